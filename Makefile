@@ -1,0 +1,37 @@
+# AlphaFence developer commands. Every target installs what it needs first.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
+
+.PHONY: install demo test sitl-test bench lint clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/alphafence demo -o demo-out
+
+test: $(STAMP)
+	$(BIN)/pytest -q -m 'not sitl'
+	$(BIN)/pytest -q -m sitl
+
+sitl-test: $(STAMP)
+	@$(BIN)/alphafence sitl --find >/dev/null || { $(BIN)/alphafence sitl --find; exit 1; }
+	$(BIN)/pytest -q -m sitl
+
+bench: $(STAMP)
+	$(BIN)/python -m bench --osm $(MALTA)
+
+lint: $(STAMP)
+	$(BIN)/ruff check kit tests bench
+	$(BIN)/ruff format --check kit tests bench
+
+clean:
+	rm -rf $(VENV) demo-out bench-out .pytest_cache .hypothesis

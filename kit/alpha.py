@@ -1,0 +1,128 @@
+"""Alpha shapes (Edelsbrunner) on a scipy Delaunay triangulation, with automatic alpha.
+
+The fence of a site must contain the site's *required region* R (its restricted geometry
+buffered by the margin). We triangulate the vertices of R's outer rings. A triangle whose
+centroid lies inside R is part of the site (weight 0); any other triangle is added to the
+shape once alpha (a radius, in metres) reaches its circumradius. Automatic alpha is the
+smallest radius at which the kept triangles join every part of R into one component: the
+bottleneck of the minimax paths between the site's parts, read off a minimum spanning tree
+of the triangle adjacency graph. The shape is finally united with R, so it can never cut
+into the site, whatever the triangulation did along R's boundary.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+from scipy.spatial import Delaunay, QhullError
+
+
+def outer_polygons(geom):
+    """Polygon parts of ``geom`` with their holes filled."""
+    parts = shapely.get_parts(geom)
+    parts = parts[shapely.get_type_id(parts) == 3]
+    return shapely.polygons(shapely.get_exterior_ring(parts))
+
+
+def fill_holes(geom):
+    polys = outer_polygons(geom)
+    if len(polys) == 1:
+        return polys[0]
+    return shapely.union_all(polys)
+
+
+def circumradii(pts, simplices):
+    a = pts[simplices[:, 0]]
+    b = pts[simplices[:, 1]]
+    c = pts[simplices[:, 2]]
+    ab = np.hypot(*(b - a).T)
+    bc = np.hypot(*(c - b).T)
+    ca = np.hypot(*(a - c).T)
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    area2 = np.abs(cross)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(area2 > 0, ab * bc * ca / (2.0 * area2), np.inf)
+    return r, area2
+
+
+def _adjacency(neighbors):
+    t = np.repeat(np.arange(len(neighbors)), 3)
+    u = neighbors.ravel()
+    ok = u > t  # each shared edge once; -1 (hull) dropped
+    return t[ok], u[ok]
+
+
+def bottleneck_alpha(neighbors, weight, terminal) -> float:
+    """Smallest alpha at which all terminal triangles are connected through triangles of
+    weight <= alpha (minimax path bottleneck over the MST)."""
+    n = len(weight)
+    term = np.flatnonzero(terminal)
+    if term.size <= 1:
+        return 0.0
+    a, b = _adjacency(neighbors)
+    w = np.maximum(weight[a], weight[b])
+    finite = np.isfinite(w)
+    a, b, w = a[finite], b[finite], w[finite]
+    # +1 so zero-weight edges survive the sparse representation
+    graph = coo_matrix((w + 1.0, (a, b)), shape=(n, n)).tocsr()
+    mst = minimum_spanning_tree(graph)
+    mst = mst + mst.T
+    order, pred = breadth_first_order(mst, int(term[0]), directed=False, return_predecessors=True)
+    has = terminal.copy()
+    for v in order[:0:-1]:  # leaves first; skip the root
+        if has[v]:
+            has[pred[v]] = True
+    child = order[1:][has[order[1:]]]
+    if child.size == 0:
+        return 0.0
+    reached = np.isin(term, order)
+    if not reached.all():
+        return float("inf")  # parts not connected by finite triangles
+    edge_w = np.asarray(mst[child, pred[child]]).ravel() - 1.0
+    return float(edge_w.max()) if edge_w.size else 0.0
+
+
+def alpha_shape(required, alpha: float | None = None):
+    """Alpha shape enclosing ``required`` (metric coordinates).
+
+    Returns (geometry, alpha_used). ``alpha=None`` picks the smallest alpha that makes one
+    component; the result always covers ``required`` and has no holes.
+    """
+    polys = outer_polygons(required)
+    region = polys[0] if len(polys) == 1 else shapely.union_all(polys)
+    if len(shapely.get_parts(region)) == 1 and alpha is None:
+        return region, 0.0
+    pts = np.unique(
+        shapely.get_coordinates(shapely.get_exterior_ring(shapely.get_parts(region))), axis=0
+    )
+    if len(pts) < 3:
+        return region, 0.0
+    try:
+        tri = Delaunay(pts)
+    except QhullError:
+        return shapely.convex_hull(region), float("inf")
+    simplices = tri.simplices
+    radius, area2 = circumradii(pts, simplices)
+    centroid = pts[simplices].mean(axis=1)
+    shapely.prepare(region)
+    inside = shapely.contains_xy(region, centroid[:, 0], centroid[:, 1])
+    weight = np.where(inside, 0.0, radius)
+    if alpha is None:
+        alpha = bottleneck_alpha(tri.neighbors, weight, inside)
+        if not np.isfinite(alpha):
+            return shapely.convex_hull(region), alpha
+    keep = weight <= alpha * (1.0 + 1e-9)
+    # keep only the components that hold part of the site
+    a, b = _adjacency(tri.neighbors)
+    both = keep[a] & keep[b]
+    n = len(simplices)
+    graph = coo_matrix((np.ones(both.sum()), (a[both], b[both])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    site_labels = np.unique(labels[inside & keep])
+    keep &= np.isin(labels, site_labels)
+    keep &= area2 > 0
+    tris = shapely.polygons(pts[simplices[keep]])
+    shape = shapely.coverage_union_all(tris) if len(tris) else shapely.Polygon()
+    return fill_holes(shapely.union(shape, region)), float(alpha)

@@ -1,0 +1,99 @@
+"""Options and output helpers shared by the verbs."""
+
+from __future__ import annotations
+
+import sys
+from contextlib import contextmanager
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    SpinnerColumn,
+    TextColumn,
+    TimeElapsedColumn,
+)
+
+from kit.features import parse_bbox
+
+err_console = Console(stderr=True)
+out_console = Console()
+
+
+def add_database_options(p):
+    p.add_argument(
+        "databases",
+        nargs="+",
+        metavar="DATABASE",
+        help="geofence database(s): .osm.pbf, .osm, GeoJSON or ED-269 JSON",
+    )
+    p.add_argument("--rules", metavar="FILE", help="rules TOML (default: the shipped rules)")
+    p.add_argument(
+        "--bbox",
+        metavar="MINLON,MINLAT,MAXLON,MAXLAT",
+        type=_bbox,
+        help="only features intersecting this box",
+    )
+    p.add_argument(
+        "--join",
+        type=float,
+        default=25.0,
+        metavar="M",
+        help="features of one category within M metres form one site (default 25)",
+    )
+    p.add_argument(
+        "--margin",
+        type=float,
+        default=None,
+        metavar="M",
+        help="override every rule's margin (0 = the paper's setting)",
+    )
+    p.add_argument(
+        "--max-vertices",
+        type=int,
+        default=32,
+        metavar="N",
+        help="vertex budget per fence polygon (default 32)",
+    )
+
+
+def _bbox(text):
+    from kit.errors import InputError
+
+    try:
+        return parse_bbox(text)
+    except InputError as exc:
+        import argparse
+
+        raise argparse.ArgumentTypeError(exc.message) from None
+
+
+@contextmanager
+def progress(enabled=True):
+    """A rich progress bar on stderr (transient); yields a task factory."""
+    if not enabled or not sys.stderr.isatty():
+        yield None
+        return
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+    ) as prog:
+        yield prog
+
+
+def callback(prog, description):
+    """A ``progress(done, total)`` callback drawing into ``prog`` (or None)."""
+    if prog is None:
+        return None
+    task = prog.add_task(description, total=None)
+
+    def update(done, total):
+        prog.update(task, completed=done, total=total)
+
+    return update

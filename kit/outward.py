@@ -1,0 +1,314 @@
+"""Conservative (outward) polygon simplification.
+
+Douglas-Peucker and Visvalingam (``shapely.simplify``) may cut into a polygon; a fence
+simplified that way could leave part of a restricted area outside. Shapely/GEOS expose no
+outer-hull simplifier, so this module provides one: a greedy sequence of operations each of
+which only *adds* area, cheapest first:
+
+* removing a reflex vertex (the triangle it cuts out is filled in), and
+* collapsing an edge of two convex vertices onto the point where its neighbouring edges,
+  extended, meet (the triangle beyond the edge is added).
+
+An operation is applied only if it keeps the ring simple (no other vertex in the added
+triangle, no edge crossing it). Operations of height <= ``tolerance`` metres are always
+applied; larger ones only while the ring has more than ``max_vertices`` vertices. Running it
+on a clockwise ring instead simplifies *inward* (each operation only removes area), which
+keep-in fences use.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+import shapely
+
+_EPS = 1e-12
+
+
+def ring_coords(ring) -> np.ndarray:
+    """Vertices of a ring or (n, 2) array without the closing duplicate or repeats."""
+    pts = np.asarray(
+        shapely.get_coordinates(ring) if not isinstance(ring, np.ndarray) else ring, float
+    )
+    pts = pts[:, :2]
+    if len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+        pts = pts[:-1]
+    if len(pts) > 1:
+        keep = np.any(pts != np.roll(pts, 1, axis=0), axis=1)
+        keep[0] = True
+        pts = pts[keep]
+    return pts
+
+
+def signed_area(pts) -> float:
+    x, y = pts[:, 0], pts[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def _vertex_op(P, prev, nxt, i):
+    """Removing reflex vertex i: (area, height) added, or None if i is convex."""
+    p, q = prev[i], nxt[i]
+    (px, py), (ix, iy), (qx, qy) = P[p], P[i], P[q]
+    c = (ix - px) * (qy - py) - (iy - py) * (qx - px)
+    if c > 0:
+        return None
+    area = -0.5 * c
+    base = math.hypot(qx - px, qy - py)
+    return area, (2.0 * area / base if base > 0 else 0.0)
+
+
+def _edge_point(P, prev, nxt, i):
+    """Where the edges before i and after next[i], extended, meet (outside), or None."""
+    p = prev[i]
+    j = nxt[i]
+    q = nxt[j]
+    if q == i or p == j:
+        return None
+    (px, py), (ix, iy), (jx, jy), (qx, qy) = P[p], P[i], P[j], P[q]
+    d1x, d1y = ix - px, iy - py
+    d2x, d2y = jx - qx, jy - qy
+    den = d1x * d2y - d1y * d2x
+    if abs(den) < _EPS:
+        return None
+    wx, wy = jx - ix, jy - iy
+    t = (wx * d2y - wy * d2x) / den
+    s = (wx * d1y - wy * d1x) / den
+    if t <= 0 or s <= 0:
+        return None
+    X = (ix + t * d1x, iy + t * d1y)
+    # nudge X a hair further out, so rounding never leaves i or j outside the new edges
+    mx, my = 0.5 * (ix + jx), 0.5 * (iy + jy)
+    X = (X[0] + (X[0] - mx) * 1e-9, X[1] + (X[1] - my) * 1e-9)
+    c = (jx - ix) * (X[1] - iy) - (jy - iy) * (X[0] - ix)
+    if c >= 0:
+        return None
+    area = -0.5 * c
+    base = math.hypot(wx, wy)
+    return area, (2.0 * area / base if base > 0 else 0.0), X
+
+
+def _greedy(pts, max_vertices, tolerance, check):
+    """Greedy outward simplification of a CCW ring; ``check`` verifies simplicity per step."""
+    n = len(pts)
+    P = [tuple(p) for p in pts.tolist()]
+    prev = [(k - 1) % n for k in range(n)]
+    nxt = [(k + 1) % n for k in range(n)]
+    alive = [True] * n
+    stamp = [0] * n
+    heap = []
+
+    def ops(v):
+        op = _vertex_op(P, prev, nxt, v)
+        if op is not None:
+            yield (op[0], op[1], 0, v, stamp[v], None)
+        op = _edge_point(P, prev, nxt, v)
+        if op is not None:
+            yield (op[0], op[1], 1, v, stamp[v], op[2])
+
+    for v in range(n):
+        heap.extend(ops(v))
+    heapq.heapify(heap)
+    count = n
+    while heap and count > 3:
+        area, height, kind, i, st, X = heapq.heappop(heap)
+        if not alive[i] or stamp[i] != st:
+            continue
+        if count <= max_vertices and height > tolerance:
+            continue
+        if kind == 0:
+            p, q = prev[i], nxt[i]
+            if check and _blocked(P, alive, nxt, (P[p], P[i], P[q]), (p, i, q), None):
+                continue
+            alive[i] = False
+            nxt[p], prev[q] = q, p
+            touched = (prev[p], p, q)
+        else:
+            p, j = prev[i], nxt[i]
+            q = nxt[j]
+            if check and _blocked(
+                P, alive, nxt, (P[i], X, P[j]), (i, j), ((P[i], X), (X, P[j]), (p, i, j))
+            ):
+                continue
+            P[i] = X
+            alive[j] = False
+            nxt[i], prev[q] = q, i
+            touched = (prev[p], p, i, q)
+        count -= 1
+        for v in touched:
+            stamp[v] += 1
+            for op in ops(v):
+                heapq.heappush(heap, op)
+    start = alive.index(True)
+    out = [P[start]]
+    v = nxt[start]
+    while v != start:
+        out.append(P[v])
+        v = nxt[v]
+    return np.array(out)
+
+
+def _blocked(P, alive, nxt, tri, corners, segments):
+    """Would filling triangle ``tri`` break the ring's simplicity?"""
+    (ax, ay), (bx, by), (cx, cy) = tri
+    lox, hix = min(ax, bx, cx), max(ax, bx, cx)
+    loy, hiy = min(ay, by, cy), max(ay, by, cy)
+    for v, ok in enumerate(alive):
+        if not ok or v in corners:
+            continue
+        x, y = P[v]
+        if x < lox or x > hix or y < loy or y > hiy:
+            continue
+        d1 = (bx - ax) * (y - ay) - (by - ay) * (x - ax)
+        d2 = (cx - bx) * (y - by) - (cy - by) * (x - bx)
+        d3 = (ax - cx) * (y - cy) - (ay - cy) * (x - cx)
+        if not ((d1 < 0 or d2 < 0 or d3 < 0) and (d1 > 0 or d2 > 0 or d3 > 0)):
+            return True
+    if segments is None:
+        return False
+    *segs, skip = segments
+    for u, ok in enumerate(alive):
+        if not ok or u in skip:
+            continue
+        C, D = P[u], P[nxt[u]]
+        for A, B in segs:
+            if _crosses(A, B, C, D):
+                return True
+    return False
+
+
+def _crosses(A, B, C, D):
+    if max(C[0], D[0]) < min(A[0], B[0]) or min(C[0], D[0]) > max(A[0], B[0]):
+        return False
+    if max(C[1], D[1]) < min(A[1], B[1]) or min(C[1], D[1]) > max(A[1], B[1]):
+        return False
+    o1 = (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0])
+    o2 = (B[0] - A[0]) * (D[1] - A[1]) - (B[1] - A[1]) * (D[0] - A[0])
+    o3 = (D[0] - C[0]) * (A[1] - C[1]) - (D[1] - C[1]) * (A[0] - C[0])
+    o4 = (D[0] - C[0]) * (B[1] - C[1]) - (D[1] - C[1]) * (B[0] - C[0])
+    return o1 * o2 <= 0 and o3 * o4 <= 0
+
+
+def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True) -> np.ndarray:
+    """Simplify a simple ring, only ever adding area (``outward``) or only removing it.
+
+    A fast pass without per-step simplicity checks is tried first and kept when the result
+    is a valid ring containing (outward) or contained in (inward) the input; otherwise the
+    checked pass runs.
+    """
+    pts = ring_coords(pts)
+    if len(pts) <= 3:
+        return pts
+    area = signed_area(pts)
+    flip = (area < 0) if outward else (area > 0)
+    if flip:
+        pts = pts[::-1]
+    max_vertices = max(3, int(max_vertices))
+    out = _greedy(pts, max_vertices, tolerance, check=False)
+    if not (_contains(out, pts) if outward else _contains(pts, out)):
+        out = _greedy(pts, max_vertices, tolerance, check=True)
+    return out[::-1] if flip else out
+
+
+def shifted_dp(pts, tol):
+    """Fast outward pre-reduction of a CCW ring (vectorised).
+
+    Douglas-Peucker (GEOS) picks a subset of the vertices; each kept edge is then pushed
+    outward, parallel to itself, just far enough that the chain of vertices it replaced lies
+    on its inner side, and consecutive pushed edges are joined at their intersection (or,
+    where they are nearly parallel, by a short bevel). Returns the new ring, or None when the
+    subset is degenerate; callers verify containment.
+    """
+    n = len(pts)
+    ring = shapely.Polygon(pts)
+    simple = shapely.simplify(ring, tol, preserve_topology=True)
+    spts = ring_coords(simple.exterior)
+    if len(spts) < 3 or len(spts) >= n:
+        return None
+    index = {tuple(p): k for k, p in enumerate(pts.tolist())}
+    try:
+        keep = np.array(sorted(index[tuple(p)] for p in spts.tolist()))
+    except KeyError:
+        return None
+    m = len(keep)
+    a = pts[keep]
+    b = pts[np.roll(keep, -1)]
+    d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    if np.any(length == 0):
+        return None
+    normal = np.column_stack([d[:, 1], -d[:, 0]]) / length[:, None]  # right = outside (CCW)
+    # every vertex belongs to the kept edge that starts at or before it
+    seg = np.searchsorted(keep, np.arange(n), side="right") - 1
+    seg[seg < 0] = m - 1  # vertices before the first kept one wrap to the last edge
+    rel = pts - a[seg]
+    dev = rel[:, 0] * normal[seg, 0] + rel[:, 1] * normal[seg, 1]
+    push = np.zeros(m)
+    np.maximum.at(push, seg, dev)
+    # the vertex where an edge ends also belongs to it
+    nxt = np.roll(np.arange(m), -1)
+    end = pts[keep[nxt]] - a
+    push = np.maximum(push, end[:, 0] * normal[:, 0] + end[:, 1] * normal[:, 1])
+    push = np.maximum(push, 0.0) * (1 + 1e-9) + 1e-9
+    a2 = a + normal * push[:, None]
+    # intersect edge k-1 with edge k
+    prv = np.roll(np.arange(m), 1)
+    d1, d2 = d[prv], d
+    den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    w = a2 - a2[prv]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[:, 0] * d2[:, 1] - w[:, 1] * d2[:, 0]) / den
+    x = a2[prv] + t[:, None] * d1
+    far = ~np.isfinite(t) | (np.hypot(*(x - a).T) > 4.0 * (push + push[prv]) + 1e-6)
+    out = []
+    b_prev = a2[prv] + d1  # end of pushed edge k-1
+    for k in range(m):
+        if far[k]:
+            out.append(b_prev[k])
+            out.append(a2[k])
+        else:
+            out.append(x[k])
+    return np.array(out)
+
+
+def _contains(outer_pts, inner_pts):
+    """Is ``outer`` a valid ring covering ``inner`` (up to rounding in the last digits)?"""
+    outer = shapely.Polygon(outer_pts)
+    if not outer.is_valid:
+        return False
+    inner = shapely.Polygon(inner_pts)
+    if outer.covers(inner):
+        return True
+    return shapely.difference(inner, outer).area <= 1e-9 * max(inner.area, 1.0)
+
+
+def prereduce(pts, target):
+    """Bring a CCW ring near ``target`` vertices with :func:`shifted_dp`, verified."""
+    if len(pts) <= target:
+        return pts
+    span = float(np.ptp(pts, axis=0).max())
+    tol = max(span * 1e-4, 1e-3)
+    while tol < span:
+        cand = shifted_dp(pts, tol)
+        if cand is not None and len(cand) <= target and _contains(cand, pts):
+            return cand
+        tol *= 2.0
+    return pts
+
+
+def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = True):
+    """Shapely polygon (exterior only) simplified outward/inward; falls back to the
+    convex hull when the ring cannot be brought within ``max_vertices`` (outward only)."""
+    pts = ring_coords(poly.exterior)
+    if outward and len(pts) > 2 * max_vertices:
+        if signed_area(pts) < 0:
+            pts = pts[::-1]
+        pts = prereduce(pts, 2 * max_vertices)
+    pts = simplify_ring(pts, max_vertices, tolerance, outward)
+    result = shapely.Polygon(pts)
+    if outward and len(pts) > max_vertices:
+        hull = ring_coords(shapely.convex_hull(result).exterior)
+        pts = simplify_ring(hull, max_vertices, tolerance, True)
+        result = shapely.Polygon(pts)
+    return result
