@@ -85,32 +85,33 @@ def check_coordinates(path, geoms, label):
         raise InputError(path, "empty geometry", label(int(empty[0])))
 
 
-def repair(geoms, sources, repaired):
-    """Make invalid polygons valid (vectorised); record which were repaired."""
+def flag_invalid(geoms, sources, repaired):
+    """Record invalid (e.g. self-intersecting) polygons. They are repaired later, in the
+    site's metric frame: repairing in degrees would misread shapes across the antimeridian."""
     geoms = np.asarray(geoms, dtype=object)
-    if geoms.size == 0:
-        return geoms
-    invalid = np.flatnonzero(~shapely.is_valid(geoms))
-    if invalid.size:
-        fixed = shapely.make_valid(geoms[invalid])
-        for i, g in zip(invalid, fixed):
-            # make_valid may return a collection mixing dimensions: keep the highest one
-            if g.geom_type == "GeometryCollection":
-                parts = list(g.geoms)
-                top = max(p.dimension for p in parts)
-                g = shapely.union_all([p for p in parts if p.dimension == top])
-            geoms[i] = g
+    if geoms.size:
+        for i in np.flatnonzero(~shapely.is_valid(geoms)):
             repaired.append(sources[i])
     return geoms
 
 
+def make_valid_polygonal(geoms):
+    """Valid geometries (vectorised). Repair may leave a collection of polygons plus the
+    lines or points a degenerate ring collapsed to; all of it stays restricted."""
+    geoms = np.asarray(geoms, dtype=object).copy()
+    invalid = np.flatnonzero(~shapely.is_valid(geoms))
+    if invalid.size:
+        geoms[invalid] = shapely.make_valid(geoms[invalid])
+    return geoms
+
+
 def select_bbox(features, bbox):
-    """Features whose geometry intersects (minlon, minlat, maxlon, maxlat)."""
+    """Features whose extent meets (minlon, minlat, maxlon, maxlat)."""
     if bbox is None or not features:
         return features
     box = shapely.box(*bbox)
     geoms = np.array([f.geometry for f in features], dtype=object)
-    keep = shapely.intersects(geoms, box)
+    keep = shapely.intersects(shapely.envelope(geoms), box)
     return [f for f, k in zip(features, keep) if k]
 
 

@@ -130,12 +130,25 @@ def outer_fence(region, opts):
 
 
 def covers_required(fence_geom, circle, geometry, margin_m) -> bool:
-    """Does the fence cover the restricted geometry buffered by its margin?"""
-    check = shapely.buffer(geometry, margin_m, quad_segs=8) if margin_m > 0 else geometry
+    """Does the fence contain the restricted geometry buffered by its margin?
+
+    Checked exactly, without approximating the buffer: the geometry lies inside the fence
+    and at least ``margin_m`` from the fence's boundary (for a circle: every vertex of the
+    geometry lies within radius - margin of the centre).
+    """
+    return contains_with_margin(fence_geom, circle, geometry, margin_m)
+
+
+def contains_with_margin(fence_geom, circle, geometry, margin_m, slack=0.0) -> bool:
     if circle is not None:
-        pts = shapely.get_coordinates(check)
-        return bool(np.all(np.hypot(pts[:, 0] - circle[0], pts[:, 1] - circle[1]) <= circle[2]))
-    return bool(shapely.covers(fence_geom, check))
+        pts = shapely.get_coordinates(geometry)
+        d = np.hypot(pts[:, 0] - circle[0], pts[:, 1] - circle[1])
+        return bool(np.all(d + margin_m <= circle[2] + slack))
+    if not shapely.covers(fence_geom, geometry):
+        return False
+    if margin_m <= 0:
+        return True
+    return bool(shapely.distance(geometry, shapely.boundary(fence_geom)) >= margin_m - slack)
 
 
 def site_fences(site, opts: FenceOptions):

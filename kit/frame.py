@@ -14,6 +14,13 @@ import pyproj
 import shapely
 
 
+def wrap_lon(lon):
+    """Longitudes into [-180, 180] (PROJ may return -180.00000000000003)."""
+    lon = np.asarray(lon, float)
+    out = np.where(np.abs(lon) > 180.0, (lon + 180.0) % 360.0 - 180.0, lon)
+    return out if out.ndim else float(out)
+
+
 class LocalFrame:
     __slots__ = ("lon0", "lat0", "_tr")
 
@@ -33,11 +40,12 @@ class LocalFrame:
         return self._tr.transform(np.asarray(lon, float), np.asarray(lat, float))
 
     def to_wgs84(self, x, y):
-        return self._tr.transform(
+        lon, lat = self._tr.transform(
             np.asarray(x, float),
             np.asarray(y, float),
             direction=pyproj.enums.TransformDirection.INVERSE,
         )
+        return wrap_lon(lon), lat
 
     def _fwd(self, coords):
         x, y = self._tr.transform(coords[:, 0], coords[:, 1])
@@ -47,7 +55,7 @@ class LocalFrame:
         lon, lat = self._tr.transform(
             coords[:, 0], coords[:, 1], direction=pyproj.enums.TransformDirection.INVERSE
         )
-        return np.column_stack([lon, lat])
+        return np.column_stack([wrap_lon(lon), lat])
 
     # -- geometries (scalars or arrays, vectorised) ---------------------------
     def geom_to_local(self, geom):

@@ -25,6 +25,7 @@ import numpy as np
 import shapely
 
 _EPS = 1e-12
+MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
 
 
 def ring_coords(ring) -> np.ndarray:
@@ -59,8 +60,11 @@ def _vertex_op(P, prev, nxt, i):
     return area, (2.0 * area / base if base > 0 else 0.0)
 
 
-def _edge_point(P, prev, nxt, i):
-    """Where the edges before i and after next[i], extended, meet (outside), or None."""
+def _edge_point(P, prev, nxt, i, reach=math.inf):
+    """Where the edges before i and after next[i], extended, meet (outside), or None.
+
+    ``reach`` bounds how far (in multiples of the edge's length) the new vertex may lie
+    from the edge, so nearly parallel neighbours never throw a vertex across the map."""
     p = prev[i]
     j = nxt[i]
     q = nxt[j]
@@ -76,6 +80,8 @@ def _edge_point(P, prev, nxt, i):
     t = (wx * d2y - wy * d2x) / den
     s = (wx * d1y - wy * d1x) / den
     if t <= 0 or s <= 0:
+        return None
+    if t * math.hypot(d1x, d1y) > reach or s * math.hypot(d2x, d2y) > reach:
         return None
     X = (ix + t * d1x, iy + t * d1y)
     # nudge X a hair further out, so rounding never leaves i or j outside the new edges
@@ -98,12 +104,14 @@ def _greedy(pts, max_vertices, tolerance, check):
     alive = [True] * n
     stamp = [0] * n
     heap = []
+    span = float(np.ptp(pts, axis=0).max())
+    reach = 2.0 * span + 1.0
 
     def ops(v):
         op = _vertex_op(P, prev, nxt, v)
         if op is not None:
             yield (op[0], op[1], 0, v, stamp[v], None)
-        op = _edge_point(P, prev, nxt, v)
+        op = _edge_point(P, prev, nxt, v, reach)
         if op is not None:
             yield (op[0], op[1], 1, v, stamp[v], op[2])
 
@@ -204,7 +212,7 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     flip = (area < 0) if outward else (area > 0)
     if flip:
         pts = pts[::-1]
-    max_vertices = max(3, int(max_vertices))
+    max_vertices = max(MIN_VERTICES, int(max_vertices))
     out = _greedy(pts, max_vertices, tolerance, check=False)
     if not (_contains(out, pts) if outward else _contains(pts, out)):
         out = _greedy(pts, max_vertices, tolerance, check=True)

@@ -18,6 +18,7 @@ import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from kit.features import make_valid_polygonal
 from kit.frame import LocalFrame
 
 M_PER_DEG_LAT = 110_574.0
@@ -103,9 +104,9 @@ def group_sites(features, rules, join_m=25.0):
 
 def _region_sites(category, kind, margin, feats, geoms, widths, join_m):
     frame = LocalFrame.around(geoms)
-    local = frame.geom_to_local(geoms)
+    local = make_valid_polygonal(frame.geom_to_local(geoms))
     # points and lines become discs and strips; polygons stay as they are
-    widened = np.where(widths > 0, shapely.buffer(local, widths, quad_segs=8), local)
+    widened = _widen(local, widths)
     if len(widened) == 1:
         labels = np.zeros(1, int)
     else:
@@ -121,11 +122,18 @@ def _region_sites(category, kind, margin, feats, geoms, widths, join_m):
         site_frame = frame
         if extent > SMALL_REGION_M:
             site_frame = LocalFrame.around(geoms[idx])
-            loc = site_frame.geom_to_local(geoms[idx])
+            loc = make_valid_polygonal(site_frame.geom_to_local(geoms[idx]))
             w = widths[idx]
-            parts = np.where(w > 0, shapely.buffer(loc, w, quad_segs=8), loc)
+            parts = _widen(loc, w)
         out.append(_make_site(category, kind, margin, site_frame, members, parts))
     return out
+
+
+def _widen(local, widths):
+    """Points become discs and lines strips (polygons that contain the true round shapes);
+    polygons stay as they are."""
+    grown = shapely.buffer(local, widths * circle_steps(8), quad_segs=8)
+    return np.where(widths > 0, grown, local)
 
 
 def _extent_m(local):

@@ -59,7 +59,7 @@ def register(sub):
 
 def options_from(args, **over) -> BuildOptions:
     for name, value in (("--join", args.join), ("--max-vertices", args.max_vertices)):
-        if value is None or value < (3 if name == "--max-vertices" else 0):
+        if value is None or value < (4 if name == "--max-vertices" else 0):
             raise InputError(name, f"invalid value {value}")
     opts = BuildOptions(
         method=getattr(args, "method", "alpha"),

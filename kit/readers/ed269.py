@@ -15,7 +15,7 @@ import shapely
 
 from kit.coords import valid_lonlat
 from kit.errors import InputError
-from kit.features import Feature, check_coordinates, repair
+from kit.features import Feature, check_coordinates, flag_invalid
 from kit.frame import LocalFrame
 
 _UNITS = {"M": 1.0, "FT": 0.3048}
@@ -145,7 +145,7 @@ def read_ed269_doc(path, doc, rules, repaired, skipped):
         return []
     geoms = np.array(geoms, dtype=object)
     check_coordinates(path, geoms, lambda k: f"zone {metas[k][1]}")
-    geoms = repair(geoms, [m[1] for m in metas], repaired)
+    geoms = flag_invalid(geoms, [m[1] for m in metas], repaired)
     out = []
     for g, (tags, source, lower, upper, props) in zip(geoms, metas):
         rule = rules.match(tags.get, "area")

@@ -14,7 +14,7 @@ import shapely
 from shapely.errors import GeometryTypeError
 
 from kit.errors import InputError
-from kit.features import Feature, check_coordinates, geomtype_of, repair
+from kit.features import Feature, check_coordinates, flag_invalid, geomtype_of
 
 _HSTORE = re.compile(r'"((?:[^"\\]|\\.)*)"\s*=>\s*(?:"((?:[^"\\]|\\.)*)"|NULL)')
 _ID_KEYS = ("osm_id", "osm_way_id", "osm_type", "fid", "id", "@id")
@@ -92,12 +92,13 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
         except (ValueError, TypeError, IndexError, KeyError, AttributeError) as exc:
             raise InputError(path, f"malformed {gj.get('type')} geometry ({exc})", label) from None
         if geom.geom_type == "GeometryCollection":
-            parts = [g for g in geom.geoms if geomtype_of(g) is not None]
-            if not parts:
+            parts = shapely.get_parts(geom)
+            parts = parts[[geomtype_of(g) is not None for g in parts]] if len(parts) else parts
+            if not len(parts):
                 skipped["empty geometry collection"] += 1
                 continue
-            top = max(p.dimension for p in parts)
-            geom = shapely.union_all([p for p in parts if p.dimension == top])
+            dims = shapely.get_dimensions(parts)
+            geom = shapely.union_all(parts[dims == dims.max()])
         gtype = geomtype_of(geom)
         if gtype is None:
             raise InputError(path, f"unsupported geometry type {geom.geom_type!r}", label)
@@ -114,7 +115,7 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
         return []
     geoms = np.array(geoms, dtype=object)
     check_coordinates(path, geoms, lambda i: f"{sources[i]}")
-    geoms = repair(geoms, sources, repaired)
+    geoms = flag_invalid(geoms, sources, repaired)
     return [
         Feature(g, t, s, str(path), r, r.alt_min_m, r.alt_max_m)
         for g, t, s, r in zip(geoms, tags_list, sources, rule_list)

@@ -15,7 +15,7 @@ import shapely
 from osmium.filter import KeyFilter
 
 from kit.errors import InputError
-from kit.features import Feature, check_coordinates, geomtype_of, repair
+from kit.features import Feature, check_coordinates, flag_invalid, geomtype_of
 
 
 def read_osm(path, rules, repaired, skipped):
@@ -72,7 +72,7 @@ def read_osm(path, rules, repaired, skipped):
         return []
     geoms = shapely.from_wkb(np.array(blobs, dtype=object))
     check_coordinates(path, geoms, lambda i: sources[i])
-    geoms = repair(geoms, sources, repaired)
+    geoms = flag_invalid(geoms, sources, repaired)
     out = []
     for g, tags, src, rule in zip(geoms, tags_list, sources, rule_list):
         if g.is_empty or geomtype_of(g) is None:

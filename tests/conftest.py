@@ -1,0 +1,47 @@
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "data" / "osm"
+MALTA = SHARED / "malta-2018-08-27.osm.pbf"
+MONACO = SHARED / "monaco-2016-03.osm.pbf"
+
+
+@pytest.fixture(scope="session")
+def malta():
+    if not MALTA.is_file():
+        pytest.skip(f"Malta extract not found at {MALTA} (../shared beside the checkout)")
+    return MALTA
+
+
+@pytest.fixture(scope="session")
+def monaco():
+    if not MONACO.is_file():
+        pytest.skip(f"Monaco extract not found at {MONACO}")
+    return MONACO
+
+
+@pytest.fixture(scope="session")
+def rules():
+    from kit.rules import load_rules
+
+    return load_rules()
+
+
+@pytest.fixture(scope="session")
+def malta_db(malta, rules):
+    from kit.readers import read_database
+
+    return read_database([malta], rules)
+
+
+@pytest.fixture
+def write_json(tmp_path):
+    def write(name, doc):
+        path = tmp_path / name
+        path.write_text(json.dumps(doc))
+        return path
+
+    return write

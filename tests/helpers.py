@@ -1,0 +1,52 @@
+"""Independent checks used by the tests: a verifying metric frame that is *not* the one the
+kit used (transverse Mercator instead of azimuthal equidistant, another origin)."""
+
+import json
+
+import numpy as np
+import pyproj
+import shapely
+
+
+class VerifyFrame:
+    def __init__(self, lon0, lat0):
+        self.t = pyproj.Transformer.from_pipeline(
+            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+            f"+step +proj=tmerc +lat_0={lat0!r} +lon_0={lon0!r} +k=1 +ellps=WGS84"
+        )
+
+    def local(self, geom):
+        def f(c):
+            x, y = self.t.transform(c[:, 0], c[:, 1])
+            return np.column_stack([x, y])
+
+        return shapely.transform(geom, f)
+
+    def xy(self, lon, lat):
+        return self.t.transform(lon, lat)
+
+
+def restricted_in(frame, geoms_wgs84, widths):
+    """The restricted area (points and lines widened as the rules say), computed
+    independently in ``frame``; the discs are inscribed polygons, so they lie inside the
+    true discs the kit must honour."""
+    local = [shapely.make_valid(frame.local(g)) for g in geoms_wgs84]
+    parts = [shapely.buffer(g, w, quad_segs=32) if w > 0 else g for g, w in zip(local, widths)]
+    return shapely.union_all(parts)
+
+
+def missing_area(fence, restricted, margin):
+    """How the fence fails to contain ``restricted`` plus ``margin``, checked exactly (no
+    buffer approximation): '' if it contains it, else a description."""
+    if not fence.covers(restricted):
+        return f"{shapely.difference(restricted, fence).area:.6f} m² of the restricted area is outside"
+    if margin > 0:
+        d = shapely.distance(restricted, fence.boundary)
+        if d < margin - 1e-6:
+            return f"the restricted area comes within {d:.4f} m of the fence (margin {margin} m)"
+    return ""
+
+
+def geojson_fences(text):
+    doc = json.loads(text)
+    return [(f["properties"], shapely.geometry.shape(f["geometry"])) for f in doc["features"]]
