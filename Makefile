@@ -19,8 +19,7 @@ demo: $(STAMP)
 	$(BIN)/alphafence demo -o demo-out
 
 test: $(STAMP)
-	$(BIN)/pytest -q -m 'not sitl'
-	$(BIN)/pytest -q -m sitl
+	$(BIN)/pytest -q
 
 sitl-test: $(STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null || { $(BIN)/alphafence sitl --find; exit 1; }

@@ -126,3 +126,21 @@ def alpha_shape(required, alpha: float | None = None):
     tris = shapely.polygons(pts[simplices[keep]])
     shape = shapely.coverage_union_all(tris) if len(tris) else shapely.Polygon()
     return fill_holes(shapely.union(shape, region)), float(alpha)
+
+
+def alpha_shape_points(points, alpha: float):
+    """The plain Edelsbrunner alpha shape of a point set: the union of the Delaunay
+    triangles whose circumradius is at most ``alpha`` (metres). This is what the
+    ``alphashape`` package computes (its parameter is 1 / alpha)."""
+    pts = np.unique(np.asarray(points, float), axis=0)
+    if len(pts) < 3:
+        return shapely.Polygon()
+    try:
+        tri = Delaunay(pts)
+    except QhullError:
+        return shapely.Polygon()
+    radius, area2 = circumradii(pts, tri.simplices)
+    keep = (radius <= alpha) & (area2 > 0)
+    if not keep.any():
+        return shapely.Polygon()
+    return shapely.coverage_union_all(shapely.polygons(pts[tri.simplices[keep]]))

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 import shapely
+import shapely.errors
 
 _EPS = 1e-12
 MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
@@ -213,9 +214,16 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     if flip:
         pts = pts[::-1]
     max_vertices = max(MIN_VERTICES, int(max_vertices))
+    # the flipped ring is simplified "outward" in its own orientation: for inward
+    # simplification that means the result must lie inside the input
+    def ok(out):
+        return _contains(out, pts) if outward else (_valid(out) and _contains(pts, out))
+
     out = _greedy(pts, max_vertices, tolerance, check=False)
-    if not (_contains(out, pts) if outward else _contains(pts, out)):
+    if not ok(out):
         out = _greedy(pts, max_vertices, tolerance, check=True)
+        if not ok(out):  # numerically degenerate input: leave it as it is
+            out = pts
     return out[::-1] if flip else out
 
 
@@ -280,15 +288,22 @@ def shifted_dp(pts, tol):
     return np.array(out)
 
 
+def _valid(pts):
+    return len(pts) >= 3 and shapely.Polygon(pts).is_valid
+
+
 def _contains(outer_pts, inner_pts):
     """Is ``outer`` a valid ring covering ``inner`` (up to rounding in the last digits)?"""
     outer = shapely.Polygon(outer_pts)
     if not outer.is_valid:
         return False
     inner = shapely.Polygon(inner_pts)
-    if outer.covers(inner):
-        return True
-    return shapely.difference(inner, outer).area <= 1e-9 * max(inner.area, 1.0)
+    try:
+        if outer.covers(inner):
+            return True
+        return shapely.difference(inner, outer).area <= 1e-9 * max(inner.area, 1.0)
+    except shapely.errors.GEOSException:
+        return False
 
 
 def prereduce(pts, target):
