@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 import shapely
-from scipy.sparse import coo_matrix
+import shapely.errors
+from scipy.sparse import coo_array
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 from scipy.spatial import Delaunay, QhullError
 
@@ -66,7 +67,7 @@ def bottleneck_alpha(neighbors, weight, terminal) -> float:
     finite = np.isfinite(w)
     a, b, w = a[finite], b[finite], w[finite]
     # +1 so zero-weight edges survive the sparse representation
-    graph = coo_matrix((w + 1.0, (a, b)), shape=(n, n)).tocsr()
+    graph = coo_array((w + 1.0, (a, b)), shape=(n, n)).tocsr()
     mst = minimum_spanning_tree(graph)
     mst = mst + mst.T
     order, pred = breadth_first_order(mst, int(term[0]), directed=False, return_predecessors=True)
@@ -80,7 +81,8 @@ def bottleneck_alpha(neighbors, weight, terminal) -> float:
     reached = np.isin(term, order)
     if not reached.all():
         return float("inf")  # parts not connected by finite triangles
-    edge_w = np.asarray(mst[child, pred[child]]).ravel() - 1.0
+    # an edge of the tree weighs what its heavier triangle weighs
+    edge_w = np.maximum(weight[child], weight[pred[child]])
     return float(edge_w.max()) if edge_w.size else 0.0
 
 
@@ -118,14 +120,25 @@ def alpha_shape(required, alpha: float | None = None):
     a, b = _adjacency(tri.neighbors)
     both = keep[a] & keep[b]
     n = len(simplices)
-    graph = coo_matrix((np.ones(both.sum()), (a[both], b[both])), shape=(n, n))
+    graph = coo_array((np.ones(both.sum()), (a[both], b[both])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     site_labels = np.unique(labels[inside & keep])
     keep &= np.isin(labels, site_labels)
     keep &= area2 > 0
-    tris = shapely.polygons(pts[simplices[keep]])
-    shape = shapely.coverage_union_all(tris) if len(tris) else shapely.Polygon()
+    shape = _union_triangles(pts[simplices[keep]])
     return fill_holes(shapely.union(shape, region)), float(alpha)
+
+
+def _union_triangles(corners):
+    """Union of triangles that tile a Delaunay triangulation: a coverage union (fast), or
+    an ordinary union where near-collinear points leave the coverage incorrectly noded."""
+    if not len(corners):
+        return shapely.Polygon()
+    tris = shapely.polygons(corners)
+    try:
+        return shapely.coverage_union_all(tris)
+    except shapely.errors.GEOSException:
+        return shapely.union_all(tris)
 
 
 def alpha_shape_points(points, alpha: float):
@@ -143,4 +156,4 @@ def alpha_shape_points(points, alpha: float):
     keep = (radius <= alpha) & (area2 > 0)
     if not keep.any():
         return shapely.Polygon()
-    return shapely.coverage_union_all(shapely.polygons(pts[tri.simplices[keep]]))
+    return _union_triangles(pts[tri.simplices[keep]])

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
 from kit.features import make_valid_polygonal
@@ -51,7 +51,7 @@ class Site:
 
 
 def _components(n, a, b):
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 
 
