@@ -1,0 +1,37 @@
+"""Run the benchmarks and print each result against its target and its named peer.
+
+    python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from rich.console import Console
+from rich.table import Table
+
+from bench import build_bench
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench")
+    p.add_argument("--osm", required=True, help="OSM extract (Malta)")
+    p.add_argument("--optimize-sites", type=int, default=8,
+                   help="sites timed against alphashape.optimizealpha (it is slow)")
+    args = p.parse_args(argv)
+    console = Console(width=150)
+    rows = build_bench.run(args.osm, args.optimize_sites, console)
+    table = Table(title="AlphaFence benchmarks (this machine, one run)")
+    for col in ("benchmark", "result", "target", "peer", "ratio", "ok"):
+        table.add_column(col, justify="left" if col in ("benchmark", "peer") else "right")
+    failed = 0
+    for r in rows:
+        failed += not r.ok
+        table.add_row(r.name, r.result, r.target, r.peer, r.ratio, "[green]yes[/]" if r.ok else "[red]NO[/]")
+    console.print(table)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
