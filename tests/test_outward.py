@@ -26,7 +26,9 @@ def test_outward_contains_and_meets_the_budget(poly, budget, tol):
         return
     out = simplify_polygon(poly, budget, tol, outward=True)
     assert out.is_valid
-    assert out.covers(poly) or shapely.difference(poly, out).area < 1e-6
+    # up to floating-point noise on degenerate (collinear) input; fences carry 0.1 m of
+    # slack for that, and each fence is checked exactly against its site afterwards
+    assert out.covers(poly) or shapely.difference(poly, out).area <= 1e-9 * poly.area
     assert len(out.exterior.coords) - 1 <= max(budget, len(poly.exterior.coords) - 1)
     assert len(out.exterior.coords) - 1 <= budget
 
