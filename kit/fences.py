@@ -151,6 +151,18 @@ def contains_with_margin(fence_geom, circle, geometry, margin_m, slack=0.0) -> b
     return bool(shapely.distance(geometry, shapely.boundary(fence_geom)) >= margin_m - slack)
 
 
+def site_properties(site) -> dict:
+    """What a fence carries from its features beyond geometry: ED-269 restriction,
+    reasons, vertical references and applicability (time windows)."""
+    props = {}
+    for f in site.features:
+        for key in ("restriction", "reason", "applicability", "lower_reference", "upper_reference"):
+            value = f.properties.get(key)
+            if value not in (None, [], "") and key not in props:
+                props[key] = value
+    return props
+
+
 def site_fences(site, opts: FenceOptions):
     """The fences of one site: its main fence, plus a warning layer for keep-out sites."""
     base = dict(
@@ -161,6 +173,7 @@ def site_fences(site, opts: FenceOptions):
         alt_max_m=site.alt_max_m,
         sources=site.sources,
         frame=site.frame,
+        properties=site_properties(site),
     )
     geometry = site.geometry
     margin = site.margin_m if opts.margin_m is None else opts.margin_m

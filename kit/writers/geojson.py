@@ -33,6 +33,8 @@ def fence_properties(f) -> dict:
         props["radius_m"] = round(r, 3)
     if f.repaired:
         props["repaired"] = True
+    if f.properties:
+        props["zone"] = f.properties
     return props
 
 
