@@ -5,6 +5,8 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+pytest_plugins = ["tests.sitl_fixtures"]
+
 # CI runs the property tests on a fixed seed so a run is reproducible; locally each run
 # explores new examples (and replays any failure hypothesis has saved).
 settings.register_profile("ci", derandomize=True, deadline=None)

@@ -7,7 +7,6 @@ import shapely
 from kit.build import BuildOptions, build_fences
 from kit.fences import contains_with_margin
 from kit.readers import read_database
-from kit.rules import load_rules
 
 AREA = {"type": "FeatureCollection", "features": [
     {"type": "Feature", "properties": {"name": "Operating area", "alphafence:kind": "keep_in", "osm_way_id": "1"},

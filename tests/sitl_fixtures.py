@@ -1,0 +1,67 @@
+"""Fixtures that drive a real ArduPilot SITL binary (registered from conftest.py).
+
+- ``sitl_binary``: the arducopter binary, or a skip with a one-line reason.
+- ``sitl``: one SITL instance, started and ready (position estimate), stopped after the test.
+  Defaults: home ``egham``, speedup ``$ALPHAFENCE_SITL_SPEEDUP`` or 5, ready within 60 s.
+  Override per test with indirect parametrization::
+
+      @pytest.mark.parametrize("sitl", [{"home": "malta_airport", "speedup": 1}], indirect=True)
+
+  Any keyword of ``kit.sitl.launcher.SitlInstance`` works, plus ``ready_timeout``.
+- ``sitl_factory``: ``await sitl_factory(**options)`` launches more instances (ready unless
+  ``ready_timeout=None``); all are stopped after the test.
+
+Mark tests that use them ``@pytest.mark.sitl``. ``ALPHAFENCE_SITL_KEEP=1`` keeps each
+instance's temporary working directory (its ``sitl.log``) for a post-mortem.
+"""
+
+import os
+
+import pytest
+
+from kit.sitl.find import NOT_FOUND_HELP, find_sitl_binary
+
+DEFAULTS = {"home": "egham", "ready_timeout": 60.0}
+
+
+def _defaults():
+    options = dict(DEFAULTS)
+    options["speedup"] = float(os.environ.get("ALPHAFENCE_SITL_SPEEDUP", "5"))
+    options["keep_dir"] = os.environ.get("ALPHAFENCE_SITL_KEEP", "") not in ("", "0")
+    return options
+
+
+@pytest.fixture(scope="session")
+def sitl_binary():
+    binary = find_sitl_binary()
+    if binary is None:
+        pytest.skip(NOT_FOUND_HELP)
+    return binary
+
+
+@pytest.fixture
+async def sitl_factory(sitl_binary):
+    from kit.sitl.launcher import SitlInstance
+
+    started = []
+
+    async def launch(**options):
+        options = {**_defaults(), "binary": sitl_binary, **options}
+        ready_timeout = options.pop("ready_timeout")
+        instance = SitlInstance(**options)
+        started.append(instance)
+        await instance.start()
+        if ready_timeout is not None:
+            await instance.wait_ready(ready_timeout)
+        return instance
+
+    try:
+        yield launch
+    finally:
+        for instance in reversed(started):
+            await instance.stop()
+
+
+@pytest.fixture
+async def sitl(request, sitl_factory):
+    return await sitl_factory(**getattr(request, "param", {}))
