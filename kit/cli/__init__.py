@@ -8,7 +8,7 @@ import sys
 from kit import __version__
 from kit.errors import InputError
 
-VERBS = ("build", "compare", "demo", "sitl")
+VERBS = ("build", "compare", "compile", "demo", "sitl")
 
 
 def parser() -> argparse.ArgumentParser:

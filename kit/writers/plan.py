@@ -34,12 +34,16 @@ def group_polygons(items):
     return polygons, circles
 
 
-def plan_document(items, home_lonlat=None, mission_items=None) -> dict:
+def plan_document(items, home_lonlat=None, mission_items=None, breach_return=None) -> dict:
     polygons, circles = group_polygons(items)
     if home_lonlat is None:
         pts = [p for _, poly in polygons for p in poly] + [(c.lon, c.lat) for c in circles]
         home_lonlat = tuple(np.mean(np.asarray(pts), axis=0)) if pts else (0.0, 0.0)
     home = latlon([home_lonlat])[0]
+    fence = {}
+    if breach_return is not None:
+        lat, lon = latlon([breach_return])[0]
+        fence["breachReturn"] = [lat, lon, 0]
     return {
         "fileType": "Plan",
         "version": 1,
@@ -61,6 +65,7 @@ def plan_document(items, home_lonlat=None, mission_items=None) -> dict:
                 }
                 for c in circles
             ],
+            **fence,
         },
         "mission": {
             "version": 2,
