@@ -168,3 +168,15 @@ def test_compile_rejects_a_plan_without_positions(tmp_path):
     p.write_text('{"fileType": "Plan", "mission": {"items": []}}')
     with pytest.raises(InputError, match="no positions"):
         operating_area_from_plan(p)
+
+
+def test_upload_dry_run_and_missing_area(tmp_path, capsys):
+    from kit.cli import main
+    from kit.cli.demo import scene_path
+
+    fences = tmp_path / "f.geojson"
+    assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
+    assert main(["upload", str(fences), "--bbox=-0.58,51.42,-0.52,51.44", "--dry-run"]) == 0
+    assert "nothing sent" in capsys.readouterr().out
+    assert main(["upload", str(fences), "--dry-run"]) == 2
+    assert "needs an operating area" in capsys.readouterr().err

@@ -1,0 +1,41 @@
+"""alphafence download: read the vehicle's fence into a .plan (and a waypoint file)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from kit.cli.common import err_console, out_console
+from kit.writers import plan, waypoints
+from kit.writers.atomic import write_all
+
+
+def register(sub):
+    p = sub.add_parser("download", help="read the fence a vehicle holds",
+                       description="Download the vehicle's fence items into a QGroundControl plan.")
+    p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.plan")
+    p.add_argument("--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file")
+    p.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    return asyncio.run(_download(args))
+
+
+async def _download(args) -> int:
+    from kit.vehicle.fence_transfer import FenceTransferError, download_fence
+    from kit.vehicle.link import LinkError, open_vehicle
+
+    try:
+        async with open_vehicle(args.connect, args.timeout) as vehicle:
+            items = await download_fence(vehicle)
+    except (FenceTransferError, LinkError) as exc:
+        err_console.print(f"alphafence download: error: {exc}", soft_wrap=True)
+        return 3
+    out = {args.output: plan.dumps(plan.plan_document(items))}
+    if args.waypoints:
+        out[args.waypoints] = waypoints.waypoints_text(items)
+    write_all(out)
+    out_console.print(f"downloaded {len(items)} fence items -> {', '.join(out)}")
+    return 0

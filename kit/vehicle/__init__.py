@@ -1,0 +1,1 @@
+"""Talking to the vehicle: fence upload/download and fence parameters, through MAVSDK."""

@@ -1,0 +1,71 @@
+"""Open a MAVSDK link to the autopilot, and collect the vehicle's STATUSTEXT messages (its
+own words for why a transfer failed)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections import deque
+
+
+class LinkError(RuntimeError):
+    """The vehicle could not be reached, or went away."""
+
+
+@contextlib.asynccontextmanager
+async def open_vehicle(url: str, timeout: float = 10.0):
+    """``async with open_vehicle("udpin://127.0.0.1:14550") as vehicle`` -> Vehicle."""
+    import mavsdk.asyncio as ms
+
+    config = ms.Configuration.create_with_component_type(ms.ComponentType.GROUND_STATION)
+    async with ms.Mavsdk(config) as mavsdk:
+        try:
+            await mavsdk.add_any_connection(url)
+        except Exception as exc:  # mavsdk raises its own error types
+            raise LinkError(f"{url}: cannot open the connection ({exc})") from None
+        try:
+            system = await mavsdk.first_autopilot(timeout_s=timeout)
+        except Exception:
+            system = None
+        if system is None:
+            raise LinkError(f"{url}: no autopilot answered within {timeout:g} s")
+        vehicle = Vehicle(system, url)
+        await vehicle.start()
+        try:
+            yield vehicle
+        finally:
+            await vehicle.close()
+
+
+class Vehicle:
+    def __init__(self, system, url):
+        from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+        from mavsdk.asyncio.plugins.param import ParamAsync
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        self.url = url
+        self.system = system
+        self.mission_raw = MissionRawAsync(system)
+        self.param = ParamAsync(system)
+        self.telemetry = TelemetryAsync(system)
+        self.texts: deque = deque(maxlen=50)  # (monotonic time, text)
+        self._task = None
+
+    async def start(self):
+        self._task = asyncio.create_task(self._collect_texts())
+
+    async def close(self):
+        if self._task:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self._task
+
+    async def _collect_texts(self):
+        async for st in self.telemetry.subscribe_status_text():
+            self.texts.append((time.monotonic(), st.text))
+
+    async def texts_since(self, t0: float, settle: float = 0.3):
+        """STATUSTEXTs received after ``t0`` (waits briefly: they trail the ACK by a few ms)."""
+        await asyncio.sleep(settle)
+        return [text for t, text in self.texts if t >= t0]

@@ -1,0 +1,73 @@
+"""Fence parameter profiles (AC_Fence), set and read back."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# FENCE_TYPE bits: 1 max altitude, 2 circle around home, 4 polygons and circles, 8 min altitude.
+# FENCE_ACTION (Copter): 0 report, 1 RTL or land, 2 land, 3 SmartRTL/RTL/land, 4 brake or land.
+PROFILES = {
+    "copter-rtl": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 1, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
+    "copter-brake": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 4, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
+    "copter-land": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 2, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
+    "report-only": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 0, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
+}
+INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
+
+
+class ParamError(RuntimeError):
+    pass
+
+
+@dataclass
+class ParamReport:
+    values: dict
+
+
+async def apply_params(vehicle, values: dict) -> ParamReport:
+    """Set each parameter, then read every one back; raise ParamError on any mismatch."""
+    for name, value in values.items():
+        try:
+            await _set(vehicle, name, value)
+        except Exception as exc:
+            raise ParamError(f"setting {name} = {value} failed ({exc})") from None
+    got = await read_params(vehicle, values)
+    bad = {k: (v, got[k]) for k, v in values.items() if abs(float(got[k]) - float(v)) > 1e-4 * max(1.0, abs(v))}
+    if bad:
+        raise ParamError("read back differs: " + ", ".join(f"{k} set {a} reads {b}" for k, (a, b) in bad.items()))
+    return ParamReport(got)
+
+
+async def read_params(vehicle, names) -> dict:
+    out = {}
+    for name in names:
+        try:
+            out[name] = await _get(vehicle, name)
+        except Exception as exc:
+            raise ParamError(f"reading {name} failed ({exc})") from None
+    return out
+
+
+# ArduPilot declares some integer parameters with a type MAVSDK does not expect (it reports
+# WRONG_TYPE): try the natural type first, then the other.
+async def _set(vehicle, name, value):
+    first, second = ("int", "float") if name in INTEGER else ("float", "int")
+    try:
+        await _call(vehicle, "set", first, name, value)
+    except Exception:
+        await _call(vehicle, "set", second, name, value)
+
+
+async def _get(vehicle, name):
+    first, second = ("int", "float") if name in INTEGER else ("float", "int")
+    try:
+        return await _call(vehicle, "get", first, name)
+    except Exception:
+        return await _call(vehicle, "get", second, name)
+
+
+def _call(vehicle, verb, kind, name, value=None):
+    fn = getattr(vehicle.param, f"{verb}_param_{kind}")
+    if verb == "get":
+        return fn(name)
+    return fn(name, int(value) if kind == "int" else float(value))
