@@ -206,7 +206,8 @@ def compile_fences(records, area, profile: Profile, distance_m=2000.0, keep_in_m
             continue
         local = frame.geom_to_local(rec.geometry)
         if not local.is_valid:
-            local = shapely.make_valid(local)
+            # a ring that projects to a self-touching one: keep all of it, spikes included
+            local = shapely.buffer(shapely.make_valid(local), 1e-3, join_style="mitre")
         if shapely.distance(local, area_local) > distance_m:
             dropped.append(rec.site_id)
             continue
@@ -255,9 +256,9 @@ def _cheapest_circle(piece):
 
 
 def _best_merge(pieces, neighbours=4):
-    """The pair of neighbouring keep-out pieces whose merge adds the least area: the
-    convex hull of the two, less their own hulls (the merged shape, an alpha shape, is
-    never larger than that hull)."""
+    """The pair of neighbouring keep-out pieces whose merge adds the least area, estimated
+    as the larger of what their convex hull adds (large pieces stay polygons) and what
+    their common circle adds (small pieces end up as circles)."""
     outs = [i for i, p in enumerate(pieces) if not p.inclusion]
     if len(outs) < 2:
         return None
@@ -272,7 +273,15 @@ def _best_merge(pieces, neighbours=4):
     a, b = np.array(sorted(pairs)).T
     hulls = shapely.convex_hull(geoms)
     both = shapely.convex_hull(np.array([shapely.GeometryCollection([geoms[i], geoms[j]]) for i, j in zip(a, b)], dtype=object))
-    cost = shapely.area(both) - shapely.area(hulls[a]) - shapely.area(hulls[b])
+    hull_cost = shapely.area(both) - shapely.area(hulls[a]) - shapely.area(hulls[b])
+    # small pieces end up as circles: what their common circle adds counts too
+    c = np.array([_cheapest_circle(pieces[i]) for i in outs])
+    x, y, r = c[:, 0], c[:, 1], c[:, 2]
+    d = np.hypot(x[a] - x[b], y[a] - y[b])
+    big = np.maximum(r[a], r[b])
+    R = np.where(d + np.minimum(r[a], r[b]) <= big, big, (d + r[a] + r[b]) / 2)
+    circle_cost = np.pi * (R**2 - r[a] ** 2 - r[b] ** 2)
+    cost = np.maximum(hull_cost, circle_cost)
     j = int(np.argmin(cost))
     return float(cost[j]), outs[a[j]], outs[b[j]]
 
