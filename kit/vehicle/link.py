@@ -13,10 +13,27 @@ class LinkError(RuntimeError):
     """The vehicle could not be reached, or went away."""
 
 
+_QUIET = False
+
+
+def quiet_mavsdk():
+    """Keep MAVSDK's own debug and info lines off the operator's terminal (warnings and
+    errors still show; the vehicle's STATUSTEXTs are collected and reported by the kit)."""
+    global _QUIET
+    if _QUIET:
+        return
+    from mavsdk.logging import LogLevel, log_subscribe
+
+    log_subscribe(lambda level, message, file, line: level < LogLevel.WARN)
+    _QUIET = True
+
+
 @contextlib.asynccontextmanager
 async def open_vehicle(url: str, timeout: float = 10.0):
     """``async with open_vehicle("udpin://127.0.0.1:14550") as vehicle`` -> Vehicle."""
     import mavsdk.asyncio as ms
+
+    quiet_mavsdk()
 
     config = ms.Configuration.create_with_component_type(ms.ComponentType.GROUND_STATION)
     async with ms.Mavsdk(config) as mavsdk:
