@@ -11,7 +11,7 @@ import sys
 from rich.console import Console
 from rich.table import Table
 
-from bench import build_bench, compile_bench, upload_bench
+from bench import build_bench, compile_bench, monitor_bench, upload_bench
 
 
 def main(argv=None) -> int:
@@ -19,7 +19,7 @@ def main(argv=None) -> int:
     p.add_argument("--osm", required=True, help="OSM extract (Malta)")
     p.add_argument("--optimize-sites", type=int, default=8,
                    help="sites timed against alphashape.optimizealpha (it is slow)")
-    p.add_argument("--only", choices=["build", "compile", "upload"], help="run one group")
+    p.add_argument("--only", choices=["build", "compile", "upload", "monitor"], help="run one group")
     args = p.parse_args(argv)
     console = Console(width=150)
     rows = []
@@ -29,6 +29,8 @@ def main(argv=None) -> int:
         rows += compile_bench.run(args.osm, build_bench.Row)
     if args.only in (None, "upload"):
         rows += upload_bench.run(build_bench.Row)
+    if args.only in (None, "monitor"):
+        rows += monitor_bench.run(args.osm, build_bench.Row)
     table = Table(title="AlphaFence benchmarks (this machine, one run)")
     for col in ("benchmark", "result", "target", "peer", "ratio", "ok"):
         table.add_column(col, justify="left" if col in ("benchmark", "peer") else "right")

@@ -1,0 +1,41 @@
+"""Prediction arithmetic: stopping distance, time to breach, closest point of approach."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Braking:
+    reaction_s: float = 1.0  # link + decision + autopilot mode change
+    decel_mps2: float = 2.5  # a Copter in BRAKE decelerates at a few m/s²
+    margin_m: float = 2.0
+
+
+def stopping_distance(speed_mps: float, braking: Braking = Braking()) -> float:
+    """Metres covered before standstill: reaction time at speed, then constant braking."""
+    v = max(0.0, speed_mps)
+    return v * braking.reaction_s + v * v / (2.0 * braking.decel_mps2) + braking.margin_m
+
+
+def time_to_breach(distance_along_track_m: float | None, speed_mps: float) -> float:
+    """Seconds until the track reaches the fence at the current speed (inf if never)."""
+    if distance_along_track_m is None or speed_mps <= 0.05:
+        return math.inf
+    return distance_along_track_m / speed_mps
+
+
+def closest_approach(rx, ry, rz, vx, vy, vz, horizon_s):
+    """Time (clamped to [0, horizon]) and distance of closest approach between two craft with
+    relative position r (other minus own, metres) and relative velocity v (m/s)."""
+    vv = vx * vx + vy * vy + vz * vz
+    t = 0.0 if vv < 1e-9 else -(rx * vx + ry * vy + rz * vz) / vv
+    t = min(max(t, 0.0), horizon_s)
+    dx, dy, dz = rx + vx * t, ry + vy * t, rz + vz * t
+    return t, math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+def dynamic_radius(base_m: float, closing_speed_mps: float, reaction_s: float = 2.0) -> float:
+    """A moving aircraft's keep-out cylinder grows with how fast the two close on each other."""
+    return base_m + max(0.0, closing_speed_mps) * reaction_s
