@@ -7,7 +7,13 @@ import shapely
 
 from kit.frame import LocalFrame
 from kit.monitor.fenceset import FenceSet
-from kit.monitor.predict import Braking, closest_approach, dynamic_radius, stopping_distance, time_to_breach
+from kit.monitor.predict import (
+    Braking,
+    closest_approach,
+    dynamic_radius,
+    stopping_distance,
+    time_to_breach,
+)
 from kit.monitor.state import Level, StateMachine, assess
 from kit.readers.fences import FenceRecord
 

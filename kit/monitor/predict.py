@@ -13,8 +13,9 @@ class Braking:
     margin_m: float = 2.0
 
 
-def stopping_distance(speed_mps: float, braking: Braking = Braking()) -> float:
+def stopping_distance(speed_mps: float, braking: Braking = None) -> float:
     """Metres covered before standstill: reaction time at speed, then constant braking."""
+    braking = braking or Braking()
     v = max(0.0, speed_mps)
     return v * braking.reaction_s + v * v / (2.0 * braking.decel_mps2) + braking.margin_m
 

@@ -27,8 +27,9 @@ class Assessment:
     reason: str
 
 
-def assess(check, speed_mps, horizon_s, braking: Braking = Braking()) -> Assessment:
+def assess(check, speed_mps, horizon_s, braking: Braking = None) -> Assessment:
     """One position's raw level (before hysteresis)."""
+    braking = braking or Braking()
     stop = stopping_distance(speed_mps, braking)
     nearest = check.nearest_keep_out
     dist = nearest.distance_m if nearest else math.inf
