@@ -1,0 +1,152 @@
+"""The monitor's decision engine: telemetry samples in, events out (alerts, level changes,
+actions, failsafes). Synchronous and I/O-free, so it is unit-tested and replayed on recorded
+traces; kit.monitor.runner feeds it from MAVSDK and carries out what it decides."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from kit.monitor.fenceset import FenceSet
+from kit.monitor.predict import Braking
+from kit.monitor.state import Level, StateMachine, assess
+
+ACTIONS = ("none", "brake", "rtl", "land")
+
+
+@dataclass
+class Sample:
+    t: float  # seconds (monotonic)
+    lat: float
+    lon: float
+    alt_m: float  # above home
+    vn: float = 0.0  # m/s north
+    ve: float = 0.0  # m/s east
+    mode: str | None = None
+    armed: bool | None = None
+
+
+@dataclass
+class MonitorOptions:
+    horizon_s: float = 15.0
+    braking: Braking = field(default_factory=Braking)
+    enforce: bool = False
+    imminent_action: str = "brake"
+    breach_action: str = "rtl"
+    hold_s: float = 2.0  # hysteresis
+    backoff_s: float = 15.0  # after the pilot changes mode, alert only
+    stale_s: float = 1.0
+    max_speed_mps: float = 60.0  # a position jump faster than this is a GPS glitch
+
+
+class Engine:
+    def __init__(self, fences: FenceSet, options: MonitorOptions | None = None):
+        self.fences = fences
+        self.options = options or MonitorOptions()
+        self.sm = StateMachine(self.options.hold_s)
+        self.last: Sample | None = None
+        self.last_t: float | None = None
+        self.stale = False
+        self.commanded_mode: str | None = None
+        self.backoff_until = -math.inf
+        self.checks = 0
+
+    # -- inputs ---------------------------------------------------------------------
+    def step(self, s: Sample) -> list:
+        events = []
+        if not _plausible(s):
+            return [self._event(s.t, "gps_glitch", s, reason="position missing, NaN or at 0,0")]
+        if self.last is not None and s.t > self.last.t:
+            jump = _distance_m(self.last, s) / (s.t - self.last.t)
+            if jump > self.options.max_speed_mps:
+                return [self._event(s.t, "gps_glitch", s, reason=f"position jumped at {jump:.0f} m/s")]
+        if self.stale:
+            self.stale = False
+            events.append(self._event(s.t, "telemetry_resumed", s))
+        events += self._pilot(s)
+        self.last, self.last_t = s, s.t
+        x, y = self.fences.frame.to_local(s.lon, s.lat)
+        speed = math.hypot(s.vn, s.ve)
+        lookahead = max(50.0, speed * self.options.horizon_s)
+        check = self.fences.check(float(x), float(y), s.alt_m, s.ve, s.vn, lookahead)
+        self.checks += 1
+        a = assess(check, speed, self.options.horizon_s, self.options.braking)
+        previous = self.sm.level
+        level, changed = self.sm.update(a.level, s.t)
+        if changed:
+            events.append(self._event(s.t, "level", s, level=level.name, previous=previous.name,
+                                      fence=self._site(a.fence), distance_m=_r(a.distance_m),
+                                      time_to_breach_s=_r(a.time_to_breach_s), stopping_m=_r(a.stopping_m),
+                                      reason=a.reason))
+            events += self._act(s, level)
+        return events
+
+    def tick(self, now: float) -> list:
+        """Called on a timer: telemetry older than ``stale_s`` is an event (once)."""
+        if self.last_t is not None and not self.stale and now - self.last_t > self.options.stale_s:
+            self.stale = True
+            return [{"time": round(now, 3), "event": "telemetry_stale", "age_s": round(now - self.last_t, 2)}]
+        return []
+
+    # -- decisions ------------------------------------------------------------------
+    def _pilot(self, s):
+        if s.mode is None or self.last is None or s.mode == self.last.mode:
+            return []
+        if self.commanded_mode is not None and s.mode == self.commanded_mode:
+            return []
+        # someone else (the pilot, a GCS) changed mode: do not fight them for a while
+        self.backoff_until = s.t + self.options.backoff_s
+        self.commanded_mode = None
+        return [self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)]
+
+    def _act(self, s, level):
+        o = self.options
+        if level == Level.IMMINENT:
+            action = o.imminent_action
+        elif level == Level.BREACH:
+            action = o.breach_action
+        else:
+            return []
+        if not o.enforce or action == "none":
+            return []
+        if s.t < self.backoff_until:
+            return [self._event(s.t, "action_withheld", s, action=action, reason="pilot changed mode recently")]
+        if s.armed is False:
+            return []
+        self.commanded_mode = {"brake": "HOLD", "rtl": "RETURN_TO_LAUNCH", "land": "LAND"}[action]
+        return [self._event(s.t, "action", s, action=action)]
+
+    def _site(self, index):
+        return None if index is None else self.fences.records[index].site_id
+
+    def _event(self, t, kind, s, **extra):
+        return {"time": round(t, 3), "event": kind, "lat": round(s.lat, 7), "lon": round(s.lon, 7),
+                "alt_m": _r(s.alt_m), **extra}
+
+
+def _r(v):
+    return None if v is None or not math.isfinite(v) else round(float(v), 2)
+
+
+def _plausible(s) -> bool:
+    ok = all(isinstance(v, (int, float)) and math.isfinite(v) for v in (s.lat, s.lon, s.alt_m))
+    return ok and abs(s.lat) <= 90 and abs(s.lon) <= 180 and not (s.lat == 0 and s.lon == 0)
+
+
+def _distance_m(a, b) -> float:
+    dlat = math.radians(b.lat - a.lat)
+    dlon = math.radians(b.lon - a.lon) * math.cos(math.radians(0.5 * (a.lat + b.lat)))
+    return 6_371_000.0 * math.hypot(dlat, dlon)
+
+
+def alert_text(event) -> str | None:
+    """A STATUSTEXT (<= 50 characters) for the ground station, or None."""
+    kind = event["event"]
+    if kind == "level":
+        text = f"AF {event['level']} {event.get('fence') or ''}"
+        if event.get("time_to_breach_s") is not None and event["level"] in ("WARNING", "IMMINENT"):
+            text += f" {event['time_to_breach_s']:.0f}s"
+        return text[:50]
+    if kind in ("gps_glitch", "telemetry_stale", "action", "action_withheld"):
+        return f"AF {kind} {event.get('action', '')}".strip()[:50]
+    return None
