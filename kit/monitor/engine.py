@@ -12,6 +12,7 @@ from kit.monitor.predict import Braking
 from kit.monitor.state import Level, StateMachine, assess
 
 ACTIONS = ("none", "brake", "rtl", "land")
+COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
 
 
 @dataclass
@@ -47,7 +48,7 @@ class Engine:
         self.last: Sample | None = None
         self.last_t: float | None = None
         self.stale = False
-        self.commanded_mode: str | None = None
+        self.action_t = -math.inf  # when the monitor last commanded a mode
         self.backoff_until = -math.inf
         self.checks = 0
 
@@ -92,11 +93,10 @@ class Engine:
     def _pilot(self, s):
         if s.mode is None or self.last is None or s.mode == self.last.mode:
             return []
-        if self.commanded_mode is not None and s.mode == self.commanded_mode:
-            return []
+        if s.t - self.action_t <= COMMAND_SETTLE_S:
+            return []  # the mode change the monitor itself commanded
         # someone else (the pilot, a GCS) changed mode: do not fight them for a while
         self.backoff_until = s.t + self.options.backoff_s
-        self.commanded_mode = None
         return [self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)]
 
     def _act(self, s, level):
@@ -113,7 +113,7 @@ class Engine:
             return [self._event(s.t, "action_withheld", s, action=action, reason="pilot changed mode recently")]
         if s.armed is False:
             return []
-        self.commanded_mode = {"brake": "HOLD", "rtl": "RETURN_TO_LAUNCH", "land": "LAND"}[action]
+        self.action_t = s.t
         return [self._event(s.t, "action", s, action=action)]
 
     def _site(self, index):

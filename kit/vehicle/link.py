@@ -57,6 +57,7 @@ async def open_vehicle(url: str, timeout: float = 10.0):
 
 class Vehicle:
     def __init__(self, system, url):
+        from mavsdk.asyncio.plugins.action import ActionAsync
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
         from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -64,6 +65,7 @@ class Vehicle:
         self.url = url
         self.system = system
         self.mission_raw = MissionRawAsync(system)
+        self.action = ActionAsync(system)
         self.param = ParamAsync(system)
         self.telemetry = TelemetryAsync(system)
         self.texts: deque = deque(maxlen=50)  # (monotonic time, text)

@@ -1,0 +1,168 @@
+"""The async companion monitor: MAVSDK telemetry in, the engine's decisions out.
+
+Telemetry subscriptions only update the latest state; a checker wakes on every new position
+and at least every 0.1 s; alerts (STATUSTEXT to the ground station) and actions (brake, RTL,
+land) run as their own tasks; the event log is written by its own task off the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+
+from kit.monitor.engine import Engine, Sample, alert_text
+
+TICK_S = 0.1
+
+
+class EventLog:
+    """JSON lines, appended by a background task (file I/O never blocks the loop)."""
+
+    def __init__(self, path=None, echo=None):
+        self.path = path
+        self.echo = echo
+        self.queue: asyncio.Queue = asyncio.Queue()
+        self.task = asyncio.create_task(self._write()) if path else None
+        self.events = []
+
+    def put(self, event):
+        self.events.append(event)
+        if self.echo:
+            self.echo(event)
+        if self.task:
+            self.queue.put_nowait(json.dumps(event, separators=(",", ":")))
+
+    async def _write(self):
+        while True:
+            lines = [await self.queue.get()]
+            while not self.queue.empty():
+                lines.append(self.queue.get_nowait())
+            await asyncio.to_thread(_append, self.path, lines)
+
+    async def close(self):
+        if self.task:
+            while not self.queue.empty():
+                await asyncio.sleep(0.01)
+            await asyncio.sleep(0.05)
+            self.task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self.task
+
+
+def _append(path, lines):
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write("\n".join(lines) + "\n")
+
+
+class Monitor:
+    def __init__(self, vehicle, fences, options, log: EventLog, rate_hz: float = 10.0):
+        self.vehicle = vehicle
+        self.engine = Engine(fences, options)
+        self.log = log
+        self.rate_hz = rate_hz
+        self.latest = {"position": None, "velocity": None, "mode": None, "armed": None}
+        self.new_position = asyncio.Event()
+        self.tasks = []
+        self.pending = set()
+
+    async def run(self, stop: asyncio.Event):
+        tel = self.vehicle.telemetry
+        for setter in (tel.set_rate_position, tel.set_rate_velocity_ned):
+            with contextlib.suppress(Exception):
+                await setter(self.rate_hz)
+        self.tasks = [
+            asyncio.create_task(self._follow(tel.subscribe_position(), "position", wake=True)),
+            asyncio.create_task(self._follow(tel.subscribe_velocity_ned(), "velocity")),
+            asyncio.create_task(self._follow(tel.subscribe_flight_mode(), "mode")),
+            asyncio.create_task(self._follow(tel.subscribe_armed(), "armed")),
+        ]
+        try:
+            while not stop.is_set():
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await asyncio.wait_for(self.new_position.wait(), TICK_S)
+                events = []
+                if self.new_position.is_set():
+                    self.new_position.clear()
+                    sample = self._sample()
+                    if sample is not None:
+                        events += self.engine.step(sample)
+                events += self.engine.tick(time.monotonic())
+                for e in events:
+                    self._handle(e)
+        finally:
+            for t in self.tasks + list(self.pending):
+                t.cancel()
+            for t in self.tasks + list(self.pending):
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await t
+
+    async def _follow(self, stream, key, wake=False):
+        async for value in stream:
+            self.latest[key] = (time.monotonic(), value)
+            if wake:
+                self.new_position.set()
+
+    def _sample(self):
+        pos = self.latest["position"]
+        if pos is None:
+            return None
+        t, p = pos
+        vel = self.latest["velocity"]
+        vn, ve = (vel[1].north_m_s, vel[1].east_m_s) if vel else (0.0, 0.0)
+        mode = self.latest["mode"]
+        armed = self.latest["armed"]
+        return Sample(t, p.latitude_deg, p.longitude_deg, p.relative_altitude_m, vn, ve,
+                      mode[1].name if mode else None, armed[1] if armed else None)
+
+    def _handle(self, event):
+        self.log.put(event)
+        text = alert_text(event)
+        if text:
+            self._spawn(self._alert(text, event))
+        if event["event"] == "action":
+            self._spawn(self._act(event["action"]))
+
+    def _spawn(self, coro):
+        task = asyncio.create_task(coro)
+        self.pending.add(task)
+        task.add_done_callback(self.pending.discard)
+
+    async def _alert(self, text, event):
+        from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
+        from mavsdk.plugins.server_utility import StatusTextType
+
+        severity = StatusTextType.CRITICAL if event.get("level") in ("IMMINENT", "BREACH") else StatusTextType.WARNING
+        try:
+            await ServerUtilityAsync(self.vehicle.system).send_status_text(severity, text)
+        except Exception as exc:  # an alert that cannot be sent is logged, never fatal
+            self.log.put({"time": round(time.monotonic(), 3), "event": "alert_failed", "text": text, "error": str(exc)})
+
+    async def _act(self, action):
+        act = self.vehicle.action
+        try:
+            if action == "brake":
+                await act.hold()
+            elif action == "rtl":
+                await act.return_to_launch()
+            elif action == "land":
+                await act.land()
+            self.log.put({"time": round(time.monotonic(), 3), "event": "action_done", "action": action})
+        except Exception as exc:
+            self.log.put({"time": round(time.monotonic(), 3), "event": "action_failed", "action": action, "error": str(exc)})
+
+
+async def run_monitor(url, fences, options, log_path=None, stop: asyncio.Event | None = None, echo=None,
+                      timeout: float = 10.0):
+    from kit.vehicle.link import open_vehicle
+
+    stop = stop or asyncio.Event()
+    log = EventLog(log_path, echo)
+    try:
+        async with open_vehicle(url, timeout) as vehicle:
+            monitor = Monitor(vehicle, fences, options, log)
+            await monitor.run(stop)
+            return monitor
+    finally:
+        await log.close()

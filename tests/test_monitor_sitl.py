@@ -1,0 +1,38 @@
+"""The async monitor against real ArduPilot SITL."""
+
+import asyncio
+import json
+
+import pytest
+import shapely
+
+from kit.frame import LocalFrame
+from kit.monitor.engine import MonitorOptions
+from kit.monitor.fenceset import FenceSet
+from kit.monitor.runner import run_monitor
+from kit.readers.fences import FenceRecord
+
+pytestmark = pytest.mark.sitl
+EGHAM = (-0.55, 51.43)
+
+
+@pytest.mark.parametrize("sitl", [{"home": "egham", "speedup": 1}], indirect=True)
+async def test_monitor_sees_a_vehicle_parked_in_a_keep_out_zone(sitl, tmp_path):
+    frame = LocalFrame(*EGHAM)
+    fences = FenceSet([
+        FenceRecord("test/around-home", "keep_out", frame.geom_to_wgs84(shapely.box(-50, -50, 50, 50))),
+        FenceRecord("test/far", "keep_out", frame.geom_to_wgs84(shapely.box(1000, 1000, 1100, 1100))),
+    ])
+    log = tmp_path / "events.jsonl"
+    stop = asyncio.Event()
+    task = asyncio.create_task(run_monitor(sitl.connection_url, fences, MonitorOptions(enforce=False), log, stop))
+    await asyncio.sleep(4.0)
+    stop.set()
+    monitor = await asyncio.wait_for(task, 10)
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    breach = [e for e in events if e["event"] == "level" and e["level"] == "BREACH"]
+    assert breach and breach[0]["fence"] == "test/around-home"
+    assert abs(breach[0]["lat"] - EGHAM[1]) < 1e-3 and abs(breach[0]["lon"] - EGHAM[0]) < 1e-3
+    # position checks run at the telemetry rate (>= 5 Hz over the last few seconds)
+    assert monitor.engine.checks >= 10
+    assert not [e for e in events if e["event"] in ("action", "alert_failed")]
