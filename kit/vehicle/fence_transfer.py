@@ -8,6 +8,7 @@ ArduPilot keeps its previous fence when an upload fails, and the kit checks that
 
 from __future__ import annotations
 
+import asyncio
 import time
 from dataclasses import dataclass
 
@@ -16,6 +17,11 @@ from kit.writers.mavlink_items import FenceItem
 
 MISSION_TYPE_FENCE = 1
 FRAME_GLOBAL = 0
+# ArduPilot abandons a stalled upload 8 s after the last item it received, and until then answers
+# a download with MISSION_ACK(DENIED), which MAVSDK's download ignores (it times out instead).
+# MAVSDK gives up on an upload after about 2.5 s of silence: the vehicle may need the rest of
+# those 8 s before it can say what it holds.
+VEHICLE_UPLOAD_TIMEOUT_S = 8.0
 
 # MAVSDK's MissionRawResult names -> plain words
 REASONS = {
@@ -24,18 +30,25 @@ REASONS = {
     "INVALID_ARGUMENT": "the vehicle rejected an item as invalid",
     "UNSUPPORTED": "the vehicle does not support fence transfers",
     "DENIED": "the vehicle denied the transfer",
-    "PROTOCOL_ERROR": "the transfer broke off (protocol error)",
+    # MAVSDK's name for MISSION_ACK(MAV_MISSION_ERROR), ArduPilot's answer to a fence it will
+    # not store (too many bytes, a bad polygon, ...), and for an ACK before the last item
+    "PROTOCOL_ERROR": "the vehicle refused the fence",
     "INT_MESSAGES_NOT_SUPPORTED": "the vehicle does not speak MISSION_ITEM_INT",
     "TRANSFER_CANCELLED": "the transfer was cancelled",
     "BUSY": "the vehicle is busy with another transfer",
     "NO_SYSTEM": "the vehicle is not connected",
-    "ERROR": "the vehicle refused the fence",
+    # MAVSDK's name for a message it could not send (its ConnectionError)
+    "ERROR": "the link to the vehicle failed",
+    # ArduPilot answers an item it did not ask for (a repeated or late request) with
+    # MISSION_ACK(INVALID_SEQUENCE), and MAVSDK ends the upload there
+    "INVALID_SEQUENCE": "the transfer got out of step (a message was repeated or came late)",
+    "NO_MISSION_AVAILABLE": "there were no fence items to send",
 }
 
 
 class FenceTransferError(RuntimeError):
     def __init__(self, message, vehicle_says=(), holds=None):
-        self.vehicle_says = list(vehicle_says)
+        self.vehicle_says = [" ".join(str(t).split()) for t in vehicle_says]  # one line
         self.holds = holds
         parts = [message]
         if self.vehicle_says:
@@ -94,7 +107,21 @@ async def download_fence(vehicle):
         if getattr(exc.result, "name", "") == "NO_MISSION_AVAILABLE":
             return []
         raise FenceTransferError(f"download failed: {_reason(exc)}") from None
-    return from_raw(raw)
+    return from_raw(_in_sequence(raw))
+
+
+def _in_sequence(raw):
+    """The downloaded items, one per sequence number 0..n-1.
+
+    MAVSDK 4.1 keeps the items it already has when a repeated MISSION_COUNT (an answer to its
+    own re-sent MISSION_REQUEST_LIST, arriving late) restarts a download, and then returns some
+    items twice; ArduPilot sends the same item for the same number, so one per number is kept."""
+    by_seq = {}
+    for r in raw:
+        by_seq.setdefault(int(r.seq), r)
+    if sorted(by_seq) != list(range(len(by_seq))):
+        raise FenceTransferError(f"download failed: items came back numbered {sorted(by_seq)}")
+    return [by_seq[i] for i in range(len(by_seq))]
 
 
 async def upload_fence(vehicle, items) -> UploadReport:
@@ -106,8 +133,12 @@ async def upload_fence(vehicle, items) -> UploadReport:
     try:
         await vehicle.mission_raw.upload_geofence(to_raw(items))
     except MissionRawError as exc:
+        got, holds = await _what_it_holds(vehicle)
+        if got is not None and same_items(items, got) == []:
+            # the vehicle stored the fence but its final MISSION_ACK was lost: the read-back,
+            # which is what success means here, shows the fence sent
+            return UploadReport(len(items), time.monotonic() - t0, True)
         says = await vehicle.texts_since(t0)
-        holds = await _what_it_holds(vehicle)
         raise FenceTransferError(f"upload of {len(items)} fence items failed: {_reason(exc)}", says, holds) from None
     got = await download_fence(vehicle)
     seconds = time.monotonic() - t0
@@ -118,9 +149,30 @@ async def upload_fence(vehicle, items) -> UploadReport:
     return UploadReport(len(items), seconds, True)
 
 
-async def _what_it_holds(vehicle) -> str:
+async def _what_it_holds(vehicle):
+    """After a failed upload: (items read back or None, what the vehicle holds in words).
+
+    Keeps asking while the vehicle may still be busy with the abandoned upload (see
+    VEHICLE_UPLOAD_TIMEOUT_S) and still sends heartbeats; each attempt ends within MAVSDK's
+    own timeout (about 2.5 s), so this takes at most about 11 s."""
+    deadline = time.monotonic() + VEHICLE_UPLOAD_TIMEOUT_S + 0.5
+    while True:
+        try:
+            got = await download_fence(vehicle)
+        except FenceTransferError as exc:
+            why = str(exc)
+        else:
+            return got, f"the vehicle still holds its previous fence ({len(got)} items)"
+        if not await _connected(vehicle):
+            return None, ("the vehicle is no longer connected (no heartbeat), so what it holds "
+                          "is unknown; ArduPilot keeps its previous fence when an upload fails")
+        if time.monotonic() >= deadline:
+            return None, f"could not read back what the vehicle holds ({why})"
+        await asyncio.sleep(0.1)
+
+
+async def _connected(vehicle) -> bool:
     try:
-        got = await download_fence(vehicle)
-    except FenceTransferError as exc:
-        return f"could not read back what the vehicle holds ({exc})"
-    return f"the vehicle still holds its previous fence ({len(got)} items)"
+        return bool(await vehicle.system.is_connected())
+    except Exception:  # no way to tell: keep asking until the deadline
+        return True

@@ -1,0 +1,635 @@
+"""A scripted MAVLink peer that speaks ArduPilot's fence protocol, for fault-injection tests.
+
+``FakeVehicle`` is an asyncio UDP peer (system 1, component 1, an ArduPilot quadrotor) that
+MAVSDK accepts as an autopilot: it sends HEARTBEAT at 1 Hz and answers the AUTOPILOT_VERSION
+request MAVSDK makes on discovery (with the MISSION_INT capability, without which MAVSDK
+refuses mission transfers). MAVSDK listens (``udpin://127.0.0.1:PORT``); the fake sends to
+that port, and MAVSDK answers to wherever the fake's datagrams come from.
+
+The fence transfer follows ArduPilot's MissionItemProtocol / MissionItemProtocol_Fence /
+AC_PolyFence_loader (mission type FENCE only):
+
+* upload: MISSION_COUNT -> MISSION_REQUEST (id 40, not _INT) per item -> MISSION_ITEM_INT ->
+  MISSION_ACK. A count over capacity is refused at once (NO_SPACE, "Only 70 items are
+  supported"); the items are validated and sized when the last one arrives (ERROR, "Fence
+  exceeds storage size", "Fence validation failed", ...). An item with the wrong sequence
+  number is answered MISSION_ACK(INVALID_SEQUENCE) and the transfer goes on; an item while no
+  upload is under way is answered MISSION_ACK(ERROR). A stalled client is re-asked every
+  second and the upload cancelled 8 s after the last item (STATUSTEXT "Fence upload timeout",
+  then MISSION_ACK(OPERATION_CANCELLED)). A failed upload leaves the previous fence in place.
+* download: MISSION_REQUEST_LIST -> MISSION_COUNT -> MISSION_REQUEST_INT -> MISSION_ITEM_INT
+  (frame GLOBAL, exact 1e-7 degrees); while an upload is under way both are refused with
+  MISSION_ACK(DENIED).
+* STATUSTEXTs trail the MISSION_ACK by a few milliseconds, as ArduPilot's queued texts do.
+
+Capacity: 70 items and 560 bytes (a Copter): header 4 bytes, a polygon 2 + 8 per vertex, a
+circle 13, the return point 9, end marker 1 (kit/compile.py's ``storage_bytes`` layout).
+
+Faults (``Faults``) are scripted and deterministic: the numbered or seeded-random loss of
+mission-protocol messages (only MISSION_* messages are numbered and subject to loss, so that
+heartbeats and MAVSDK's discovery traffic cannot shift the numbering), late (re-ordered)
+messages, duplicated and out-of-order requests, NACKs, a stall and a disconnect. Everything
+the fake sees, sends and loses is recorded in ``FakeVehicle.log``.
+
+No threads and no mavutil: pymavlink's MAVLink 2 encoder/decoder writes into a buffer that
+the asyncio datagram transport sends.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+import socket
+import time
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, field
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+SYSTEM_ID = 1
+COMPONENT_ID = 1
+FENCE = mav.MAV_MISSION_TYPE_FENCE
+
+POLYGON_INCLUSION = mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION  # 5001
+POLYGON_EXCLUSION = mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION  # 5002
+CIRCLE_INCLUSION = mav.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION  # 5003
+CIRCLE_EXCLUSION = mav.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION  # 5004
+RETURN_POINT = mav.MAV_CMD_NAV_FENCE_RETURN_POINT  # 5000
+POLYGONS = (POLYGON_INCLUSION, POLYGON_EXCLUSION)
+CIRCLES = (CIRCLE_INCLUSION, CIRCLE_EXCLUSION)
+GLOBAL_FRAMES = (
+    mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT,
+    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+)
+CAPABILITIES = (
+    mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+)
+MISSION_MESSAGES = frozenset({
+    "MISSION_COUNT", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_REQUEST_LIST",
+    "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_ACK", "MISSION_CLEAR_ALL",
+})
+TEXT_DELAY = 0.005  # STATUSTEXT after the ACK, as ArduPilot's deferred texts arrive
+
+
+def free_udp_port() -> int:
+    """A UDP port on loopback that nothing listens on right now (for MAVSDK's udpin)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass(frozen=True)
+class StoredItem:
+    """One fence item as the vehicle keeps it (x = latitude, y = longitude, 1e-7 degrees)."""
+
+    command: int
+    param1: float
+    x: int
+    y: int
+
+    @property
+    def lat(self) -> float:
+        return self.x / 1e7
+
+    @property
+    def lon(self) -> float:
+        return self.y / 1e7
+
+    @classmethod
+    def of(cls, item) -> StoredItem:
+        """From anything with command, param1, lon, lat (e.g. kit's FenceItem)."""
+        if isinstance(item, StoredItem):
+            return item
+        return cls(int(item.command), float(item.param1), int(round(item.lat * 1e7)),
+                   int(round(item.lon * 1e7)))
+
+
+def storage_bytes(items) -> int:
+    """Bytes of fence storage the items need (the layout of kit/compile.py's storage_bytes)."""
+    total = 4 + 1  # header, end marker
+    i = 0
+    while i < len(items):
+        it = items[i]
+        if it.command in POLYGONS:
+            n = max(int(it.param1), 1)
+            total += 2 + 8 * n
+            i += n
+            continue
+        total += 9 if it.command == RETURN_POINT else 13
+        i += 1
+    return total
+
+
+def validate(items) -> str | None:
+    """AC_PolyFence_loader::validate_fence: None, or the vehicle's complaint."""
+    expected = 0  # vertices still expected in the current polygon
+    count = 0
+    kind = None
+    seen_return = False
+    for it in items:
+        if it.command in POLYGONS:
+            n = int(it.param1)
+            if n < 3:
+                return f"Invalid vertex count ({n})"
+            if expected == 0:
+                expected = count = n
+                kind = it.command
+            elif it.command != kind:
+                return f"Received incorrect vertex type (want={kind} got={it.command})"
+            elif n != count:
+                return f"Unexpected vertex count want={count} got={n}\n"  # sic
+            expected -= 1
+        elif expected:
+            return f"Received incorrect type (want={kind} got={it.command})"
+        elif it.command in CIRCLES:
+            if not it.param1 > 0:
+                return "Non-positive circle radius"
+        elif it.command == RETURN_POINT:
+            if seen_return:
+                return "Multiple return points"
+            seen_return = True
+        if not (-900_000_000 <= it.x <= 900_000_000 and -1_800_000_000 <= it.y <= 1_800_000_000):
+            return "Bad lat or lon"
+    if expected:
+        return "Incorrect item count"
+    return None
+
+
+@dataclass
+class Faults:
+    """What goes wrong, scripted. Message numbers count mission-protocol (MISSION_*) messages
+    only, from 0, separately per direction, over the fake's whole life (uploads and the
+    downloads after them)."""
+
+    drop_in: Collection[int] = ()  # incoming mission messages lost on the way in
+    drop_out: Collection[int] = ()  # outgoing mission messages lost on the way out
+    loss_in: float = 0.0  # fraction of incoming mission messages lost at random
+    loss_out: float = 0.0  # fraction of outgoing mission messages lost at random
+    seed: int = 0  # for the random loss
+    delay_out: Mapping[int, float] = field(default_factory=dict)  # outgoing number -> s late
+    duplicate_requests: Collection[int] = ()  # item numbers whose MISSION_REQUEST goes twice
+    # before requesting item k, first request item j ({k: j}); j > k asks ahead, j < k asks again
+    # for an item already received (both out of order)
+    extra_requests: Mapping[int, int] = field(default_factory=dict)
+    nack_count: int | None = None  # answer MISSION_COUNT with this MAV_MISSION_RESULT
+    nack_item: tuple[int, int] | None = None  # (item number, MAV_MISSION_RESULT) refuse it
+    nack_text: str | None = None  # STATUSTEXT after a scripted NACK
+    stall_after: int | None = None  # after this many items of an upload: stop requesting
+    disconnect_after: int | None = None  # after this many items of an upload: go silent
+
+
+@dataclass
+class Upload:
+    """The upload under way (ArduPilot's receiving state)."""
+
+    count: int
+    sysid: int
+    compid: int
+    items: list = field(default_factory=list)
+    last_receive: float = 0.0
+    last_request: float = 0.0
+    stalled: bool = False
+
+    @property
+    def next_seq(self) -> int:
+        return len(self.items)
+
+
+class _Buffer:
+    """The file pymavlink's encoder writes to; the datagram transport empties it."""
+
+    def __init__(self):
+        self.chunks: list[bytes] = []
+
+    def write(self, data):
+        self.chunks.append(bytes(data))
+
+    def take(self) -> bytes:
+        data = b"".join(self.chunks)
+        self.chunks.clear()
+        return data
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, vehicle: FakeVehicle):
+        self.vehicle = vehicle
+
+    def datagram_received(self, data, addr):
+        self.vehicle._received(data)
+
+    def error_received(self, exc):  # e.g. ICMP port unreachable before MAVSDK listens
+        pass
+
+
+class FakeVehicle:
+    """``async with FakeVehicle(fence=items, faults=Faults(...)) as fake:`` then connect MAVSDK
+    to ``fake.url``. ``fake.fence`` is the stored fence (a list of StoredItem)."""
+
+    def __init__(self, fence=(), faults: Faults | None = None, *, max_items: int = 70,
+                 storage_size: int = 560, upload_timeout: float = 8.0,
+                 rerequest_interval: float = 1.0, port: int | None = None):
+        self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
+        self.faults = faults or Faults()
+        self.max_items = max_items
+        self.storage_size = storage_size
+        self.upload_timeout = upload_timeout
+        self.rerequest_interval = rerequest_interval
+        self.port = port or free_udp_port()
+        self.log: list[tuple] = []  # (seconds since start, what, message name, detail)
+        self.texts: list[str] = []  # STATUSTEXTs sent
+        self.upload_results: list[int] = []  # MAV_MISSION_RESULT that ended each upload
+        self.fence_writes = 0  # fences stored (successful uploads and clears)
+        self.disconnected = False
+        self.upload: Upload | None = None
+        self._buffer = _Buffer()
+        self._mav = mav.MAVLink(self._buffer, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self._mav.robust_parsing = True
+        self._rng_in = random.Random(self.faults.seed * 2 + 1)
+        self._rng_out = random.Random(self.faults.seed * 2)
+        self._n_in = 0
+        self._n_out = 0
+        self._heard = False
+        self._t0 = time.monotonic()
+        self._transport = None
+        self._tasks: list[asyncio.Task] = []
+        self._loop = None
+
+    @property
+    def url(self) -> str:
+        return f"udpin://127.0.0.1:{self.port}"
+
+    # ---------------------------------------------------------------- life cycle
+
+    async def start(self):
+        self._loop = asyncio.get_running_loop()
+        self._t0 = time.monotonic()
+        self._transport, _ = await self._loop.create_datagram_endpoint(
+            lambda: _Protocol(self), local_addr=("127.0.0.1", 0))
+        self._tasks = [asyncio.create_task(self._heartbeats()), asyncio.create_task(self._update())]
+        return self
+
+    async def stop(self):
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            try:
+                await task
+            except asyncio.CancelledError:
+                pass
+        self._tasks = []
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None
+
+    async def __aenter__(self):
+        return await self.start()
+
+    async def __aexit__(self, *exc):
+        await self.stop()
+
+    def disconnect(self):
+        """Go silent: send nothing more (heartbeats included) and ignore what arrives."""
+        self.disconnected = True
+        self._note("disconnect", "", "")
+
+    def reconnect(self):
+        self.disconnected = False
+        self._note("reconnect", "", "")
+
+    def sent(self, name: str) -> list:
+        """Details of the messages of that name that went out, late or not (not those lost)."""
+        return [detail for _, what, n, detail in self.log if what.startswith("out") and n == name]
+
+    def received(self, name: str) -> list:
+        return [detail for _, what, n, detail in self.log if what == "in" and n == name]
+
+    # ---------------------------------------------------------------- wire
+
+    def _now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def _note(self, what, name, detail):
+        self.log.append((round(self._now(), 4), what, name, detail))
+
+    def _send(self, msg, detail=""):
+        """Encode and send one message, through the scripted faults."""
+        if self._transport is None or self.disconnected:
+            return
+        self._mav.send(msg)  # a lost message still uses up a sequence number, as on a radio
+        data = self._buffer.take()
+        name = msg.get_type()
+        delay = 0.0
+        if name in MISSION_MESSAGES:
+            n = self._n_out
+            self._n_out += 1
+            lost = n in self.faults.drop_out
+            if self.faults.loss_out and self._rng_out.random() < self.faults.loss_out:
+                lost = True
+            if lost:
+                self._note("lost-out", name, detail)
+                return
+            delay = self.faults.delay_out.get(n, 0.0)
+        if name != "HEARTBEAT":
+            self._note("out" if not delay else f"out+{delay:g}s", name, detail)
+        if delay:
+            self._loop.call_later(delay, self._sendto, data)
+        else:
+            self._sendto(data)
+
+    def _sendto(self, data):
+        if self._transport is not None and not self.disconnected:
+            self._transport.sendto(data, ("127.0.0.1", self.port))
+
+    def _received(self, data: bytes):
+        if self.disconnected:
+            return
+        self._heard = True
+        try:
+            msgs = self._mav.parse_buffer(data) or []
+        except Exception:  # a garbled datagram; the robust parser should not raise
+            return
+        for msg in msgs:
+            name = msg.get_type()
+            if name == "BAD_DATA":
+                continue
+            target = getattr(msg, "target_system", None)
+            if target not in (None, 0, SYSTEM_ID):
+                continue
+            if name in MISSION_MESSAGES:
+                n = self._n_in
+                self._n_in += 1
+                lost = n in self.faults.drop_in
+                if self.faults.loss_in and self._rng_in.random() < self.faults.loss_in:
+                    lost = True
+                if lost:
+                    self._note("lost-in", name, _detail(msg))
+                    continue
+            if name not in ("HEARTBEAT",):
+                self._note("in", name, _detail(msg))
+            handler = getattr(self, "_on_" + name.lower(), None)
+            if handler is not None:
+                handler(msg)
+            if self.disconnected:
+                return
+
+    # ---------------------------------------------------------------- periodic
+
+    async def _heartbeats(self):
+        """1 Hz; every 0.1 s until the ground station is first heard, so that a test does not
+        wait a second when MAVSDK starts listening just after the fake's first heartbeat."""
+        while True:
+            self._send(mav.MAVLink_heartbeat_message(
+                mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED,
+                0, mav.MAV_STATE_STANDBY, 3))
+            await asyncio.sleep(1.0 if self._heard else 0.1)
+
+    async def _update(self):
+        """MissionItemProtocol::update: re-ask a stalled client, cancel after the timeout."""
+        while True:
+            await asyncio.sleep(0.02)
+            up = self.upload
+            if up is None:
+                continue
+            now = time.monotonic()
+            if now - up.last_receive > self.upload_timeout:
+                self.upload = None
+                self.upload_results.append(mav.MAV_MISSION_OPERATION_CANCELLED)
+                self._text("Fence upload timeout")  # timeout() comes before the ACK here
+                self._ack(up.sysid, up.compid, mav.MAV_MISSION_OPERATION_CANCELLED)
+                continue
+            if not up.stalled and now - up.last_request > self.rerequest_interval:
+                self._request(up)
+
+    # ---------------------------------------------------------------- replies
+
+    def _ack(self, sysid, compid, result, mission_type=FENCE):
+        self._send(mav.MAVLink_mission_ack_message(sysid, compid, result, mission_type),
+                   _result_name(result))
+
+    def _text(self, text, severity=mav.MAV_SEVERITY_WARNING, delay=0.0):
+        def send():
+            self.texts.append(text)
+            self._send(mav.MAVLink_statustext_message(severity, text.encode()[:50]), text)
+
+        if delay and self._loop is not None:
+            self._loop.call_later(delay, send)
+        else:
+            send()
+
+    def _request(self, up: Upload, seq: int | None = None):
+        seq = up.next_seq if seq is None else seq
+        self._send(mav.MAVLink_mission_request_message(up.sysid, up.compid, seq, FENCE), seq)
+        up.last_request = time.monotonic()
+
+    def _request_next(self, up: Upload):
+        """Request the next item, with the scripted request faults."""
+        k = up.next_seq
+        if k in self.faults.extra_requests:
+            self._request(up, self.faults.extra_requests[k])
+        self._request(up)
+        if k in self.faults.duplicate_requests:
+            self._request(up)
+
+    def _end_upload(self, msg, result, text=None):
+        self.upload = None
+        self.upload_results.append(result)
+        self._ack(msg.get_srcSystem(), msg.get_srcComponent(), result)
+        if text:
+            self._text(text, delay=TEXT_DELAY)
+
+    # ---------------------------------------------------------------- handlers
+
+    def _mavlink2(self, msg) -> bool:
+        """mavlink2_requirement_met: fence transfers need MAVLink 2 (ArduPilot checks the
+        protocol of its link, which follows the ground station's)."""
+        if msg.get_msgbuf()[:1] == b"\xfd":
+            return True
+        self._text("Need mavlink2 for item transfer")
+        self._ack(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_UNSUPPORTED)
+        return False
+
+    def _other_type(self, msg) -> bool:
+        """This fake keeps a fence only; other mission types are refused."""
+        if msg.mission_type == FENCE:
+            return False
+        self._ack(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_UNSUPPORTED,
+                  msg.mission_type)
+        return True
+
+    def _on_command_long(self, msg):
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        wants_version = (msg.command == mav.MAV_CMD_REQUEST_MESSAGE
+                         and int(msg.param1) == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION) \
+            or msg.command == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+        if msg.target_component not in (0, COMPONENT_ID):
+            return
+        result = mav.MAV_RESULT_ACCEPTED if wants_version else mav.MAV_RESULT_UNSUPPORTED
+        self._send(mav.MAVLink_command_ack_message(msg.command, result, 0, 0, *src))
+        if wants_version:
+            self._send(mav.MAVLink_autopilot_version_message(
+                CAPABILITIES, (4 << 24) | (7 << 16) | (0 << 8) | 255, 0, 0, 0,
+                [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x0123456789))
+
+    def _on_mission_count(self, msg):
+        if self._other_type(msg) or not self._mavlink2(msg):
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        up = self.upload
+        if up is not None and (sysid, compid) != (up.sysid, up.compid):
+            self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
+            return
+        self.upload = None  # a repeated count from the same client restarts the upload
+        if msg.count > self.max_items:
+            self.upload_results.append(mav.MAV_MISSION_NO_SPACE)
+            self._ack(sysid, compid, mav.MAV_MISSION_NO_SPACE)
+            self._text(f"Only {self.max_items} items are supported", delay=TEXT_DELAY)
+            return
+        if self.faults.nack_count is not None:
+            self._end_upload(msg, self.faults.nack_count, self.faults.nack_text)
+            return
+        if msg.count == 0:
+            self._store([])
+            self._end_upload(msg, mav.MAV_MISSION_ACCEPTED)
+            return
+        now = time.monotonic()
+        up = self.upload = Upload(msg.count, sysid, compid, last_receive=now)
+        if self._scripted_stop(up):
+            return
+        self._request_next(up)
+
+    def _scripted_stop(self, up: Upload) -> bool:
+        if self.faults.disconnect_after is not None and up.next_seq >= self.faults.disconnect_after:
+            self.disconnect()
+            return True
+        if self.faults.stall_after is not None and up.next_seq >= self.faults.stall_after:
+            if not up.stalled:
+                up.stalled = True
+                self._note("stall", "", up.next_seq)
+            return True
+        return False
+
+    def _on_mission_item_int(self, msg):
+        if self._other_type(msg) or not self._mavlink2(msg):
+            return
+        up = self.upload
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if up is None:
+            self._ack(sysid, compid, mav.MAV_MISSION_ERROR)
+            return
+        if up.stalled:
+            return  # a stalled vehicle does not listen either
+        if msg.seq != up.next_seq:
+            self._ack(sysid, compid, mav.MAV_MISSION_INVALID_SEQUENCE)
+            return
+        if (sysid, compid) != (up.sysid, up.compid):
+            self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
+            return
+        result = self._convert(msg)
+        if self.faults.nack_item is not None and self.faults.nack_item[0] == msg.seq:
+            result = self.faults.nack_item[1]
+        if result != mav.MAV_MISSION_ACCEPTED:
+            self._end_upload(msg, result, self.faults.nack_text if self.faults.nack_item else None)
+            return
+        up.items.append(StoredItem(msg.command, float(msg.param1), msg.x, msg.y))
+        up.last_receive = time.monotonic()
+        if up.next_seq >= up.count:
+            self._complete(msg, up)
+            return
+        if self._scripted_stop(up):
+            return
+        self._request_next(up)
+
+    def _convert(self, msg) -> int:
+        """convert_MISSION_ITEM_INT_to_AC_PolyFenceItem."""
+        if msg.frame not in GLOBAL_FRAMES:
+            return mav.MAV_MISSION_UNSUPPORTED_FRAME
+        if msg.command in POLYGONS:
+            if msg.param1 > 255:
+                return mav.MAV_MISSION_INVALID_PARAM1
+        elif msg.command not in CIRCLES and msg.command != RETURN_POINT:
+            return mav.MAV_MISSION_UNSUPPORTED
+        return mav.MAV_MISSION_ACCEPTED
+
+    def _complete(self, msg, up: Upload):
+        """MissionItemProtocol_Fence::complete -> AC_PolyFence_loader::write_fence."""
+        problem = validate(up.items)
+        if problem is not None:
+            self.upload = None
+            self.upload_results.append(mav.MAV_MISSION_ERROR)
+            self._ack(up.sysid, up.compid, mav.MAV_MISSION_ERROR)
+            self._text(problem, delay=TEXT_DELAY)
+            self._text("Fence validation failed", delay=TEXT_DELAY)
+            return
+        if storage_bytes(up.items) > self.storage_size:
+            self._end_upload(msg, mav.MAV_MISSION_ERROR, "Fence exceeds storage size")
+            return
+        self._store(up.items)
+        self._end_upload(msg, mav.MAV_MISSION_ACCEPTED)
+        self._text("Fence Indexed OK", mav.MAV_SEVERITY_DEBUG, delay=TEXT_DELAY)
+
+    def _store(self, items):
+        self.fence = list(items)
+        self.fence_writes += 1
+
+    def _on_mission_request_list(self, msg):
+        if self._other_type(msg) or not self._mavlink2(msg):
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if self.upload is not None:
+            self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
+            return
+        self._send(mav.MAVLink_mission_count_message(sysid, compid, len(self.fence), FENCE),
+                   len(self.fence))
+
+    def _on_mission_request_int(self, msg):
+        if self._other_type(msg) or not self._mavlink2(msg):
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if self.upload is not None:
+            self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
+            return
+        if msg.seq > len(self.fence):
+            self._ack(sysid, compid, mav.MAV_MISSION_INVALID_SEQUENCE)
+            return
+        if msg.seq == len(self.fence):  # ArduPilot checks seq > count, then fails to read
+            self._ack(sysid, compid, mav.MAV_MISSION_ERROR)
+            return
+        it = self.fence[msg.seq]
+        param1 = float(int(it.param1)) if it.command in POLYGONS else it.param1
+        self._send(mav.MAVLink_mission_item_int_message(
+            sysid, compid, msg.seq, mav.MAV_FRAME_GLOBAL,
+            RETURN_POINT if it.command == RETURN_POINT else it.command, 0, 0,
+            0.0 if it.command == RETURN_POINT else param1, 0.0, 0.0, 0.0,
+            it.x, it.y, 0.0, FENCE), msg.seq)
+
+    def _on_mission_clear_all(self, msg):
+        if self._other_type(msg):
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if self.upload is not None:
+            self._ack(sysid, compid, mav.MAV_MISSION_ERROR)
+            return
+        self._store([])
+        self._ack(sysid, compid, mav.MAV_MISSION_ACCEPTED)
+
+
+def _result_name(result) -> str:
+    entry = mav.enums["MAV_MISSION_RESULT"].get(result)
+    return entry.name.replace("MAV_MISSION_", "") if entry else str(result)
+
+
+def _detail(msg):
+    name = msg.get_type()
+    if name == "MISSION_ACK":
+        return _result_name(msg.type)
+    if name == "MISSION_COUNT":
+        return msg.count
+    if name == "COMMAND_LONG":
+        return (msg.command, msg.param1)
+    return getattr(msg, "seq", "")
