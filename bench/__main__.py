@@ -1,6 +1,6 @@
 """Run the benchmarks and print each result against its target and its named peer.
 
-    python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf
+python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf
 """
 
 from __future__ import annotations
@@ -17,9 +17,15 @@ from bench import build_bench, compile_bench, monitor_bench, upload_bench
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench")
     p.add_argument("--osm", required=True, help="OSM extract (Malta)")
-    p.add_argument("--optimize-sites", type=int, default=8,
-                   help="sites timed against alphashape.optimizealpha (it is slow)")
-    p.add_argument("--only", choices=["build", "compile", "upload", "monitor"], help="run one group")
+    p.add_argument(
+        "--optimize-sites",
+        type=int,
+        default=8,
+        help="sites timed against alphashape.optimizealpha (it is slow)",
+    )
+    p.add_argument(
+        "--only", choices=["build", "compile", "upload", "monitor"], help="run one group"
+    )
     args = p.parse_args(argv)
     console = Console(width=150)
     rows = []
@@ -37,7 +43,9 @@ def main(argv=None) -> int:
     failed = 0
     for r in rows:
         failed += not r.ok
-        table.add_row(r.name, r.result, r.target, r.peer, r.ratio, "[green]yes[/]" if r.ok else "[red]NO[/]")
+        table.add_row(
+            r.name, r.result, r.target, r.peer, r.ratio, "[green]yes[/]" if r.ok else "[red]NO[/]"
+        )
     console.print(table)
     return 1 if failed else 0
 

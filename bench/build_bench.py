@@ -80,24 +80,53 @@ def run(osm, optimize_sites, console):
     rows = []
     rules = load_rules()
     t_read, med_read, db = best_of(lambda: read_database([osm], rules))
-    rows.append(Row("read Malta (pyosmium, default rules)", f"{t_read:.3f} s (median {med_read:.3f})", "< 1.5 s", "-", "-", t_read < 1.5))
+    rows.append(
+        Row(
+            "read Malta (pyosmium, default rules)",
+            f"{t_read:.3f} s (median {med_read:.3f})",
+            "< 1.5 s",
+            "-",
+            "-",
+            t_read < 1.5,
+        )
+    )
 
     t_fence, med_fence, result = best_of(lambda: build_fences(db.features, rules, BuildOptions()))
-    rows.append(Row(f"fence {len(result.sites)} Malta sites, auto alpha (+warning layers)",
-                    f"{t_fence:.3f} s (median {med_fence:.3f})", "< 0.5 s", "-", "-", t_fence < 0.5))
+    rows.append(
+        Row(
+            f"fence {len(result.sites)} Malta sites, auto alpha (+warning layers)",
+            f"{t_fence:.3f} s (median {med_fence:.3f})",
+            "< 0.5 s",
+            "-",
+            "-",
+            t_fence < 0.5,
+        )
+    )
 
     sites = group_sites(db.features, rules)
     sets = point_sets(sites)
     multi = [x for x in sets if x[3] > 1]
-    console.print(f"{len(sets)} point sets ({len(multi)} multi-part sites), {sum(len(x[2]) for x in sets)} points")
+    console.print(
+        f"{len(sets)} point sets ({len(multi)} multi-part sites), {sum(len(x[2]) for x in sets)} points"
+    )
 
     t_ours, _, ours = best_of(lambda: [alpha_shape_points(x[2], FIXED_ALPHA_M) for x in sets])
     lists = [[tuple(q) for q in x[2]] for x in sets]
-    t_peer, _, theirs = best_of(lambda: [alphashape.alphashape(pl, 1.0 / FIXED_ALPHA_M) for pl in lists], repeat=1)
+    t_peer, _, theirs = best_of(
+        lambda: [alphashape.alphashape(pl, 1.0 / FIXED_ALPHA_M) for pl in lists], repeat=1
+    )
     agree = np.mean([abs(a.area - b.area) <= 1e-6 * max(b.area, 1) for a, b in zip(ours, theirs)])
     ratio = t_peer / t_ours
-    rows.append(Row(f"alpha shape at {FIXED_ALPHA_M:g} m on {len(sets)} point sets ({100 * agree:.0f}% same area)",
-                    f"{1e3 * t_ours:.1f} ms", ">= 3x faster", f"alphashape {1e3 * t_peer:.0f} ms", f"{ratio:.1f}x", ratio >= 3))
+    rows.append(
+        Row(
+            f"alpha shape at {FIXED_ALPHA_M:g} m on {len(sets)} point sets ({100 * agree:.0f}% same area)",
+            f"{1e3 * t_ours:.1f} ms",
+            ">= 3x faster",
+            f"alphashape {1e3 * t_peer:.0f} ms",
+            f"{ratio:.1f}x",
+            ratio >= 3,
+        )
+    )
 
     chosen = sorted(multi, key=lambda x: len(x[2]))[: max(1, optimize_sites)]
     t_auto, _, _ = best_of(lambda: [alpha_shape(x[1]) for x in chosen])
@@ -106,21 +135,53 @@ def run(osm, optimize_sites, console):
         optimizealpha([tuple(q) for q in x[2]], silent=True)
     t_opt = time.perf_counter() - t0
     ratio = t_opt / t_auto
-    rows.append(Row(f"automatic alpha per site ({len(chosen)} smallest multi-part sites)",
-                    f"{1e3 * t_auto / len(chosen):.2f} ms/site", ">= 100x faster",
-                    f"optimizealpha {1e3 * t_opt / len(chosen):.0f} ms/site", f"{ratio:.0f}x", ratio >= 100))
+    rows.append(
+        Row(
+            f"automatic alpha per site ({len(chosen)} smallest multi-part sites)",
+            f"{1e3 * t_auto / len(chosen):.2f} ms/site",
+            ">= 100x faster",
+            f"optimizealpha {1e3 * t_opt / len(chosen):.0f} ms/site",
+            f"{ratio:.0f}x",
+            ratio >= 100,
+        )
+    )
 
     for label, margin in (("paper's setting, margin 0", 0.0), ("rules' margins", None)):
-        cmp = compare_methods(db.features, rules, ["alpha", "polygon"], BuildOptions(margin_m=margin))
+        cmp = compare_methods(
+            db.features, rules, ["alpha", "polygon"], BuildOptions(margin_m=margin)
+        )
         st = {s.method: s for s in cmp.stats}
         a, p = st["alpha"], st["polygon"]
         over = a.overshoot / p.overshoot if margin == 0.0 else a.excess / p.excess
         what = "overshoot" if margin == 0.0 else "excess beyond margin"
-        rows.append(Row(f"alpha {what} vs polygon ({label})",
-                        f"{(a.overshoot if margin == 0.0 else a.excess):.3f}", "<= 40% of polygon",
-                        f"polygon {(p.overshoot if margin == 0.0 else p.excess):.3f}", f"{100 * over:.0f}%", over <= 0.40))
-        rows.append(Row(f"alpha containment ({label})", f"{a.containment_pct:.4f} %", "100 %", "-", "-",
-                        abs(a.containment_pct - 100) < 1e-6))
-        rows.append(Row(f"alpha p95 vertices per fence ({label})", f"{a.vertices_p95:.0f}", "<= 32",
-                        f"polygon {p.vertices_p95:.0f}", "-", a.vertices_p95 <= 32))
+        rows.append(
+            Row(
+                f"alpha {what} vs polygon ({label})",
+                f"{(a.overshoot if margin == 0.0 else a.excess):.3f}",
+                "<= 40% of polygon",
+                f"polygon {(p.overshoot if margin == 0.0 else p.excess):.3f}",
+                f"{100 * over:.0f}%",
+                over <= 0.40,
+            )
+        )
+        rows.append(
+            Row(
+                f"alpha containment ({label})",
+                f"{a.containment_pct:.4f} %",
+                "100 %",
+                "-",
+                "-",
+                abs(a.containment_pct - 100) < 1e-6,
+            )
+        )
+        rows.append(
+            Row(
+                f"alpha p95 vertices per fence ({label})",
+                f"{a.vertices_p95:.0f}",
+                "<= 32",
+                f"polygon {p.vertices_p95:.0f}",
+                "-",
+                a.vertices_p95 <= 32,
+            )
+        )
     return rows

@@ -29,15 +29,23 @@ def run(osm, Row):
     included = {sid for p in compiled.pieces for sid in p.sources}
     restricted = sum(sites[sid].geometry.area for sid in included)
     alpha_area = sum(f.area_m2 for f in keep_out if f.site_id in included)
-    onboard_area = sum(p.chosen.local.area if p.chosen.circle is None else 3.141592653589793 * p.chosen.circle[2] ** 2
-                       for p in compiled.pieces)
+    onboard_area = sum(
+        p.chosen.local.area
+        if p.chosen.circle is None
+        else 3.141592653589793 * p.chosen.circle[2] ** 2
+        for p in compiled.pieces
+    )
     alpha_over = alpha_area - restricted
     onboard_over = onboard_area - restricted
     ratio = onboard_over / alpha_over
     return [
-        Row(f"compile Malta airport + 5 km: {len(included)} fences -> {len(compiled.items)} items, "
+        Row(
+            f"compile Malta airport + 5 km: {len(included)} fences -> {len(compiled.items)} items, "
             f"{storage_bytes(compiled.items)} B ({seconds:.2f} s)",
-            f"overshoot {onboard_over / 1e6:.2f} km²", "<= 2x alpha, <= 70 items",
-            f"alpha fences {alpha_over / 1e6:.2f} km²", f"{ratio:.2f}x",
-            ratio <= 2.0 and len(compiled.items) <= 70),
+            f"overshoot {onboard_over / 1e6:.2f} km²",
+            "<= 2x alpha, <= 70 items",
+            f"alpha fences {alpha_over / 1e6:.2f} km²",
+            f"{ratio:.2f}x",
+            ratio <= 2.0 and len(compiled.items) <= 70,
+        ),
     ]

@@ -27,7 +27,9 @@ def _p99_us(fn, positions):
 
 def _compare(label, fs, positions, peer_positions, Row):
     ours = _p99_us(lambda x, y: fs.check(x, y, 30.0, 7.0, 7.0, 150.0), positions)
-    polys = list(shapely.from_wkb(shapely.to_wkb(fs.local)))  # unprepared, as a plain loop holds them
+    polys = list(
+        shapely.from_wkb(shapely.to_wkb(fs.local))
+    )  # unprepared, as a plain loop holds them
 
     def plain(x, y):
         p = shapely.Point(x, y)
@@ -35,8 +37,14 @@ def _compare(label, fs, positions, peer_positions, Row):
 
     peer = _p99_us(plain, peer_positions)
     ratio = peer / ours
-    return Row(f"position check p99, {label} ({len(polys)} fences)", f"{ours:.0f} us", "< 100 us, >= 100x",
-               f"plain contains loop {peer / 1e3:.1f} ms", f"{ratio:.0f}x", ours < 100 and ratio >= 100)
+    return Row(
+        f"position check p99, {label} ({len(polys)} fences)",
+        f"{ours:.0f} us",
+        "< 100 us, >= 100x",
+        f"plain contains loop {peer / 1e3:.1f} ms",
+        f"{ratio:.0f}x",
+        ours < 100 and ratio >= 100,
+    )
 
 
 def run(osm, Row, seed=1):
@@ -55,8 +63,13 @@ def run(osm, Row, seed=1):
     cx, cy = rng.uniform(-50_000, 50_000, n), rng.uniform(-50_000, 50_000, n)
     size = rng.uniform(20, 200, n)
     boxes = shapely.box(cx, cy, cx + size, cy + size)
-    many = FenceSet([FenceRecord(f"synthetic/{i}", "keep_out", g) for i, g in enumerate(frame.geom_to_wgs84(boxes))],
-                    frame=frame)
+    many = FenceSet(
+        [
+            FenceRecord(f"synthetic/{i}", "keep_out", g)
+            for i, g in enumerate(frame.geom_to_wgs84(boxes))
+        ],
+        frame=frame,
+    )
     pos = np.column_stack([rng.uniform(-50_000, 50_000, 5000), rng.uniform(-50_000, 50_000, 5000)])
     rows.append(_compare("synthetic", many, pos, pos[:20], Row))
     return rows

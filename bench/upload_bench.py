@@ -22,7 +22,9 @@ def full_polygon(n=69, lon0=-0.545, lat0=51.433, radius=300.0):
     frame = LocalFrame(lon0, lat0)
     ang = np.linspace(0, 2 * math.pi, n, endpoint=False)
     lon, lat = frame.to_wgs84(radius * np.cos(ang), radius * np.sin(ang))
-    return [FenceItem(POLYGON_EXCLUSION, float(n), round(a, 7), round(b, 7)) for a, b in zip(lon, lat)]
+    return [
+        FenceItem(POLYGON_EXCLUSION, float(n), round(a, 7), round(b, 7)) for a, b in zip(lon, lat)
+    ]
 
 
 async def _measure(repeat):
@@ -44,8 +46,25 @@ async def _measure(repeat):
 
 def run(Row, repeat=5):
     if find_sitl_binary() is None:
-        return [Row("69-item fence upload + verify (SITL speedup 1)", "skipped: no SITL binary", "< 1.5 s", "-", "-", True)]
+        return [
+            Row(
+                "69-item fence upload + verify (SITL speedup 1)",
+                "skipped: no SITL binary",
+                "< 1.5 s",
+                "-",
+                "-",
+                True,
+            )
+        ]
     times = asyncio.run(_measure(repeat))
     best, med = min(times), statistics.median(times)
-    return [Row(f"69-item (full Copter storage) upload + verifying download, SITL speedup 1, {repeat} runs",
-                f"{best:.3f} s (median {med:.3f})", "< 1.5 s", "-", "-", med < 1.5)]
+    return [
+        Row(
+            f"69-item (full Copter storage) upload + verifying download, SITL speedup 1, {repeat} runs",
+            f"{best:.3f} s (median {med:.3f})",
+            "< 1.5 s",
+            "-",
+            "-",
+            med < 1.5,
+        )
+    ]

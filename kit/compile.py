@@ -40,8 +40,41 @@ CIRCLE_BYTES = 13
 RETURN_BYTES = 9
 PAD_M = 0.05  # onboard fences stand this far outside what they must contain (1e-7 deg < 1.2 cm)
 # vertex counts tried per fence (69 and 83 fill a Copter's and a Plane's storage alone)
-K_CANDIDATES = (4, 5, 6, 7, 8, 9, 10, 11, 12, 14, 16, 18, 20, 24, 28, 32, 36, 40, 44, 48, 52, 56, 60,
-                64, 69, 76, 83, 96, 128, 160, 192, 224, 255)
+K_CANDIDATES = (
+    4,
+    5,
+    6,
+    7,
+    8,
+    9,
+    10,
+    11,
+    12,
+    14,
+    16,
+    18,
+    20,
+    24,
+    28,
+    32,
+    36,
+    40,
+    44,
+    48,
+    52,
+    56,
+    60,
+    64,
+    69,
+    76,
+    83,
+    96,
+    128,
+    160,
+    192,
+    224,
+    255,
+)
 
 
 def polygon_bytes(n: int) -> int:
@@ -155,7 +188,9 @@ def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
     if not inclusion:
         c = circle if circle is not None else enclosing_circle(base)
         c = (c[0], c[1], c[2] + PAD_M) if circle is not None else c
-        opts.append(Option("circle", 1, CIRCLE_BYTES, math.pi * c[2] ** 2 - area, circle_polygon(*c), c))
+        opts.append(
+            Option("circle", 1, CIRCLE_BYTES, math.pi * c[2] ** 2 - area, circle_polygon(*c), c)
+        )
     n = len(base.exterior.coords) - 1
     ks = sorted({k for k in K_CANDIDATES if k < n} | ({n} if n <= max_vertices else set()))
     for k in ks:
@@ -184,7 +219,11 @@ def operating_area_from_plan(path):
         pts.append((home[1], home[0]))
     for item in mission.get("items", []):
         params = item.get("params") if isinstance(item, dict) else None
-        if isinstance(params, list) and len(params) >= 6 and all(isinstance(v, (int, float)) for v in params[4:6]):
+        if (
+            isinstance(params, list)
+            and len(params) >= 6
+            and all(isinstance(v, (int, float)) for v in params[4:6])
+        ):
             lat, lon = params[4], params[5]
             if lat or lon:
                 pts.append((lon, lat))
@@ -193,13 +232,22 @@ def operating_area_from_plan(path):
     return shapely.MultiPoint(pts).convex_hull, (pts[0] if home else None)
 
 
-def compile_fences(records, area, profile: Profile, distance_m=2000.0, keep_in_m=None,
-                   return_point=None, max_items=None) -> CompileResult:
+def compile_fences(
+    records,
+    area,
+    profile: Profile,
+    distance_m=2000.0,
+    keep_in_m=None,
+    return_point=None,
+    max_items=None,
+) -> CompileResult:
     """Fences (kit.readers.fences.FenceRecord) near ``area`` (WGS84) -> onboard items."""
     frame = LocalFrame.around(area)
     area_local = frame.geom_to_local(area)
     if max_items is not None:
-        profile = Profile(profile.name, min(profile.items, max_items), profile.bytes, profile.max_polygon_vertices)
+        profile = Profile(
+            profile.name, min(profile.items, max_items), profile.bytes, profile.max_polygon_vertices
+        )
     pieces, dropped = [], []
     for rec in records:
         if rec.kind not in ("keep_out", "keep_in"):
@@ -226,8 +274,18 @@ def compile_fences(records, area, profile: Profile, distance_m=2000.0, keep_in_m
     if keep_in_m is not None:
         allowed = outer_polygons(shapely.buffer(area_local, keep_in_m))[0]
         # the operator's area: stored generously (outward), never inside what they asked for
-        opts = [o for o in piece_options(allowed, False, profile.max_polygon_vertices) if o.kind == "polygon"]
-        keep = Piece(["operating-area"], True, allowed, [min(opts, key=lambda o: (o.items > 8, o.loss))], outward=True)
+        opts = [
+            o
+            for o in piece_options(allowed, False, profile.max_polygon_vertices)
+            if o.kind == "polygon"
+        ]
+        keep = Piece(
+            ["operating-area"],
+            True,
+            allowed,
+            [min(opts, key=lambda o: (o.items > 8, o.loss))],
+            outward=True,
+        )
         keep.options[0].loss = 0.0
         pieces.insert(0, keep)
     budget_items = profile.items - fixed_items
@@ -240,7 +298,9 @@ def compile_fences(records, area, profile: Profile, distance_m=2000.0, keep_in_m
     result = CompileResult(items, pieces, profile, frame, dropped, merges, return_point)
     used = storage_bytes(items)
     if len(items) > profile.items or used > profile.bytes:  # pragma: no cover - guarded above
-        raise InputError("compile", f"internal error: {len(items)} items / {used} bytes exceed {profile.name}")
+        raise InputError(
+            "compile", f"internal error: {len(items)} items / {used} bytes exceed {profile.name}"
+        )
     return result
 
 
@@ -272,7 +332,11 @@ def _best_merge(pieces, neighbours=4):
                 pairs.add((min(a, int(b)), max(a, int(b))))
     a, b = np.array(sorted(pairs)).T
     hulls = shapely.convex_hull(geoms)
-    both = shapely.convex_hull(np.array([shapely.GeometryCollection([geoms[i], geoms[j]]) for i, j in zip(a, b)], dtype=object))
+    both = shapely.convex_hull(
+        np.array(
+            [shapely.GeometryCollection([geoms[i], geoms[j]]) for i, j in zip(a, b)], dtype=object
+        )
+    )
     hull_cost = shapely.area(both) - shapely.area(hulls[a]) - shapely.area(hulls[b])
     # small pieces end up as circles: what their common circle adds counts too
     c = np.array([_cheapest_circle(pieces[i]) for i in outs])
@@ -294,8 +358,13 @@ def _merge(pieces, a, b, profile, merges):
         joined = None
     if joined is None or joined.geom_type != "Polygon":  # not joined into one piece: the hull
         joined = shapely.convex_hull(pair)
-    merged = Piece(pieces[a].sources + pieces[b].sources, False, joined,
-                   piece_options(joined, False, profile.max_polygon_vertices), merged=True)
+    merged = Piece(
+        pieces[a].sources + pieces[b].sources,
+        False,
+        joined,
+        piece_options(joined, False, profile.max_polygon_vertices),
+        merged=True,
+    )
     merges.append(tuple(merged.sources))
     pieces[a] = merged
     del pieces[b]
@@ -308,8 +377,11 @@ def _fit_by_merging(pieces, budget_items, budget_bytes, profile, merges):
             return
         best = _best_merge(pieces)
         if best is None:
-            raise InputError("compile", f"the fences near the area do not fit a {profile.name} "
-                                        f"({items} items / {nbytes} bytes for {budget_items} / {budget_bytes})")
+            raise InputError(
+                "compile",
+                f"the fences near the area do not fit a {profile.name} "
+                f"({items} items / {nbytes} bytes for {budget_items} / {budget_bytes})",
+            )
         _merge(pieces, best[1], best[2], profile, merges)
 
 
@@ -320,7 +392,10 @@ def _merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, round
         best = _best_merge(pieces)
         if best is None:
             return
-        trial = [Piece(p.sources, p.inclusion, p.local, p.options, p.choice, p.merged, p.outward) for p in pieces]
+        trial = [
+            Piece(p.sources, p.inclusion, p.local, p.options, p.choice, p.merged, p.outward)
+            for p in pieces
+        ]
         before = sum(p.chosen.loss for p in pieces)
         trial_merges = []
         _merge(trial, best[1], best[2], profile, trial_merges)
@@ -364,13 +439,24 @@ def _round_lonlat(frame, xy):
 def _emit(pieces, frame, return_point):
     items = []
     if return_point is not None:
-        items.append(FenceItem(RETURN_POINT, 0.0, from_e7(to_e7(return_point[0])), from_e7(to_e7(return_point[1]))))
+        items.append(
+            FenceItem(
+                RETURN_POINT, 0.0, from_e7(to_e7(return_point[0])), from_e7(to_e7(return_point[1]))
+            )
+        )
     for p in sorted(pieces, key=lambda p: (not p.inclusion, p.chosen.kind == "circle")):
         o = p.chosen
         if o.kind == "circle":
             x, y, r = o.circle
             lon, lat = _round_lonlat(frame, [(x, y)])
-            items.append(FenceItem(CIRCLE_EXCLUSION, float(math.ceil(r * 100) / 100 + 0.01), float(lon[0]), float(lat[0])))
+            items.append(
+                FenceItem(
+                    CIRCLE_EXCLUSION,
+                    float(math.ceil(r * 100) / 100 + 0.01),
+                    float(lon[0]),
+                    float(lat[0]),
+                )
+            )
             continue
         ring = shapely.LinearRing(o.local.exterior)
         pts = np.asarray(ring.coords)[:-1]
@@ -380,8 +466,11 @@ def _emit(pieces, frame, return_point):
         check = shapely.Polygon(np.column_stack(frame.to_local(lon, lat)))
         ok = check.is_valid and (check.covers(p.local) if p.grows else p.local.covers(check))
         if not ok:
-            raise InputError("compile", f"fence {', '.join(p.sources)}: rounding to 1e-7 degrees broke "
-                                        "containment; please report this")
+            raise InputError(
+                "compile",
+                f"fence {', '.join(p.sources)}: rounding to 1e-7 degrees broke "
+                "containment; please report this",
+            )
         cmd = POLYGON_INCLUSION if p.inclusion else POLYGON_EXCLUSION
         items.extend(FenceItem(cmd, float(len(pts)), float(a), float(b)) for a, b in zip(lon, lat))
     return items

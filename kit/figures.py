@@ -140,14 +140,25 @@ def onboard_figure(records, result, path):
     dropped = set(result.dropped)
     for r in records:
         if r.kind in ("keep_out", "keep_in") and r.site_id not in dropped:
-            _draw(ax, frame.geom_to_local(r.geometry), edgecolor="#c62828", facecolor="#c6282833", lw=0.8)
+            _draw(
+                ax,
+                frame.geom_to_local(r.geometry),
+                edgecolor="#c62828",
+                facecolor="#c6282833",
+                lw=0.8,
+            )
     for p in result.pieces:
         o = p.chosen
-        _draw(ax, o.local, edgecolor="#2e7d32" if p.inclusion else "#1565c0", facecolor="none", lw=1.3)
+        _draw(
+            ax, o.local, edgecolor="#2e7d32" if p.inclusion else "#1565c0", facecolor="none", lw=1.3
+        )
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
-    ax.set_title(f"Onboard fences: {len(result.items)} items, {result.bytes_used}/{result.profile.bytes} bytes "
-                 f"(blue) over full-resolution fences (red)", fontsize=10)
+    ax.set_title(
+        f"Onboard fences: {len(result.items)} items, {result.bytes_used}/{result.profile.bytes} bytes "
+        f"(blue) over full-resolution fences (red)",
+        fontsize=10,
+    )
     _save(fig, path)

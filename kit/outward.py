@@ -214,6 +214,7 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     if flip:
         pts = pts[::-1]
     max_vertices = max(MIN_VERTICES, int(max_vertices))
+
     # the flipped ring is simplified "outward" in its own orientation: for inward
     # simplification that means the result must lie inside the input
     def ok(out):

@@ -58,21 +58,35 @@ RETURN_POINT = mav.MAV_CMD_NAV_FENCE_RETURN_POINT  # 5000
 POLYGONS = (POLYGON_INCLUSION, POLYGON_EXCLUSION)
 CIRCLES = (CIRCLE_INCLUSION, CIRCLE_EXCLUSION)
 GLOBAL_FRAMES = (
-    mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT,
-    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+    mav.MAV_FRAME_GLOBAL,
+    mav.MAV_FRAME_GLOBAL_INT,
+    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
 )
 CAPABILITIES = (
-    mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
     | mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
 )
-MISSION_MESSAGES = frozenset({
-    "MISSION_COUNT", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_REQUEST_LIST",
-    "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_ACK", "MISSION_CLEAR_ALL",
-})
+MISSION_MESSAGES = frozenset(
+    {
+        "MISSION_COUNT",
+        "MISSION_REQUEST",
+        "MISSION_REQUEST_INT",
+        "MISSION_REQUEST_LIST",
+        "MISSION_ITEM",
+        "MISSION_ITEM_INT",
+        "MISSION_ACK",
+        "MISSION_CLEAR_ALL",
+    }
+)
 TEXT_DELAY = 0.005  # STATUSTEXT after the ACK, as ArduPilot's deferred texts arrive
 
 
@@ -105,8 +119,12 @@ class StoredItem:
         """From anything with command, param1, lon, lat (e.g. kit's FenceItem)."""
         if isinstance(item, StoredItem):
             return item
-        return cls(int(item.command), float(item.param1), int(round(item.lat * 1e7)),
-                   int(round(item.lon * 1e7)))
+        return cls(
+            int(item.command),
+            float(item.param1),
+            int(round(item.lat * 1e7)),
+            int(round(item.lon * 1e7)),
+        )
 
 
 def storage_bytes(items) -> int:
@@ -230,9 +248,17 @@ class FakeVehicle:
     """``async with FakeVehicle(fence=items, faults=Faults(...)) as fake:`` then connect MAVSDK
     to ``fake.url``. ``fake.fence`` is the stored fence (a list of StoredItem)."""
 
-    def __init__(self, fence=(), faults: Faults | None = None, *, max_items: int = 70,
-                 storage_size: int = 560, upload_timeout: float = 8.0,
-                 rerequest_interval: float = 1.0, port: int | None = None):
+    def __init__(
+        self,
+        fence=(),
+        faults: Faults | None = None,
+        *,
+        max_items: int = 70,
+        storage_size: int = 560,
+        upload_timeout: float = 8.0,
+        rerequest_interval: float = 1.0,
+        port: int | None = None,
+    ):
         self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
         self.faults = faults or Faults()
         self.max_items = max_items
@@ -269,7 +295,8 @@ class FakeVehicle:
         self._loop = asyncio.get_running_loop()
         self._t0 = time.monotonic()
         self._transport, _ = await self._loop.create_datagram_endpoint(
-            lambda: _Protocol(self), local_addr=("127.0.0.1", 0))
+            lambda: _Protocol(self), local_addr=("127.0.0.1", 0)
+        )
         self._tasks = [asyncio.create_task(self._heartbeats()), asyncio.create_task(self._update())]
         return self
 
@@ -383,10 +410,16 @@ class FakeVehicle:
         """1 Hz; every 0.1 s until the ground station is first heard, so that a test does not
         wait a second when MAVSDK starts listening just after the fake's first heartbeat."""
         while True:
-            self._send(mav.MAVLink_heartbeat_message(
-                mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED,
-                0, mav.MAV_STATE_STANDBY, 3))
+            self._send(
+                mav.MAVLink_heartbeat_message(
+                    mav.MAV_TYPE_QUADROTOR,
+                    mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED,
+                    0,
+                    mav.MAV_STATE_STANDBY,
+                    3,
+                )
+            )
             await asyncio.sleep(1.0 if self._heard else 0.1)
 
     async def _update(self):
@@ -409,8 +442,10 @@ class FakeVehicle:
     # ---------------------------------------------------------------- replies
 
     def _ack(self, sysid, compid, result, mission_type=FENCE):
-        self._send(mav.MAVLink_mission_ack_message(sysid, compid, result, mission_type),
-                   _result_name(result))
+        self._send(
+            mav.MAVLink_mission_ack_message(sysid, compid, result, mission_type),
+            _result_name(result),
+        )
 
     def _text(self, text, severity=mav.MAV_SEVERITY_WARNING, delay=0.0):
         def send():
@@ -458,23 +493,40 @@ class FakeVehicle:
         """This fake keeps a fence only; other mission types are refused."""
         if msg.mission_type == FENCE:
             return False
-        self._ack(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_UNSUPPORTED,
-                  msg.mission_type)
+        self._ack(
+            msg.get_srcSystem(),
+            msg.get_srcComponent(),
+            mav.MAV_MISSION_UNSUPPORTED,
+            msg.mission_type,
+        )
         return True
 
     def _on_command_long(self, msg):
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        wants_version = (msg.command == mav.MAV_CMD_REQUEST_MESSAGE
-                         and int(msg.param1) == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION) \
-            or msg.command == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+        wants_version = (
+            msg.command == mav.MAV_CMD_REQUEST_MESSAGE
+            and int(msg.param1) == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+        ) or msg.command == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
         if msg.target_component not in (0, COMPONENT_ID):
             return
         result = mav.MAV_RESULT_ACCEPTED if wants_version else mav.MAV_RESULT_UNSUPPORTED
         self._send(mav.MAVLink_command_ack_message(msg.command, result, 0, 0, *src))
         if wants_version:
-            self._send(mav.MAVLink_autopilot_version_message(
-                CAPABILITIES, (4 << 24) | (7 << 16) | (0 << 8) | 255, 0, 0, 0,
-                [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x0123456789))
+            self._send(
+                mav.MAVLink_autopilot_version_message(
+                    CAPABILITIES,
+                    (4 << 24) | (7 << 16) | (0 << 8) | 255,
+                    0,
+                    0,
+                    0,
+                    [0] * 8,
+                    [0] * 8,
+                    [0] * 8,
+                    0,
+                    0,
+                    0x0123456789,
+                )
+            )
 
     def _on_mission_count(self, msg):
         if self._other_type(msg) or not self._mavlink2(msg):
@@ -584,8 +636,10 @@ class FakeVehicle:
         if self.upload is not None:
             self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
             return
-        self._send(mav.MAVLink_mission_count_message(sysid, compid, len(self.fence), FENCE),
-                   len(self.fence))
+        self._send(
+            mav.MAVLink_mission_count_message(sysid, compid, len(self.fence), FENCE),
+            len(self.fence),
+        )
 
     def _on_mission_request_int(self, msg):
         if self._other_type(msg) or not self._mavlink2(msg):
@@ -602,11 +656,26 @@ class FakeVehicle:
             return
         it = self.fence[msg.seq]
         param1 = float(int(it.param1)) if it.command in POLYGONS else it.param1
-        self._send(mav.MAVLink_mission_item_int_message(
-            sysid, compid, msg.seq, mav.MAV_FRAME_GLOBAL,
-            RETURN_POINT if it.command == RETURN_POINT else it.command, 0, 0,
-            0.0 if it.command == RETURN_POINT else param1, 0.0, 0.0, 0.0,
-            it.x, it.y, 0.0, FENCE), msg.seq)
+        self._send(
+            mav.MAVLink_mission_item_int_message(
+                sysid,
+                compid,
+                msg.seq,
+                mav.MAV_FRAME_GLOBAL,
+                RETURN_POINT if it.command == RETURN_POINT else it.command,
+                0,
+                0,
+                0.0 if it.command == RETURN_POINT else param1,
+                0.0,
+                0.0,
+                0.0,
+                it.x,
+                it.y,
+                0.0,
+                FENCE,
+            ),
+            msg.seq,
+        )
 
     def _on_mission_clear_all(self, msg):
         if self._other_type(msg):

@@ -39,7 +39,9 @@ def missing_area(fence, restricted, margin):
     """How the fence fails to contain ``restricted`` plus ``margin``, checked exactly (no
     buffer approximation): '' if it contains it, else a description."""
     if not fence.covers(restricted):
-        return f"{shapely.difference(restricted, fence).area:.6f} m² of the restricted area is outside"
+        return (
+            f"{shapely.difference(restricted, fence).area:.6f} m² of the restricted area is outside"
+        )
     if margin > 0:
         d = shapely.distance(restricted, fence.boundary)
         if d < margin - 1e-6:

@@ -15,7 +15,9 @@ def squares(centres, size=10.0):
 
 
 def test_single_part_site_is_its_own_shape():
-    region = shapely.Polygon([(0, 0), (100, 0), (100, 100), (60, 100), (60, 30), (40, 30), (40, 100), (0, 100)])
+    region = shapely.Polygon(
+        [(0, 0), (100, 0), (100, 100), (60, 100), (60, 30), (40, 30), (40, 100), (0, 100)]
+    )
     shape, alpha = alpha_shape(region)
     assert alpha == 0.0 and shape.equals(region)  # the U keeps its notch
 
@@ -34,17 +36,23 @@ def test_forced_small_alpha_leaves_parts_apart_and_large_alpha_is_the_hull():
     apart, _ = alpha_shape(region, alpha=5.0)
     assert apart.geom_type == "MultiPolygon" and len(apart.geoms) == 2 and apart.covers(region)
     joined, _ = alpha_shape(region, alpha=1e6)
-    assert joined.geom_type == "Polygon" and math.isclose(joined.area, region.convex_hull.area, rel_tol=1e-9)
+    assert joined.geom_type == "Polygon" and math.isclose(
+        joined.area, region.convex_hull.area, rel_tol=1e-9
+    )
 
 
 def test_collinear_parts_fall_back_safely():
-    region = shapely.union_all([shapely.Point(0, 0).buffer(1, quad_segs=1), shapely.Point(50, 0).buffer(1, quad_segs=1)])
+    region = shapely.union_all(
+        [shapely.Point(0, 0).buffer(1, quad_segs=1), shapely.Point(50, 0).buffer(1, quad_segs=1)]
+    )
     shape, _ = alpha_shape(region)
     assert shape.covers(region) and shape.geom_type == "Polygon"
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.lists(st.tuples(st.floats(0, 300), st.floats(0, 300)), min_size=2, max_size=7, unique=True))
+@given(
+    st.lists(st.tuples(st.floats(0, 300), st.floats(0, 300)), min_size=2, max_size=7, unique=True)
+)
 def test_auto_alpha_is_the_smallest_radius_giving_one_piece(centres):
     region = squares(centres, 8.0)
     if region.geom_type == "Polygon":

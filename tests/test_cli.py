@@ -19,13 +19,36 @@ PNG = b"\x89PNG\r\n\x1a\n"
 
 def test_build_writes_geojson_plan_waypoints_and_map(tmp_path, capsys):
     out = tmp_path / "fences.geojson"
-    code = main(["build", str(scene_path()), "-o", str(out), "--plan", str(tmp_path / "f.plan"),
-                 "--waypoints", str(tmp_path / "f.waypoints"), "--figure", str(tmp_path / "map.png")])
+    code = main(
+        [
+            "build",
+            str(scene_path()),
+            "-o",
+            str(out),
+            "--plan",
+            str(tmp_path / "f.plan"),
+            "--waypoints",
+            str(tmp_path / "f.waypoints"),
+            "--figure",
+            str(tmp_path / "map.png"),
+        ]
+    )
     assert code == 0
     doc = json.loads(out.read_text())
     props = [f["properties"] for f in doc["features"]]
-    keys = {"site_id", "name", "category", "kind", "method", "margin_m", "alt_min_m", "alt_max_m",
-            "vertices", "area_m2", "sources"}
+    keys = {
+        "site_id",
+        "name",
+        "category",
+        "kind",
+        "method",
+        "margin_m",
+        "alt_min_m",
+        "alt_max_m",
+        "vertices",
+        "area_m2",
+        "sources",
+    }
     assert all(keys <= set(p) for p in props)
     assert {p["kind"] for p in props} == {"keep_out", "warning"}
     hospital = [p for p in props if p["category"] == "hospital" and p["kind"] == "keep_out"]
@@ -51,9 +74,23 @@ def test_build_writes_geojson_plan_waypoints_and_map(tmp_path, capsys):
 
 def test_bad_input_exits_2_with_one_line_and_leaves_no_output(tmp_path, capsys):
     bad = tmp_path / "bad.geojson"
-    bad.write_text(json.dumps({"type": "FeatureCollection", "features": [
-        {"type": "Feature", "properties": {"amenity": "prison", "osm_way_id": "42"},
-         "geometry": {"type": "Polygon", "coordinates": [[[14, 35], [14, 95], [15, 35], [14, 35]]]}}]}))
+    bad.write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"amenity": "prison", "osm_way_id": "42"},
+                        "geometry": {
+                            "type": "Polygon",
+                            "coordinates": [[[14, 35], [14, 95], [15, 35], [14, 35]]],
+                        },
+                    }
+                ],
+            }
+        )
+    )
     out = tmp_path / "fences.geojson"
     code = main(["build", str(bad), "-o", str(out), "--plan", str(tmp_path / "f.plan")])
     err = capsys.readouterr().err.strip()
@@ -73,15 +110,47 @@ def test_methods_and_alpha_radius(tmp_path):
     areas = {}
     for method in ("alpha", "polygon", "circle", "exact"):
         out = tmp_path / f"{method}.geojson"
-        assert main(["build", str(scene_path()), "-o", str(out), "--method", method, "-q", "--warn-distance", "0"]) == 0
+        assert (
+            main(
+                [
+                    "build",
+                    str(scene_path()),
+                    "-o",
+                    str(out),
+                    "--method",
+                    method,
+                    "-q",
+                    "--warn-distance",
+                    "0",
+                ]
+            )
+            == 0
+        )
         feats = json.loads(out.read_text())["features"]
         assert {f["properties"]["method"] for f in feats} == {method}
         areas[method] = sum(f["properties"]["area_m2"] for f in feats)
     assert areas["exact"] <= areas["alpha"] < areas["polygon"] < areas["circle"]
     out = tmp_path / "forced.geojson"
-    assert main(["build", str(scene_path()), "-o", str(out), "--alpha-radius", "5", "--margin", "0", "-q"]) == 0
+    assert (
+        main(
+            [
+                "build",
+                str(scene_path()),
+                "-o",
+                str(out),
+                "--alpha-radius",
+                "5",
+                "--margin",
+                "0",
+                "-q",
+            ]
+        )
+        == 0
+    )
     forced = json.loads(out.read_text())["features"]
-    assert any(f["geometry"]["type"] == "MultiPolygon" for f in forced)  # 5 m does not bridge the campus
+    assert any(
+        f["geometry"]["type"] == "MultiPolygon" for f in forced
+    )  # 5 m does not bridge the campus
 
 
 def test_compare_json_and_figure(tmp_path, capsys):
@@ -91,7 +160,9 @@ def test_compare_json_and_figure(tmp_path, capsys):
     stats = {m["method"]: m for m in doc["methods"]}
     assert set(stats) == {"alpha", "polygon", "circle", "exact"}
     assert all(m["containment_pct"] == pytest.approx(100.0) for m in stats.values())
-    assert stats["alpha"]["overshoot"] < stats["polygon"]["overshoot"] < stats["circle"]["overshoot"]
+    assert (
+        stats["alpha"]["overshoot"] < stats["polygon"]["overshoot"] < stats["circle"]["overshoot"]
+    )
     assert fig.read_bytes().startswith(PNG)
 
 
@@ -104,7 +175,9 @@ def test_bad_options(capsys):
 
 def test_console_script_runs_the_demo(tmp_path):
     exe = os.path.join(os.path.dirname(sys.executable), "alphafence")
-    res = subprocess.run([exe, "demo", "-o", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [exe, "demo", "-o", str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
     assert res.returncode == 0, res.stderr
     for name in ("fences.geojson", "fences.plan", "fences.waypoints", "fences.png", "compare.png"):
         assert (tmp_path / name).stat().st_size > 0

@@ -28,7 +28,9 @@ def test_every_malta_fence_holds_its_margin(malta_db, rules):
     sites = {s.site_id: s for s in result.sites}
     assert len(sites) > 250
     for f in result.fences:
-        assert contains_with_margin(f.local, f.circle, sites[f.site_id].geometry, f.margin_m), f.site_id
+        assert contains_with_margin(f.local, f.circle, sites[f.site_id].geometry, f.margin_m), (
+            f.site_id
+        )
         assert not f.repaired, f.site_id
 
 

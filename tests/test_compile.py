@@ -30,7 +30,13 @@ def validate_like_ardupilot(items):
     i = 0
     while i < len(items):
         it = items[i]
-        assert it.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION, CIRCLE_INCLUSION, CIRCLE_EXCLUSION, RETURN_POINT)
+        assert it.command in (
+            POLYGON_INCLUSION,
+            POLYGON_EXCLUSION,
+            CIRCLE_INCLUSION,
+            CIRCLE_EXCLUSION,
+            RETURN_POINT,
+        )
         if it.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
             n = int(it.param1)
             assert 3 <= n <= 255
@@ -41,7 +47,10 @@ def validate_like_ardupilot(items):
                 assert it.param1 > 0
             i += 1
         # MAVLink carries 1e-7 degree integers: the compiler emits exactly those
-        assert abs(it.lat * 1e7 - round(it.lat * 1e7)) < 1e-6 and abs(it.lon * 1e7 - round(it.lon * 1e7)) < 1e-6
+        assert (
+            abs(it.lat * 1e7 - round(it.lat * 1e7)) < 1e-6
+            and abs(it.lon * 1e7 - round(it.lon * 1e7)) < 1e-6
+        )
 
 
 def onboard_geometry(items, verify):
@@ -79,7 +88,11 @@ def fence_sets(draw):
     for k in range(n):
         cx, cy = draw(st.floats(-3000, 3000)), draw(st.floats(-3000, 3000))
         m = draw(st.integers(3, 60))
-        ang = np.sort(np.asarray(draw(st.lists(st.floats(0, 2 * math.pi), min_size=m, max_size=m, unique=True))))
+        ang = np.sort(
+            np.asarray(
+                draw(st.lists(st.floats(0, 2 * math.pi), min_size=m, max_size=m, unique=True))
+            )
+        )
         rad = np.asarray(draw(st.lists(st.floats(20, 400), min_size=m, max_size=m)))
         poly = shapely.Polygon(np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang)]))
         if not poly.is_valid or poly.area < 10:
@@ -96,8 +109,14 @@ def test_compiled_fences_contain_what_they_stand_for(fs, max_items, keep_in):
         return
     area = LocalFrame(lon0, lat0).geom_to_wgs84(shapely.box(-500, -500, 500, 500))
     try:
-        result = compile_fences(records, area, PROFILES["copter"], distance_m=1e6,
-                                keep_in_m=5000.0 if keep_in else None, max_items=max_items)
+        result = compile_fences(
+            records,
+            area,
+            PROFILES["copter"],
+            distance_m=1e6,
+            keep_in_m=5000.0 if keep_in else None,
+            max_items=max_items,
+        )
     except InputError as err:
         assert "do not fit" in str(err)
         return
@@ -117,20 +136,38 @@ def test_capacity_edge_matches_ardupilot_storage():
     # one polygon alone: 69 vertices fit 560 bytes (4 + 2 + 8*69 + 1 = 559), 70 do not
     frame = LocalFrame(14.5, 35.9)
     ang = np.linspace(0, 2 * math.pi, 400, endpoint=False)
-    star = shapely.Polygon(np.column_stack([(800 + 300 * np.sin(7 * ang)) * np.cos(ang), (800 + 300 * np.sin(7 * ang)) * np.sin(ang)]))
+    star = shapely.Polygon(
+        np.column_stack(
+            [
+                (800 + 300 * np.sin(7 * ang)) * np.cos(ang),
+                (800 + 300 * np.sin(7 * ang)) * np.sin(ang),
+            ]
+        )
+    )
     rec = FenceRecord("star", "keep_out", frame.geom_to_wgs84(star))
-    result = compile_fences([rec], frame.geom_to_wgs84(shapely.Point(0, 0).buffer(10)), PROFILES["copter"])
+    result = compile_fences(
+        [rec], frame.geom_to_wgs84(shapely.Point(0, 0).buffer(10)), PROFILES["copter"]
+    )
     assert storage_bytes(result.items) == 4 + 2 + 8 * 69 + 1 and len(result.items) == 69
-    plane = compile_fences([rec], frame.geom_to_wgs84(shapely.Point(0, 0).buffer(10)), PROFILES["plane"])
+    plane = compile_fences(
+        [rec], frame.geom_to_wgs84(shapely.Point(0, 0).buffer(10)), PROFILES["plane"]
+    )
     assert len(plane.items) == 83  # 672 bytes: 4 + 2 + 8*83 + 1 = 671
-    sd = compile_fences([rec], frame.geom_to_wgs84(shapely.Point(0, 0).buffer(10)), PROFILES["sd-fence"])
+    sd = compile_fences(
+        [rec], frame.geom_to_wgs84(shapely.Point(0, 0).buffer(10)), PROFILES["sd-fence"]
+    )
     assert len(sd.items) <= 255 and sd.loss_m2 < plane.loss_m2 < result.loss_m2
 
 
 def test_far_fences_are_left_out_and_tiny_budget_merges():
     frame = LocalFrame(14.5, 35.9)
-    recs = [FenceRecord(f"c{k}", "keep_out", frame.geom_to_wgs84(shapely.Point(300 * k, 0).buffer(40))) for k in range(6)]
-    recs.append(FenceRecord("far", "keep_out", frame.geom_to_wgs84(shapely.Point(50_000, 0).buffer(40))))
+    recs = [
+        FenceRecord(f"c{k}", "keep_out", frame.geom_to_wgs84(shapely.Point(300 * k, 0).buffer(40)))
+        for k in range(6)
+    ]
+    recs.append(
+        FenceRecord("far", "keep_out", frame.geom_to_wgs84(shapely.Point(50_000, 0).buffer(40)))
+    )
     area = frame.geom_to_wgs84(shapely.box(-100, -100, 1600, 100))
     result = compile_fences(recs, area, Profile("tiny", 3, 560), distance_m=1000)
     assert result.dropped == ["far"]
@@ -149,13 +186,31 @@ def test_compile_cli_on_the_demo(tmp_path):
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
     out = tmp_path / "onboard.plan"
-    code = main(["compile", str(fences), "--bbox=-0.58,51.42,-0.52,51.44", "--items", "40", "--keep-in", "300",
-                 "--return-point", "51.43,-0.55", "-o", str(out), "--waypoints", str(tmp_path / "o.waypoints"),
-                 "--figure", str(tmp_path / "o.png")])
+    code = main(
+        [
+            "compile",
+            str(fences),
+            "--bbox=-0.58,51.42,-0.52,51.44",
+            "--items",
+            "40",
+            "--keep-in",
+            "300",
+            "--return-point",
+            "51.43,-0.55",
+            "-o",
+            str(out),
+            "--waypoints",
+            str(tmp_path / "o.waypoints"),
+            "--figure",
+            str(tmp_path / "o.png"),
+        ]
+    )
     assert code == 0
     items = read_plan_fence(out)
     assert len(items) <= 40 and any(i.command == POLYGON_INCLUSION for i in items)
-    assert len(read_waypoints_fence(tmp_path / "o.waypoints")) == len(items) + 1  # + the return point
+    assert (
+        len(read_waypoints_fence(tmp_path / "o.waypoints")) == len(items) + 1
+    )  # + the return point
     validate_like_ardupilot(items)
     records = read_fences(fences)
     assert {r.kind for r in records} == {"keep_out", "warning"}

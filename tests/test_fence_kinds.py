@@ -8,14 +8,48 @@ from kit.build import BuildOptions, build_fences
 from kit.fences import contains_with_margin
 from kit.readers import read_database
 
-AREA = {"type": "FeatureCollection", "features": [
-    {"type": "Feature", "properties": {"name": "Operating area", "alphafence:kind": "keep_in", "osm_way_id": "1"},
-     "geometry": {"type": "Polygon", "coordinates": [[[14.50, 35.85], [14.52, 35.85], [14.52, 35.86],
-                                                      [14.51, 35.855], [14.50, 35.86], [14.50, 35.85]]]}},
-    {"type": "Feature", "properties": {"amenity": "hospital", "osm_way_id": "2"},
-     "geometry": {"type": "Polygon", "coordinates": [[[14.505, 35.852], [14.506, 35.852], [14.506, 35.853],
-                                                      [14.505, 35.853], [14.505, 35.852]]]}},
-]}
+AREA = {
+    "type": "FeatureCollection",
+    "features": [
+        {
+            "type": "Feature",
+            "properties": {
+                "name": "Operating area",
+                "alphafence:kind": "keep_in",
+                "osm_way_id": "1",
+            },
+            "geometry": {
+                "type": "Polygon",
+                "coordinates": [
+                    [
+                        [14.50, 35.85],
+                        [14.52, 35.85],
+                        [14.52, 35.86],
+                        [14.51, 35.855],
+                        [14.50, 35.86],
+                        [14.50, 35.85],
+                    ]
+                ],
+            },
+        },
+        {
+            "type": "Feature",
+            "properties": {"amenity": "hospital", "osm_way_id": "2"},
+            "geometry": {
+                "type": "Polygon",
+                "coordinates": [
+                    [
+                        [14.505, 35.852],
+                        [14.506, 35.852],
+                        [14.506, 35.853],
+                        [14.505, 35.853],
+                        [14.505, 35.852],
+                    ]
+                ],
+            },
+        },
+    ],
+}
 
 
 def test_keep_in_fence_lies_inside_the_area_minus_its_margin(write_json, rules):
@@ -36,7 +70,9 @@ def test_keep_in_fence_lies_inside_the_area_minus_its_margin(write_json, rules):
         warn = [f for f in result.fences if f.kind == "warning"]
         assert len(out) == len(warn) == 1
         site_out = next(s for s in result.sites if s.kind == "keep_out")
-        assert contains_with_margin(warn[0].local, warn[0].circle, site_out.geometry, out[0].margin_m + 30.0)
+        assert contains_with_margin(
+            warn[0].local, warn[0].circle, site_out.geometry, out[0].margin_m + 30.0
+        )
 
 
 def test_ed269_applicability_reaches_the_fence_geojson(tmp_path):
@@ -48,7 +84,11 @@ def test_ed269_applicability_reaches_the_fence_geojson(tmp_path):
     out = tmp_path / "f.geojson"
     assert main(["build", str(src), "-o", str(out), "-q"]) == 0
     feats = json.loads(out.read_text())["features"]
-    p1 = next(f["properties"] for f in feats if f["properties"]["sources"] == ["EX-P1"] and f["properties"]["kind"] == "keep_out")
+    p1 = next(
+        f["properties"]
+        for f in feats
+        if f["properties"]["sources"] == ["EX-P1"] and f["properties"]["kind"] == "keep_out"
+    )
     assert p1["zone"]["restriction"] == "PROHIBITED"
     assert p1["zone"]["applicability"][0]["endDateTime"] == "2026-12-01T00:00:00Z"
     assert p1["alt_max_m"] == 121.92

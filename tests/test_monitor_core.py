@@ -27,18 +27,23 @@ def rec(site, kind, poly, alt_min=None, alt_max=None):
 @pytest.fixture
 def fences():
     square = shapely.box(0, 200, 100, 300)  # keep-out, 200 m north of the origin
-    return FenceSet([
-        rec("ko", "keep_out", square),
-        rec("warn", "warning", square.buffer(30, join_style="mitre")),
-        rec("high", "keep_out", shapely.box(-300, -50, -200, 50), alt_min=50, alt_max=120),
-        rec("area", "keep_in", shapely.box(-1000, -1000, 1000, 1000)),
-    ], frame=FRAME)
+    return FenceSet(
+        [
+            rec("ko", "keep_out", square),
+            rec("warn", "warning", square.buffer(30, join_style="mitre")),
+            rec("high", "keep_out", shapely.box(-300, -50, -200, 50), alt_min=50, alt_max=120),
+            rec("area", "keep_in", shapely.box(-1000, -1000, 1000, 1000)),
+        ],
+        frame=FRAME,
+    )
 
 
 def test_inside_nearest_and_ahead(fences):
     c = fences.check(50, 0, alt=20, vx=0, vy=10, lookahead_m=500)
     assert c.inside_keep_out == [] and c.outside_keep_in == []
-    assert c.nearest_keep_out.index == 0 and c.nearest_keep_out.distance_m == pytest.approx(200, abs=0.01)
+    assert c.nearest_keep_out.index == 0 and c.nearest_keep_out.distance_m == pytest.approx(
+        200, abs=0.01
+    )
     assert c.breach_ahead[0] == 0 and c.breach_ahead[1] == pytest.approx(200, abs=0.01)
     inside = fences.check(50, 250, alt=20)
     assert inside.inside_keep_out == [0] and inside.inside_warning == [1]

@@ -17,8 +17,16 @@ FRAME = LocalFrame(-0.55, 51.43)
 @pytest.fixture
 def fences():
     square = shapely.box(-50, 200, 50, 300)
-    return FenceSet([FenceRecord("prison/way/1", "keep_out", FRAME.geom_to_wgs84(square)),
-                     FenceRecord("prison/way/1", "warning", FRAME.geom_to_wgs84(square.buffer(30, join_style="mitre")))])
+    return FenceSet(
+        [
+            FenceRecord("prison/way/1", "keep_out", FRAME.geom_to_wgs84(square)),
+            FenceRecord(
+                "prison/way/1",
+                "warning",
+                FRAME.geom_to_wgs84(square.buffer(30, join_style="mitre")),
+            ),
+        ]
+    )
 
 
 def north_run(speed=10.0, dt=0.1, seconds=30, mode="GUIDED"):

@@ -19,13 +19,21 @@ EGHAM = (-0.55, 51.43)
 @pytest.mark.parametrize("sitl", [{"home": "egham", "speedup": 1}], indirect=True)
 async def test_monitor_sees_a_vehicle_parked_in_a_keep_out_zone(sitl, tmp_path):
     frame = LocalFrame(*EGHAM)
-    fences = FenceSet([
-        FenceRecord("test/around-home", "keep_out", frame.geom_to_wgs84(shapely.box(-50, -50, 50, 50))),
-        FenceRecord("test/far", "keep_out", frame.geom_to_wgs84(shapely.box(1000, 1000, 1100, 1100))),
-    ])
+    fences = FenceSet(
+        [
+            FenceRecord(
+                "test/around-home", "keep_out", frame.geom_to_wgs84(shapely.box(-50, -50, 50, 50))
+            ),
+            FenceRecord(
+                "test/far", "keep_out", frame.geom_to_wgs84(shapely.box(1000, 1000, 1100, 1100))
+            ),
+        ]
+    )
     log = tmp_path / "events.jsonl"
     stop = asyncio.Event()
-    task = asyncio.create_task(run_monitor(sitl.connection_url, fences, MonitorOptions(enforce=False), log, stop))
+    task = asyncio.create_task(
+        run_monitor(sitl.connection_url, fences, MonitorOptions(enforce=False), log, stop)
+    )
     await asyncio.sleep(4.0)
     stop.set()
     monitor = await asyncio.wait_for(task, 10)

@@ -13,7 +13,9 @@ from kit.outward import simplify_polygon, simplify_ring
 @st.composite
 def star_polygons(draw):
     n = draw(st.integers(5, 120))
-    ang = np.sort(np.asarray(draw(st.lists(st.floats(0, 2 * math.pi), min_size=n, max_size=n, unique=True))))
+    ang = np.sort(
+        np.asarray(draw(st.lists(st.floats(0, 2 * math.pi), min_size=n, max_size=n, unique=True)))
+    )
     radii = np.asarray(draw(st.lists(st.floats(5, 500), min_size=n, max_size=n)))
     poly = shapely.Polygon(np.column_stack([radii * np.cos(ang), radii * np.sin(ang)]))
     return shapely.make_valid(poly) if not poly.is_valid else poly

@@ -75,15 +75,59 @@ QGIS_DOC = {
     "type": "FeatureCollection",
     "name": "multipolygons",
     "features": [
-        {"type": "Feature", "properties": {"osm_id": "533025", "osm_way_id": None, "name": "Canada Copse",
-                                           "landuse": "forest", "aeroway": None, "amenity": None},
-         "geometry": {"type": "MultiPolygon", "coordinates": [[[[-0.55, 51.43], [-0.549, 51.43], [-0.549, 51.431], [-0.55, 51.43]]]]}},
-        {"type": "Feature", "properties": {"osm_id": None, "osm_way_id": "777", "name": "Example Hospital",
-                                           "landuse": None, "aeroway": None, "amenity": "hospital"},
-         "geometry": {"type": "MultiPolygon", "coordinates": [[[[-0.54, 51.43], [-0.539, 51.43], [-0.539, 51.431], [-0.54, 51.431], [-0.54, 51.43]]]]}},
-        {"type": "Feature", "properties": {"osm_id": "99", "osm_way_id": None, "name": "Heli", "aeroway": None,
-                                           "other_tags": '"aeroway"=>"helipad","surface"=>"grass"'},
-         "geometry": {"type": "Point", "coordinates": [-0.53, 51.43]}},
+        {
+            "type": "Feature",
+            "properties": {
+                "osm_id": "533025",
+                "osm_way_id": None,
+                "name": "Canada Copse",
+                "landuse": "forest",
+                "aeroway": None,
+                "amenity": None,
+            },
+            "geometry": {
+                "type": "MultiPolygon",
+                "coordinates": [
+                    [[[-0.55, 51.43], [-0.549, 51.43], [-0.549, 51.431], [-0.55, 51.43]]]
+                ],
+            },
+        },
+        {
+            "type": "Feature",
+            "properties": {
+                "osm_id": None,
+                "osm_way_id": "777",
+                "name": "Example Hospital",
+                "landuse": None,
+                "aeroway": None,
+                "amenity": "hospital",
+            },
+            "geometry": {
+                "type": "MultiPolygon",
+                "coordinates": [
+                    [
+                        [
+                            [-0.54, 51.43],
+                            [-0.539, 51.43],
+                            [-0.539, 51.431],
+                            [-0.54, 51.431],
+                            [-0.54, 51.43],
+                        ]
+                    ]
+                ],
+            },
+        },
+        {
+            "type": "Feature",
+            "properties": {
+                "osm_id": "99",
+                "osm_way_id": None,
+                "name": "Heli",
+                "aeroway": None,
+                "other_tags": '"aeroway"=>"helipad","surface"=>"grass"',
+            },
+            "geometry": {"type": "Point", "coordinates": [-0.53, 51.43]},
+        },
     ],
 }
 
@@ -104,19 +148,71 @@ def test_hstore():
 ED269 = {
     "title": "test zones",
     "features": [
-        {"identifier": "EX-P1", "country": "XXX", "name": "Prohibited square", "type": "COMMON",
-         "restriction": "PROHIBITED", "reason": ["SENSITIVE"],
-         "applicability": [{"permanent": "NO", "startDateTime": "2026-11-01T00:00:00Z", "endDateTime": "2026-12-01T00:00:00Z"}],
-         "geometry": [{"uomDimensions": "FT", "lowerLimit": 0, "lowerVerticalReference": "AGL",
-                       "upperLimit": 400, "upperVerticalReference": "AGL",
-                       "horizontalProjection": {"type": "Polygon", "coordinates": [[[14.0, 35.0], [14.01, 35.0], [14.01, 35.01], [14.0, 35.01], [14.0, 35.0]]]}}]},
-        {"identifier": "EX-C1", "country": "XXX", "name": "Conditional circle", "type": "COMMON",
-         "restriction": "CONDITIONAL", "reason": ["AIR_TRAFFIC"],
-         "geometry": [{"uomDimensions": "M", "lowerLimit": 30, "lowerVerticalReference": "AMSL",
-                       "upperLimit": 150, "upperVerticalReference": "AMSL",
-                       "horizontalProjection": {"type": "Circle", "center": [14.1, 35.1], "radius": 500}}]},
-        {"identifier": "EX-N1", "restriction": "NO_RESTRICTION", "geometry": [
-            {"horizontalProjection": {"type": "Circle", "center": [14.2, 35.2], "radius": 100}}]},
+        {
+            "identifier": "EX-P1",
+            "country": "XXX",
+            "name": "Prohibited square",
+            "type": "COMMON",
+            "restriction": "PROHIBITED",
+            "reason": ["SENSITIVE"],
+            "applicability": [
+                {
+                    "permanent": "NO",
+                    "startDateTime": "2026-11-01T00:00:00Z",
+                    "endDateTime": "2026-12-01T00:00:00Z",
+                }
+            ],
+            "geometry": [
+                {
+                    "uomDimensions": "FT",
+                    "lowerLimit": 0,
+                    "lowerVerticalReference": "AGL",
+                    "upperLimit": 400,
+                    "upperVerticalReference": "AGL",
+                    "horizontalProjection": {
+                        "type": "Polygon",
+                        "coordinates": [
+                            [
+                                [14.0, 35.0],
+                                [14.01, 35.0],
+                                [14.01, 35.01],
+                                [14.0, 35.01],
+                                [14.0, 35.0],
+                            ]
+                        ],
+                    },
+                }
+            ],
+        },
+        {
+            "identifier": "EX-C1",
+            "country": "XXX",
+            "name": "Conditional circle",
+            "type": "COMMON",
+            "restriction": "CONDITIONAL",
+            "reason": ["AIR_TRAFFIC"],
+            "geometry": [
+                {
+                    "uomDimensions": "M",
+                    "lowerLimit": 30,
+                    "lowerVerticalReference": "AMSL",
+                    "upperLimit": 150,
+                    "upperVerticalReference": "AMSL",
+                    "horizontalProjection": {
+                        "type": "Circle",
+                        "center": [14.1, 35.1],
+                        "radius": 500,
+                    },
+                }
+            ],
+        },
+        {
+            "identifier": "EX-N1",
+            "restriction": "NO_RESTRICTION",
+            "geometry": [
+                {"horizontalProjection": {"type": "Circle", "center": [14.2, 35.2], "radius": 100}}
+            ],
+        },
     ],
 }
 
@@ -140,21 +236,97 @@ def test_ed269_polygon_and_circle(write_json, rules):
 @pytest.mark.parametrize(
     "doc, expected",
     [
-        ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"amenity": "prison"},
-          "geometry": {"type": "Curve", "coordinates": []}}]}, "feature 0: unknown geometry type 'Curve'"),
-        ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"amenity": "prison", "osm_way_id": "5"},
-          "geometry": {"type": "Point", "coordinates": [200.5, 35.0]}}]}, "way/5: coordinate (200.5, 35.0) out of range"),
-        ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"amenity": "prison"},
-          "geometry": {"type": "Polygon", "coordinates": [[[1, 2]]]}}]}, "feature 0: malformed Polygon geometry"),
-        ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"amenity": "school"}, "geometry": None}]},
-         "no restricted features"),
-        ({"features": [{"identifier": "Z1", "restriction": "PROHIBITED", "geometry": [
-            {"horizontalProjection": {"type": "Circle", "center": [14.0, 35.0], "radius": -5}}]}]},
-         "zone Z1: Circle radius must be a positive number"),
-        ({"features": [{"identifier": "Z2", "restriction": "PROHIBITED", "geometry": [
-            {"uomDimensions": "M", "lowerLimit": 100, "upperLimit": 50,
-             "horizontalProjection": {"type": "Circle", "center": [14.0, 35.0], "radius": 5}}]}]},
-         "zone Z2: upperLimit 50.0 m is not above lowerLimit 100.0 m"),
+        (
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"amenity": "prison"},
+                        "geometry": {"type": "Curve", "coordinates": []},
+                    }
+                ],
+            },
+            "feature 0: unknown geometry type 'Curve'",
+        ),
+        (
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"amenity": "prison", "osm_way_id": "5"},
+                        "geometry": {"type": "Point", "coordinates": [200.5, 35.0]},
+                    }
+                ],
+            },
+            "way/5: coordinate (200.5, 35.0) out of range",
+        ),
+        (
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"amenity": "prison"},
+                        "geometry": {"type": "Polygon", "coordinates": [[[1, 2]]]},
+                    }
+                ],
+            },
+            "feature 0: malformed Polygon geometry",
+        ),
+        (
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    {"type": "Feature", "properties": {"amenity": "school"}, "geometry": None}
+                ],
+            },
+            "no restricted features",
+        ),
+        (
+            {
+                "features": [
+                    {
+                        "identifier": "Z1",
+                        "restriction": "PROHIBITED",
+                        "geometry": [
+                            {
+                                "horizontalProjection": {
+                                    "type": "Circle",
+                                    "center": [14.0, 35.0],
+                                    "radius": -5,
+                                }
+                            }
+                        ],
+                    }
+                ]
+            },
+            "zone Z1: Circle radius must be a positive number",
+        ),
+        (
+            {
+                "features": [
+                    {
+                        "identifier": "Z2",
+                        "restriction": "PROHIBITED",
+                        "geometry": [
+                            {
+                                "uomDimensions": "M",
+                                "lowerLimit": 100,
+                                "upperLimit": 50,
+                                "horizontalProjection": {
+                                    "type": "Circle",
+                                    "center": [14.0, 35.0],
+                                    "radius": 5,
+                                },
+                            }
+                        ],
+                    }
+                ]
+            },
+            "zone Z2: upperLimit 50.0 m is not above lowerLimit 100.0 m",
+        ),
     ],
 )
 def test_bad_input_is_a_one_line_error_naming_file_and_feature(write_json, rules, doc, expected):
@@ -179,8 +351,27 @@ def test_malformed_json_and_unknown_format(tmp_path, rules):
 
 
 def test_self_intersecting_polygon_is_reported_and_repaired(write_json, rules):
-    bowtie = {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"amenity": "prison", "osm_way_id": "8"},
-              "geometry": {"type": "Polygon", "coordinates": [[[14.0, 35.0], [14.001, 35.001], [14.001, 35.0], [14.0, 35.001], [14.0, 35.0]]]}}]}
+    bowtie = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {"amenity": "prison", "osm_way_id": "8"},
+                "geometry": {
+                    "type": "Polygon",
+                    "coordinates": [
+                        [
+                            [14.0, 35.0],
+                            [14.001, 35.001],
+                            [14.001, 35.0],
+                            [14.0, 35.001],
+                            [14.0, 35.0],
+                        ]
+                    ],
+                },
+            }
+        ],
+    }
     db = read_database([write_json("bowtie.geojson", bowtie)], rules)
     assert db.repaired == ["way/8"]
     from kit.build import build_fences
@@ -195,4 +386,11 @@ def test_demo_scene_ships_with_the_package(rules):
 
     assert shutil.os.path.isfile(scene_path())
     db = read_database([scene_path()], rules)
-    assert {f.category for f in db.features} >= {"aerodrome", "hospital", "prison", "school", "power", "military"}
+    assert {f.category for f in db.features} >= {
+        "aerodrome",
+        "hospital",
+        "prison",
+        "school",
+        "power",
+        "military",
+    }

@@ -21,21 +21,37 @@ def test_default_rules_cover_the_issue_categories(rules):
 
 def test_user_rules_file(tmp_path):
     f = tmp_path / "rules.toml"
-    f.write_text('[defaults]\npoint_radius_m = 12\n[[rule]]\ncategory = "zoo"\nkind = "warning"\n'
-                 'tags = { tourism = ["zoo"] }\nmargin_m = 5\nalt_max_m = 120\n')
+    f.write_text(
+        '[defaults]\npoint_radius_m = 12\n[[rule]]\ncategory = "zoo"\nkind = "warning"\n'
+        'tags = { tourism = ["zoo"] }\nmargin_m = 5\nalt_max_m = 120\n'
+    )
     rules = load_rules(f)
     rule = rules.match({"tourism": "zoo"}.get, "area")
-    assert (rule.category, rule.margin_m, rule.alt_max_m, rules.point_radius_m) == ("zoo", 5.0, 120.0, 12.0)
+    assert (rule.category, rule.margin_m, rule.alt_max_m, rules.point_radius_m) == (
+        "zoo",
+        5.0,
+        120.0,
+        12.0,
+    )
     assert rules.keys == ("tourism",)
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("[[rule]]\ncategory='x'\nkind='nope'\ntags={a='*'}\n", "rule 1 (x): kind must be one of"),
-    ("[[rule]]\ncategory='x'\nkind='warning'\ntags={a='*'}\nmargin_m=-1\n", "margin_m must be >= 0"),
-    ("[[rule]]\ncategory='x'\nkind='warning'\n", "needs tags"),
-    ("[[rule]]\ncategory='x'\nkind='warning'\ntags={a='*'}\ncolour='red'\n", "unknown field(s) colour"),
-    ("not toml = = 1", "invalid TOML"),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("[[rule]]\ncategory='x'\nkind='nope'\ntags={a='*'}\n", "rule 1 (x): kind must be one of"),
+        (
+            "[[rule]]\ncategory='x'\nkind='warning'\ntags={a='*'}\nmargin_m=-1\n",
+            "margin_m must be >= 0",
+        ),
+        ("[[rule]]\ncategory='x'\nkind='warning'\n", "needs tags"),
+        (
+            "[[rule]]\ncategory='x'\nkind='warning'\ntags={a='*'}\ncolour='red'\n",
+            "unknown field(s) colour",
+        ),
+        ("not toml = = 1", "invalid TOML"),
+    ],
+)
 def test_bad_rules_are_one_line_errors(tmp_path, text, expected):
     f = tmp_path / "rules.toml"
     f.write_text(text)

@@ -26,7 +26,9 @@ from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
 
 RULES_DOC = {
     "defaults": {"point_radius_m": 15.0, "line_width_m": 6.0},
-    "rule": [{"category": "test", "kind": "keep_out", "tags": {"restricted": "*"}, "margin_m": 0.0}],
+    "rule": [
+        {"category": "test", "kind": "keep_out", "tags": {"restricted": "*"}, "margin_m": 0.0}
+    ],
 }
 
 coord = st.floats(-1500, 1500, allow_nan=False)
@@ -41,7 +43,11 @@ def shapes(draw):
     if kind == "star":
         n = draw(st.integers(3, 24))
         radii = draw(st.lists(st.floats(1, 300), min_size=n, max_size=n))
-        ang = np.sort(np.asarray(draw(st.lists(st.floats(0, 2 * math.pi), min_size=n, max_size=n, unique=True))))
+        ang = np.sort(
+            np.asarray(
+                draw(st.lists(st.floats(0, 2 * math.pi), min_size=n, max_size=n, unique=True))
+            )
+        )
         return "Polygon", [(cx + r * math.cos(a), cy + r * math.sin(a)) for r, a in zip(radii, ang)]
     if kind in ("rect", "sliver"):
         w = draw(st.floats(1, 400))
@@ -84,14 +90,22 @@ def feature_collection(lon, lat, items):
             geom = {"type": "LineString", "coordinates": coords}
         else:
             geom = {"type": "Polygon", "coordinates": [coords + [coords[0]]]}
-        feats.append({"type": "Feature", "properties": {"restricted": "yes", "osm_id": str(k)}, "geometry": geom})
+        feats.append(
+            {
+                "type": "Feature",
+                "properties": {"restricted": "yes", "osm_id": str(k)},
+                "geometry": geom,
+            }
+        )
     return {"type": "FeatureCollection", "features": feats}
 
 
 def read_features(doc, margin):
     rules_doc = {**RULES_DOC, "rule": [{**RULES_DOC["rule"][0], "margin_m": margin}]}
     rules = parse_rules(rules_doc)
-    return rules, read_geojson_doc("hypothesis.geojson", doc, rules, [], __import__("collections").Counter())
+    return rules, read_geojson_doc(
+        "hypothesis.geojson", doc, rules, [], __import__("collections").Counter()
+    )
 
 
 def polygon_in(verify, lonlat):
@@ -109,14 +123,33 @@ SPIKE = [(1.0, 0.0), (2.0, 1e-138), (1.0, 4e-38), (0.54, 0.84), (-0.42, 0.91)]
 
 
 @example(site=(0.0, 0.0, [("Polygon", SPIKE)]), margin=0.0, method="alpha", max_vertices=4)
-@example(site=(180.0, 87.4375, [("Point", [(0.0, 0.0)]), ("Polygon", SPIKE)]), margin=0.0, method="circle", max_vertices=4)
-@example(site=(179.96875, 87.0, [("Polygon", [(1, 0), (0.9, 0.5), (0.5, 0.8)]), ("Polygon", SPIKE + [(183.4, -53.4)])]),
-         margin=0.0, method="alpha", max_vertices=4)
+@example(
+    site=(180.0, 87.4375, [("Point", [(0.0, 0.0)]), ("Polygon", SPIKE)]),
+    margin=0.0,
+    method="circle",
+    max_vertices=4,
+)
+@example(
+    site=(
+        179.96875,
+        87.0,
+        [("Polygon", [(1, 0), (0.9, 0.5), (0.5, 0.8)]), ("Polygon", SPIKE + [(183.4, -53.4)])],
+    ),
+    margin=0.0,
+    method="alpha",
+    max_vertices=4,
+)
 @example(site=(0.0, 0.0, [("Point", [(0.0, 0.0)])]), margin=10.0, method="alpha", max_vertices=4)
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(site=sites(), margin=st.sampled_from([0.0, 0.5, 10.0, 100.0]), method=st.sampled_from(METHODS),
-       max_vertices=st.sampled_from([4, 8, 32]))
-def test_keep_out_fences_contain_site_plus_margin_in_every_format(site, margin, method, max_vertices):
+@given(
+    site=sites(),
+    margin=st.sampled_from([0.0, 0.5, 10.0, 100.0]),
+    method=st.sampled_from(METHODS),
+    max_vertices=st.sampled_from([4, 8, 32]),
+)
+def test_keep_out_fences_contain_site_plus_margin_in_every_format(
+    site, margin, method, max_vertices
+):
     lon, lat, items = site
     doc = feature_collection(lon, lat, items)
     rules, features = read_features(doc, margin)
@@ -127,7 +160,9 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(site, margin, 
     verify = VerifyFrame(lon, lat)
     widths = []
     for f in features:
-        widths.append({"point": rules.point_radius_m, "line": rules.line_width_m / 2}.get(f.geomtype, 0.0))
+        widths.append(
+            {"point": rules.point_radius_m, "line": rules.line_width_m / 2}.get(f.geomtype, 0.0)
+        )
     geoms = [f.geometry for f in features]
     by_site = {}
     for s in result.sites:
@@ -142,8 +177,12 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(site, margin, 
             clon, clat, r = fence.circle_wgs84
             cx, cy = verify.xy(clon, clat)
             pts = shapely.get_coordinates(restricted)
-            assert np.all(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) + fence.margin_m <= r + 1e-6), f"circle {fence.site_id}"
-        assert_contains(verify.local(fence.geometry), restricted, fence.margin_m, f"{method} {fence.kind} fence")
+            assert np.all(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) + fence.margin_m <= r + 1e-6), (
+                f"circle {fence.site_id}"
+            )
+        assert_contains(
+            verify.local(fence.geometry), restricted, fence.margin_m, f"{method} {fence.kind} fence"
+        )
         if fence.kind == "keep_out" and method not in ("exact", "circle"):
             for part in shapely.get_parts(fence.local):
                 assert len(part.exterior.coords) - 1 <= max_vertices or fence.repaired
@@ -157,7 +196,9 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(site, margin, 
         text = Path(paths[0]).read_text()
         for props, geom in geojson_fences(text):
             g, w = by_site[props["site_id"]]
-            assert_contains(verify.local(geom), restricted_in(verify, g, w), props["margin_m"], "GeoJSON")
+            assert_contains(
+                verify.local(geom), restricted_in(verify, g, w), props["margin_m"], "GeoJSON"
+            )
         keep_out = [f for f in result.fences if f.kind == "keep_out"]
         for items in (read_plan_fence(paths[1]), read_waypoints_fence(paths[2])):
             polygons, circles = group_polygons(items)
@@ -171,7 +212,9 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(site, margin, 
                     # its circle item, checked exactly
                     pts = shapely.get_coordinates(restricted)
                     assert any(
-                        np.all(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) + fence.margin_m <= r + 1e-6)
+                        np.all(
+                            np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) + fence.margin_m <= r + 1e-6
+                        )
                         for cx, cy, r in centres
                     ), "no circle item contains the site plus margin"
                     continue

@@ -45,14 +45,22 @@ MSG_MAX_S = 3.0  # a refused upload is reported within this (the ACK plus 0.3 s 
 
 
 def polygon(n, command=POLYGON_EXCLUSION, lon0=14.49, lat0=35.86, r=0.003, param1=None):
-    return [FenceItem(command, float(n if param1 is None else param1),
-                      round(lon0 + r * math.cos(2 * math.pi * i / n), 7),
-                      round(lat0 + r * math.sin(2 * math.pi * i / n), 7)) for i in range(n)]
+    return [
+        FenceItem(
+            command,
+            float(n if param1 is None else param1),
+            round(lon0 + r * math.cos(2 * math.pi * i / n), 7),
+            round(lat0 + r * math.sin(2 * math.pi * i / n), 7),
+        )
+        for i in range(n)
+    ]
 
 
 PREVIOUS = polygon(5, POLYGON_INCLUSION, r=0.01)  # on the vehicle before each upload
-NEW = polygon(8) + [FenceItem(CIRCLE_EXCLUSION, 75.5, 14.4812345, 35.8712345),
-                    FenceItem(RETURN_POINT, 0.0, 14.4954321, 35.8554321)]
+NEW = polygon(8) + [
+    FenceItem(CIRCLE_EXCLUSION, 75.5, 14.4812345, 35.8712345),
+    FenceItem(RETURN_POINT, 0.0, 14.4954321, 35.8554321),
+]
 
 
 def held(fake) -> list[FenceItem]:
@@ -75,7 +83,9 @@ async def upload_to(fake, items, bound):
             return None, exc, time.monotonic() - t0
 
 
-def assert_upload_kept_old_fence(fake, err, *, says=(), holds="still holds its previous fence (5 items)"):
+def assert_upload_kept_old_fence(
+    fake, err, *, says=(), holds="still holds its previous fence (5 items)"
+):
     msg = str(err)
     assert "\n" not in msg and "\r" not in msg, msg
     assert msg.startswith(f"upload of {len(NEW)} fence items failed: "), msg
@@ -120,8 +130,9 @@ class RawClient(asyncio.DatagramProtocol):
 
 async def raw_client(fake, mavlink1=False) -> RawClient:
     loop = asyncio.get_running_loop()
-    _, client = await loop.create_datagram_endpoint(lambda: RawClient(mavlink1),
-                                                    local_addr=("127.0.0.1", fake.port))
+    _, client = await loop.create_datagram_endpoint(
+        lambda: RawClient(mavlink1), local_addr=("127.0.0.1", fake.port)
+    )
     for _ in range(50):  # until the first heartbeat says where the fake is
         if client.peer:
             return client
@@ -137,15 +148,33 @@ async def test_fake_speaks_ardupilot_fence_protocol():
             for seq, it in enumerate(polygon(3)):
                 req = await client.expect("MISSION_REQUEST")  # id 40, as ArduPilot asks
                 assert req.seq == seq and req.mission_type == mav.MAV_MISSION_TYPE_FENCE
-                client.send(mav.MAVLink_mission_item_int_message(
-                    1, 1, seq, 0, it.command, 0, 1, it.param1, 0, 0, 0,
-                    round(it.lat * 1e7), round(it.lon * 1e7), 0, mav.MAV_MISSION_TYPE_FENCE))
+                client.send(
+                    mav.MAVLink_mission_item_int_message(
+                        1,
+                        1,
+                        seq,
+                        0,
+                        it.command,
+                        0,
+                        1,
+                        it.param1,
+                        0,
+                        0,
+                        0,
+                        round(it.lat * 1e7),
+                        round(it.lon * 1e7),
+                        0,
+                        mav.MAV_MISSION_TYPE_FENCE,
+                    )
+                )
             ack = await client.expect("MISSION_ACK")
             assert ack.type == mav.MAV_MISSION_ACCEPTED
             assert same_items(polygon(3), held(fake)) == []
             client.send(mav.MAVLink_mission_request_list_message(1, 1, mav.MAV_MISSION_TYPE_FENCE))
             assert (await client.expect("MISSION_COUNT")).count == 3
-            client.send(mav.MAVLink_mission_request_int_message(1, 1, 2, mav.MAV_MISSION_TYPE_FENCE))
+            client.send(
+                mav.MAVLink_mission_request_int_message(1, 1, 2, mav.MAV_MISSION_TYPE_FENCE)
+            )
             item = await client.expect("MISSION_ITEM_INT")
             assert (item.seq, item.frame, item.x) == (2, 0, round(polygon(3)[2].lat * 1e7))
         finally:
@@ -185,8 +214,10 @@ async def test_download_survives_a_late_repeated_count():
     # restarts its download without clearing what it has (it returned item 0 twice) -- the kit
     # keeps one item per sequence number
     faults = Faults(delay_out={0: 0.7}, drop_out={3})
-    async with FakeVehicle(fence=PREVIOUS, faults=faults) as fake, \
-            open_vehicle(fake.url, timeout=5.0) as vehicle:
+    async with (
+        FakeVehicle(fence=PREVIOUS, faults=faults) as fake,
+        open_vehicle(fake.url, timeout=5.0) as vehicle,
+    ):
         got = await asyncio.wait_for(download_fence(vehicle), 6.0)
         assert same_items(PREVIOUS, got) == []
         assert len(fake.sent("MISSION_COUNT")) == 2
@@ -207,22 +238,35 @@ async def test_upload_clean():
 N = len(NEW)  # outgoing mission messages: MISSION_REQUEST 0..N-1 are 0..N-1, the ACK is N
 
 
-@pytest.mark.parametrize("faults, what_is_lost", [
-    (Faults(drop_in={0}), [("lost-in", "MISSION_COUNT", N)]),
-    (Faults(drop_out={0}), [("lost-out", "MISSION_REQUEST", 0)]),
-    (Faults(drop_out={4}), [("lost-out", "MISSION_REQUEST", 4)]),
-    (Faults(drop_in={5}), [("lost-in", "MISSION_ITEM_INT", 4)]),
-    (Faults(drop_in={N}), [("lost-in", "MISSION_ITEM_INT", N - 1)]),
-    # the request and ArduPilot's re-ask a second later: the third ask still beats MAVSDK
-    (Faults(drop_out={4, 5}), [("lost-out", "MISSION_REQUEST", 4)] * 2),
-    # the vehicle stored the fence but its ACK is lost: MAVSDK times out, and the read-back
-    # shows the fence sent, which is what success means
-    (Faults(drop_out={N}), [("lost-out", "MISSION_ACK", "ACCEPTED")]),
-    # the read-back loses its MISSION_COUNT; MAVSDK asks again
-    (Faults(drop_out={N + 1}), [("lost-out", "MISSION_COUNT", N)]),
-    (Faults(drop_in={N + 2}), [("lost-in", "MISSION_REQUEST_INT", 0)]),
-], ids=["count", "first-request", "request", "item", "last-item", "request-twice", "final-ack",
-        "readback-count", "readback-request"])
+@pytest.mark.parametrize(
+    "faults, what_is_lost",
+    [
+        (Faults(drop_in={0}), [("lost-in", "MISSION_COUNT", N)]),
+        (Faults(drop_out={0}), [("lost-out", "MISSION_REQUEST", 0)]),
+        (Faults(drop_out={4}), [("lost-out", "MISSION_REQUEST", 4)]),
+        (Faults(drop_in={5}), [("lost-in", "MISSION_ITEM_INT", 4)]),
+        (Faults(drop_in={N}), [("lost-in", "MISSION_ITEM_INT", N - 1)]),
+        # the request and ArduPilot's re-ask a second later: the third ask still beats MAVSDK
+        (Faults(drop_out={4, 5}), [("lost-out", "MISSION_REQUEST", 4)] * 2),
+        # the vehicle stored the fence but its ACK is lost: MAVSDK times out, and the read-back
+        # shows the fence sent, which is what success means
+        (Faults(drop_out={N}), [("lost-out", "MISSION_ACK", "ACCEPTED")]),
+        # the read-back loses its MISSION_COUNT; MAVSDK asks again
+        (Faults(drop_out={N + 1}), [("lost-out", "MISSION_COUNT", N)]),
+        (Faults(drop_in={N + 2}), [("lost-in", "MISSION_REQUEST_INT", 0)]),
+    ],
+    ids=[
+        "count",
+        "first-request",
+        "request",
+        "item",
+        "last-item",
+        "request-twice",
+        "final-ack",
+        "readback-count",
+        "readback-request",
+    ],
+)
 async def test_upload_survives_a_lost_message(faults, what_is_lost):
     async with FakeVehicle(fence=PREVIOUS, faults=faults) as fake:
         report, err, seconds = await upload_to(fake, NEW, 8.0)
@@ -269,10 +313,14 @@ async def test_upload_survives_a_repeated_last_request():
 # ------------------------------------------------------------------ uploads that fail cleanly
 
 
-@pytest.mark.parametrize("faults", [
-    Faults(duplicate_requests={3}),  # the same request twice in a row
-    Faults(extra_requests={4: 2}),  # a stale request for an item already received
-], ids=["repeated-request", "stale-request"])
+@pytest.mark.parametrize(
+    "faults",
+    [
+        Faults(duplicate_requests={3}),  # the same request twice in a row
+        Faults(extra_requests={4: 2}),  # a stale request for an item already received
+    ],
+    ids=["repeated-request", "stale-request"],
+)
 async def test_repeated_request_fails_cleanly(faults):
     # MAVSDK sends the item again, ArduPilot answers INVALID_SEQUENCE, MAVSDK stops (see the
     # docstring). The vehicle cancels the half-done upload after its timeout (8 s on ArduPilot;
@@ -301,23 +349,54 @@ ERROR_CASES = [
     # (items, faults, words of the kit, the vehicle's own words)
     (polygon(80), Faults(), "no room", ["Only 70 items are supported"]),
     (polygon(70), Faults(), "refused the fence", ["Fence exceeds storage size"]),
-    (polygon(5)[:2] + [replace(polygon(5)[2], param1=4.0)] + polygon(5)[3:], Faults(),
-     "refused the fence", ["Unexpected vertex count want=5 got=4", "Fence validation failed"]),
-    (polygon(2) + polygon(3, lon0=14.5), Faults(), "refused the fence",
-     ["Invalid vertex count (2)"]),
+    (
+        polygon(5)[:2] + [replace(polygon(5)[2], param1=4.0)] + polygon(5)[3:],
+        Faults(),
+        "refused the fence",
+        ["Unexpected vertex count want=5 got=4", "Fence validation failed"],
+    ),
+    (
+        polygon(2) + polygon(3, lon0=14.5),
+        Faults(),
+        "refused the fence",
+        ["Invalid vertex count (2)"],
+    ),
     (polygon(4, param1=300), Faults(), "rejected an item as invalid", []),
-    (NEW, Faults(nack_count=mav.MAV_MISSION_DENIED, nack_text="Upload refused while armed"),
-     "denied the transfer", ["Upload refused while armed"]),
-    (NEW, Faults(nack_item=(4, mav.MAV_MISSION_INVALID_PARAM1), nack_text="Bad vertex count"),
-     "rejected an item as invalid", ["Bad vertex count"]),
-    (NEW, Faults(nack_item=(6, mav.MAV_MISSION_NO_SPACE), nack_text="Out of memory for upload"),
-     "no room", ["Out of memory for upload"]),
+    (
+        NEW,
+        Faults(nack_count=mav.MAV_MISSION_DENIED, nack_text="Upload refused while armed"),
+        "denied the transfer",
+        ["Upload refused while armed"],
+    ),
+    (
+        NEW,
+        Faults(nack_item=(4, mav.MAV_MISSION_INVALID_PARAM1), nack_text="Bad vertex count"),
+        "rejected an item as invalid",
+        ["Bad vertex count"],
+    ),
+    (
+        NEW,
+        Faults(nack_item=(6, mav.MAV_MISSION_NO_SPACE), nack_text="Out of memory for upload"),
+        "no room",
+        ["Out of memory for upload"],
+    ),
 ]
 
 
-@pytest.mark.parametrize("items, faults, reason, says", ERROR_CASES,
-                         ids=["too-many-items", "too-many-bytes", "vertex-counts", "two-vertices",
-                              "param1-over-255", "nack-count", "nack-item", "nack-no-space"])
+@pytest.mark.parametrize(
+    "items, faults, reason, says",
+    ERROR_CASES,
+    ids=[
+        "too-many-items",
+        "too-many-bytes",
+        "vertex-counts",
+        "two-vertices",
+        "param1-over-255",
+        "nack-count",
+        "nack-item",
+        "nack-no-space",
+    ],
+)
 async def test_refused_upload_keeps_old_fence(items, faults, reason, says):
     async with FakeVehicle(fence=PREVIOUS, faults=faults) as fake:
         _, err, seconds = await upload_to(fake, items, 10.0)
@@ -352,7 +431,8 @@ async def test_disconnect_mid_upload_fails_cleanly():
     msg = str(err)
     assert "stopped answering" in msg
     assert_upload_kept_old_fence(
-        fake, err, holds="no longer connected (no heartbeat), so what it holds is unknown")
+        fake, err, holds="no longer connected (no heartbeat), so what it holds is unknown"
+    )
     assert seconds < 8.0
 
 

@@ -24,7 +24,9 @@ def polygon_items(n, lon0=14.49, lat0=35.86, radius=300.0):
     frame = LocalFrame(lon0, lat0)
     ang = np.linspace(0, 2 * math.pi, n, endpoint=False)
     lon, lat = frame.to_wgs84(radius * np.cos(ang), radius * np.sin(ang))
-    return [FenceItem(POLYGON_EXCLUSION, float(n), round(a, 7), round(b, 7)) for a, b in zip(lon, lat)]
+    return [
+        FenceItem(POLYGON_EXCLUSION, float(n), round(a, 7), round(b, 7)) for a, b in zip(lon, lat)
+    ]
 
 
 @pytest.mark.parametrize("sitl", [MALTA_AIRPORT], indirect=True)
@@ -78,10 +80,25 @@ async def test_cli_upload_then_download(sitl, tmp_path):
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
-    code = await asyncio.to_thread(main, ["upload", str(fences), "--connect", sitl.connection_url,
-                                          "--bbox=-0.58,51.42,-0.52,51.44", "--params", "copter-rtl"])
+    code = await asyncio.to_thread(
+        main,
+        [
+            "upload",
+            str(fences),
+            "--connect",
+            sitl.connection_url,
+            "--bbox=-0.58,51.42,-0.52,51.44",
+            "--params",
+            "copter-rtl",
+        ],
+    )
     assert code == 0
     out = tmp_path / "onboard.plan"
-    assert await asyncio.to_thread(main, ["download", "--connect", sitl.connection_url, "-o", str(out)]) == 0
+    assert (
+        await asyncio.to_thread(
+            main, ["download", "--connect", sitl.connection_url, "-o", str(out)]
+        )
+        == 0
+    )
     items = read_plan_fence(out)
     assert len(items) > 5 and all(i.command in (5002, 5004) for i in items)

@@ -10,11 +10,16 @@ from kit.writers.atomic import write_all
 
 
 def register(sub):
-    p = sub.add_parser("download", help="read the fence a vehicle holds",
-                       description="Download the vehicle's fence items into a QGroundControl plan.")
+    p = sub.add_parser(
+        "download",
+        help="read the fence a vehicle holds",
+        description="Download the vehicle's fence items into a QGroundControl plan.",
+    )
     p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
     p.add_argument("-o", "--output", required=True, metavar="OUT.plan")
-    p.add_argument("--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file")
+    p.add_argument(
+        "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
+    )
     p.add_argument("--timeout", type=float, default=10.0, metavar="S")
     p.set_defaults(func=run)
 

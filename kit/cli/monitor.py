@@ -13,19 +13,38 @@ from kit.monitor.predict import Braking
 
 
 def register(sub):
-    p = sub.add_parser("monitor", help="watch a flight against the fences (companion computer)",
-                       description="Check every position against the full-resolution fences, predict breaches, "
-                                   "alert the ground station and, with --enforce, brake/RTL/land.")
+    p = sub.add_parser(
+        "monitor",
+        help="watch a flight against the fences (companion computer)",
+        description="Check every position against the full-resolution fences, predict breaches, "
+        "alert the ground station and, with --enforce, brake/RTL/land.",
+    )
     p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
     p.add_argument("--fences", required=True, metavar="FENCES.geojson")
     p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
-    p.add_argument("--horizon", type=float, default=15.0, metavar="S", help="look-ahead in seconds (default 15)")
+    p.add_argument(
+        "--horizon",
+        type=float,
+        default=15.0,
+        metavar="S",
+        help="look-ahead in seconds (default 15)",
+    )
     p.add_argument("--imminent-action", choices=ACTIONS, default="brake")
     p.add_argument("--breach-action", choices=ACTIONS, default="rtl")
-    p.add_argument("--decel", type=float, default=2.5, metavar="M/S2", help="braking deceleration (default 2.5)")
-    p.add_argument("--reaction", type=float, default=1.0, metavar="S", help="reaction time (default 1.0)")
+    p.add_argument(
+        "--decel",
+        type=float,
+        default=2.5,
+        metavar="M/S2",
+        help="braking deceleration (default 2.5)",
+    )
+    p.add_argument(
+        "--reaction", type=float, default=1.0, metavar="S", help="reaction time (default 1.0)"
+    )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
-    p.add_argument("--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle")
+    p.add_argument(
+        "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
+    )
     p.set_defaults(func=run)
 
 
@@ -33,9 +52,13 @@ def run(args) -> int:
     if args.horizon <= 0 or args.decel <= 0 or args.reaction < 0:
         raise InputError("monitor", "--horizon and --decel must be positive, --reaction >= 0")
     fences = FenceSet.from_geojson(args.fences)
-    options = MonitorOptions(horizon_s=args.horizon, enforce=args.enforce, imminent_action=args.imminent_action,
-                             breach_action=args.breach_action,
-                             braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel))
+    options = MonitorOptions(
+        horizon_s=args.horizon,
+        enforce=args.enforce,
+        imminent_action=args.imminent_action,
+        breach_action=args.breach_action,
+        braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
+    )
     return asyncio.run(_run(args, fences, options))
 
 
@@ -50,7 +73,9 @@ async def _run(args, fences, options) -> int:
     mode = "enforcing" if options.enforce else "alerting only"
     out_console.print(f"monitoring {len(fences.records)} fences ({mode}); Ctrl-C to stop")
     try:
-        monitor = await run_monitor(args.connect, fences, options, args.log, stop, echo=_echo, timeout=args.timeout)
+        monitor = await run_monitor(
+            args.connect, fences, options, args.log, stop, echo=_echo, timeout=args.timeout
+        )
     except LinkError as exc:
         err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)
         return 3
@@ -60,7 +85,11 @@ async def _run(args, fences, options) -> int:
 
 def _echo(event):
     if event["event"] == "level":
-        out_console.print(f"{event['time']:.1f} {event['previous']} -> {event['level']} {event.get('fence') or ''} "
-                          f"({event['reason']}, {event.get('distance_m')} m)")
+        out_console.print(
+            f"{event['time']:.1f} {event['previous']} -> {event['level']} {event.get('fence') or ''} "
+            f"({event['reason']}, {event.get('distance_m')} m)"
+        )
     elif event["event"] != "telemetry_resumed":
-        out_console.print(f"{event['time']:.1f} {event['event']} {event.get('action') or event.get('reason') or ''}")
+        out_console.print(
+            f"{event['time']:.1f} {event['event']} {event.get('action') or event.get('reason') or ''}"
+        )

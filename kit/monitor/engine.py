@@ -60,7 +60,9 @@ class Engine:
         if self.last is not None and s.t > self.last.t:
             jump = _distance_m(self.last, s) / (s.t - self.last.t)
             if jump > self.options.max_speed_mps:
-                return [self._event(s.t, "gps_glitch", s, reason=f"position jumped at {jump:.0f} m/s")]
+                return [
+                    self._event(s.t, "gps_glitch", s, reason=f"position jumped at {jump:.0f} m/s")
+                ]
         if self.stale:
             self.stale = False
             events.append(self._event(s.t, "telemetry_resumed", s))
@@ -75,10 +77,20 @@ class Engine:
         previous = self.sm.level
         level, changed = self.sm.update(a.level, s.t)
         if changed:
-            events.append(self._event(s.t, "level", s, level=level.name, previous=previous.name,
-                                      fence=self._site(a.fence), distance_m=_r(a.distance_m),
-                                      time_to_breach_s=_r(a.time_to_breach_s), stopping_m=_r(a.stopping_m),
-                                      reason=a.reason))
+            events.append(
+                self._event(
+                    s.t,
+                    "level",
+                    s,
+                    level=level.name,
+                    previous=previous.name,
+                    fence=self._site(a.fence),
+                    distance_m=_r(a.distance_m),
+                    time_to_breach_s=_r(a.time_to_breach_s),
+                    stopping_m=_r(a.stopping_m),
+                    reason=a.reason,
+                )
+            )
             events += self._act(s, level)
         return events
 
@@ -86,7 +98,13 @@ class Engine:
         """Called on a timer: telemetry older than ``stale_s`` is an event (once)."""
         if self.last_t is not None and not self.stale and now - self.last_t > self.options.stale_s:
             self.stale = True
-            return [{"time": round(now, 3), "event": "telemetry_stale", "age_s": round(now - self.last_t, 2)}]
+            return [
+                {
+                    "time": round(now, 3),
+                    "event": "telemetry_stale",
+                    "age_s": round(now - self.last_t, 2),
+                }
+            ]
         return []
 
     # -- decisions ------------------------------------------------------------------
@@ -97,7 +115,9 @@ class Engine:
             return []  # the mode change the monitor itself commanded
         # someone else (the pilot, a GCS) changed mode: do not fight them for a while
         self.backoff_until = s.t + self.options.backoff_s
-        return [self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)]
+        return [
+            self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)
+        ]
 
     def _act(self, s, level):
         o = self.options
@@ -110,7 +130,11 @@ class Engine:
         if not o.enforce or action == "none":
             return []
         if s.t < self.backoff_until:
-            return [self._event(s.t, "action_withheld", s, action=action, reason="pilot changed mode recently")]
+            return [
+                self._event(
+                    s.t, "action_withheld", s, action=action, reason="pilot changed mode recently"
+                )
+            ]
         if s.armed is False:
             return []
         self.action_t = s.t
@@ -120,8 +144,14 @@ class Engine:
         return None if index is None else self.fences.records[index].site_id
 
     def _event(self, t, kind, s, **extra):
-        return {"time": round(t, 3), "event": kind, "lat": round(s.lat, 7), "lon": round(s.lon, 7),
-                "alt_m": _r(s.alt_m), **extra}
+        return {
+            "time": round(t, 3),
+            "event": kind,
+            "lat": round(s.lat, 7),
+            "lon": round(s.lon, 7),
+            "alt_m": _r(s.alt_m),
+            **extra,
+        }
 
 
 def _r(v):

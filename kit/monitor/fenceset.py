@@ -45,8 +45,12 @@ class FenceSet:
         geoms = np.array([r.geometry for r in self.records], dtype=object)
         self.frame = frame or LocalFrame.around(geoms)
         self.kind = np.array([KIND_CODES[r.kind] for r in self.records])
-        self.alt_min = np.array([-math.inf if r.alt_min_m is None else r.alt_min_m for r in self.records])
-        self.alt_max = np.array([math.inf if r.alt_max_m is None else r.alt_max_m for r in self.records])
+        self.alt_min = np.array(
+            [-math.inf if r.alt_min_m is None else r.alt_min_m for r in self.records]
+        )
+        self.alt_max = np.array(
+            [math.inf if r.alt_max_m is None else r.alt_max_m for r in self.records]
+        )
         self._build(geoms)
 
     @classmethod
@@ -86,7 +90,9 @@ class FenceSet:
             inside_warn = inside[kinds == WARNING].tolist()
             inside_in = set(inside[kinds == KEEP_IN].tolist())
         keep_in_idx, _ = self._by_kind[KEEP_IN]
-        outside_in = [int(k) for k in keep_in_idx if int(k) not in inside_in] if keep_in_idx.size else []
+        outside_in = (
+            [int(k) for k in keep_in_idx if int(k) not in inside_in] if keep_in_idx.size else []
+        )
         nearest = None
         ahead = None
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]

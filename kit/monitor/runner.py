@@ -113,8 +113,16 @@ class Monitor:
         vn, ve = (vel[1].north_m_s, vel[1].east_m_s) if vel else (0.0, 0.0)
         mode = self.latest["mode"]
         armed = self.latest["armed"]
-        return Sample(t, p.latitude_deg, p.longitude_deg, p.relative_altitude_m, vn, ve,
-                      mode[1].name if mode else None, armed[1] if armed else None)
+        return Sample(
+            t,
+            p.latitude_deg,
+            p.longitude_deg,
+            p.relative_altitude_m,
+            vn,
+            ve,
+            mode[1].name if mode else None,
+            armed[1] if armed else None,
+        )
 
     def _handle(self, event):
         self.log.put(event)
@@ -133,11 +141,22 @@ class Monitor:
         from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
         from mavsdk.plugins.server_utility import StatusTextType
 
-        severity = StatusTextType.CRITICAL if event.get("level") in ("IMMINENT", "BREACH") else StatusTextType.WARNING
+        severity = (
+            StatusTextType.CRITICAL
+            if event.get("level") in ("IMMINENT", "BREACH")
+            else StatusTextType.WARNING
+        )
         try:
             await ServerUtilityAsync(self.vehicle.system).send_status_text(severity, text)
         except Exception as exc:  # an alert that cannot be sent is logged, never fatal
-            self.log.put({"time": round(time.monotonic(), 3), "event": "alert_failed", "text": text, "error": str(exc)})
+            self.log.put(
+                {
+                    "time": round(time.monotonic(), 3),
+                    "event": "alert_failed",
+                    "text": text,
+                    "error": str(exc),
+                }
+            )
 
     async def _act(self, action):
         act = self.vehicle.action
@@ -148,13 +167,29 @@ class Monitor:
                 await act.return_to_launch()
             elif action == "land":
                 await act.land()
-            self.log.put({"time": round(time.monotonic(), 3), "event": "action_done", "action": action})
+            self.log.put(
+                {"time": round(time.monotonic(), 3), "event": "action_done", "action": action}
+            )
         except Exception as exc:
-            self.log.put({"time": round(time.monotonic(), 3), "event": "action_failed", "action": action, "error": str(exc)})
+            self.log.put(
+                {
+                    "time": round(time.monotonic(), 3),
+                    "event": "action_failed",
+                    "action": action,
+                    "error": str(exc),
+                }
+            )
 
 
-async def run_monitor(url, fences, options, log_path=None, stop: asyncio.Event | None = None, echo=None,
-                      timeout: float = 10.0):
+async def run_monitor(
+    url,
+    fences,
+    options,
+    log_path=None,
+    stop: asyncio.Event | None = None,
+    echo=None,
+    timeout: float = 10.0,
+):
     from kit.vehicle.link import open_vehicle
 
     stop = stop or asyncio.Event()

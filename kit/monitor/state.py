@@ -34,19 +34,29 @@ def assess(check, speed_mps, horizon_s, braking: Braking = None) -> Assessment:
     nearest = check.nearest_keep_out
     dist = nearest.distance_m if nearest else math.inf
     if check.inside_keep_out:
-        return Assessment(Level.BREACH, check.inside_keep_out[0], 0.0, 0.0, stop, "inside a keep-out fence")
+        return Assessment(
+            Level.BREACH, check.inside_keep_out[0], 0.0, 0.0, stop, "inside a keep-out fence"
+        )
     if check.outside_keep_in:
-        return Assessment(Level.BREACH, check.outside_keep_in[0], 0.0, 0.0, stop, "outside the keep-in fence")
+        return Assessment(
+            Level.BREACH, check.outside_keep_in[0], 0.0, 0.0, stop, "outside the keep-in fence"
+        )
     ahead = check.breach_ahead
     ttb = time_to_breach(ahead[1] if ahead else None, speed_mps)
     if ahead and stop >= ahead[1]:
-        return Assessment(Level.IMMINENT, ahead[0], ahead[1], ttb, stop, "cannot stop before the fence ahead")
+        return Assessment(
+            Level.IMMINENT, ahead[0], ahead[1], ttb, stop, "cannot stop before the fence ahead"
+        )
     if dist <= braking.margin_m:
         return Assessment(Level.IMMINENT, nearest.index, dist, ttb, stop, "at the fence margin")
     if ahead and ttb <= horizon_s:
-        return Assessment(Level.WARNING, ahead[0], ahead[1], ttb, stop, f"breach predicted in {ttb:.1f} s")
+        return Assessment(
+            Level.WARNING, ahead[0], ahead[1], ttb, stop, f"breach predicted in {ttb:.1f} s"
+        )
     if check.inside_warning:
-        return Assessment(Level.WARNING, check.inside_warning[0], dist, ttb, stop, "inside a warning layer")
+        return Assessment(
+            Level.WARNING, check.inside_warning[0], dist, ttb, stop, "inside a warning layer"
+        )
     return Assessment(Level.CLEAR, nearest.index if nearest else None, dist, ttb, stop, "clear")
 
 

@@ -31,7 +31,11 @@ class FenceRecord:
 
 def read_fences(path) -> list:
     doc = read_json(path)
-    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection" or not isinstance(doc.get("features"), list):
+    if (
+        not isinstance(doc, dict)
+        or doc.get("type") != "FeatureCollection"
+        or not isinstance(doc.get("features"), list)
+    ):
         raise InputError(path, "not a fence GeoJSON FeatureCollection")
     out = []
     for i, feat in enumerate(doc["features"]):
@@ -44,23 +48,44 @@ def read_fences(path) -> list:
             raise InputError(path, f"kind must be one of {', '.join(KINDS)}, not {kind!r}", label)
         try:
             geom = shapely.geometry.shape(feat.get("geometry"))
-        except (GeometryTypeError, ValueError, TypeError, AttributeError, KeyError, IndexError) as exc:
+        except (
+            GeometryTypeError,
+            ValueError,
+            TypeError,
+            AttributeError,
+            KeyError,
+            IndexError,
+        ) as exc:
             raise InputError(path, f"malformed geometry ({exc})", label) from None
         if geom.geom_type not in ("Polygon", "MultiPolygon"):
-            raise InputError(path, f"a fence must be a Polygon or MultiPolygon, not {geom.geom_type}", label)
+            raise InputError(
+                path, f"a fence must be a Polygon or MultiPolygon, not {geom.geom_type}", label
+            )
         circle = None
         if "radius_m" in props:
             c = props.get("center")
             r = props.get("radius_m")
             if not (isinstance(c, list) and len(c) == 2 and isinstance(r, (int, float)) and r > 0):
-                raise InputError(path, "circle fence needs center [lon, lat] and a positive radius_m", label)
+                raise InputError(
+                    path, "circle fence needs center [lon, lat] and a positive radius_m", label
+                )
             circle = (float(c[0]), float(c[1]), float(r))
-        out.append(FenceRecord(
-            site_id=str(props.get("site_id", f"fence/{i}")), kind=kind, geometry=geom,
-            margin_m=float(props.get("margin_m") or 0.0), name=props.get("name"), category=props.get("category"),
-            alt_min_m=props.get("alt_min_m"), alt_max_m=props.get("alt_max_m"), circle=circle,
-            properties=props,
-        ))
+        out.append(
+            FenceRecord(
+                site_id=str(props.get("site_id", f"fence/{i}")),
+                kind=kind,
+                geometry=geom,
+                margin_m=float(props.get("margin_m") or 0.0),
+                name=props.get("name"),
+                category=props.get("category"),
+                alt_min_m=props.get("alt_min_m"),
+                alt_max_m=props.get("alt_max_m"),
+                circle=circle,
+                properties=props,
+            )
+        )
     if out:
-        check_coordinates(path, np.array([f.geometry for f in out], dtype=object), lambda k: out[k].site_id)
+        check_coordinates(
+            path, np.array([f.geometry for f in out], dtype=object), lambda k: out[k].site_id
+        )
     return out

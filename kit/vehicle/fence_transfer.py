@@ -69,9 +69,21 @@ def to_raw(items):
     from mavsdk.plugins.mission_raw import MissionItem
 
     return [
-        MissionItem(seq=i, frame=FRAME_GLOBAL, command=it.command, current=0, autocontinue=1,
-                    param1=float(it.param1), param2=0.0, param3=0.0, param4=0.0,
-                    x=to_e7(it.lat), y=to_e7(it.lon), z=0.0, mission_type=MISSION_TYPE_FENCE)
+        MissionItem(
+            seq=i,
+            frame=FRAME_GLOBAL,
+            command=it.command,
+            current=0,
+            autocontinue=1,
+            param1=float(it.param1),
+            param2=0.0,
+            param3=0.0,
+            param4=0.0,
+            x=to_e7(it.lat),
+            y=to_e7(it.lon),
+            z=0.0,
+            mission_type=MISSION_TYPE_FENCE,
+        )
         for i, it in enumerate(items)
     ]
 
@@ -86,8 +98,12 @@ def same_items(sent, got) -> list:
     if len(sent) != len(got):
         diffs.append(f"{len(sent)} items sent, {len(got)} read back")
     for i, (a, b) in enumerate(zip(sent, got)):
-        if a.command != b.command or abs(a.param1 - b.param1) > 1e-3 * max(1.0, abs(a.param1)) \
-                or to_e7(a.lat) != to_e7(b.lat) or to_e7(a.lon) != to_e7(b.lon):
+        if (
+            a.command != b.command
+            or abs(a.param1 - b.param1) > 1e-3 * max(1.0, abs(a.param1))
+            or to_e7(a.lat) != to_e7(b.lat)
+            or to_e7(a.lon) != to_e7(b.lon)
+        ):
             diffs.append(f"item {i}: sent {a}, read {b}")
     return diffs
 
@@ -139,13 +155,18 @@ async def upload_fence(vehicle, items) -> UploadReport:
             # which is what success means here, shows the fence sent
             return UploadReport(len(items), time.monotonic() - t0, True)
         says = await vehicle.texts_since(t0)
-        raise FenceTransferError(f"upload of {len(items)} fence items failed: {_reason(exc)}", says, holds) from None
+        raise FenceTransferError(
+            f"upload of {len(items)} fence items failed: {_reason(exc)}", says, holds
+        ) from None
     got = await download_fence(vehicle)
     seconds = time.monotonic() - t0
     diffs = same_items(items, got)
     if diffs:
-        raise FenceTransferError("the fence read back differs from the one sent: " + "; ".join(diffs[:3]),
-                                 await vehicle.texts_since(t0, 0.0), f"the vehicle holds {len(got)} fence items")
+        raise FenceTransferError(
+            "the fence read back differs from the one sent: " + "; ".join(diffs[:3]),
+            await vehicle.texts_since(t0, 0.0),
+            f"the vehicle holds {len(got)} fence items",
+        )
     return UploadReport(len(items), seconds, True)
 
 
@@ -164,8 +185,10 @@ async def _what_it_holds(vehicle):
         else:
             return got, f"the vehicle still holds its previous fence ({len(got)} items)"
         if not await _connected(vehicle):
-            return None, ("the vehicle is no longer connected (no heartbeat), so what it holds "
-                          "is unknown; ArduPilot keeps its previous fence when an upload fails")
+            return None, (
+                "the vehicle is no longer connected (no heartbeat), so what it holds "
+                "is unknown; ArduPilot keeps its previous fence when an upload fails"
+            )
         if time.monotonic() >= deadline:
             return None, f"could not read back what the vehicle holds ({why})"
         await asyncio.sleep(0.1)

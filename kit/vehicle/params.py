@@ -7,10 +7,34 @@ from dataclasses import dataclass
 # FENCE_TYPE bits: 1 max altitude, 2 circle around home, 4 polygons and circles, 8 min altitude.
 # FENCE_ACTION (Copter): 0 report, 1 RTL or land, 2 land, 3 SmartRTL/RTL/land, 4 brake or land.
 PROFILES = {
-    "copter-rtl": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 1, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
-    "copter-brake": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 4, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
-    "copter-land": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 2, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
-    "report-only": {"FENCE_ENABLE": 1, "FENCE_TYPE": 5, "FENCE_ACTION": 0, "FENCE_MARGIN": 2.0, "FENCE_ALT_MAX": 120.0},
+    "copter-rtl": {
+        "FENCE_ENABLE": 1,
+        "FENCE_TYPE": 5,
+        "FENCE_ACTION": 1,
+        "FENCE_MARGIN": 2.0,
+        "FENCE_ALT_MAX": 120.0,
+    },
+    "copter-brake": {
+        "FENCE_ENABLE": 1,
+        "FENCE_TYPE": 5,
+        "FENCE_ACTION": 4,
+        "FENCE_MARGIN": 2.0,
+        "FENCE_ALT_MAX": 120.0,
+    },
+    "copter-land": {
+        "FENCE_ENABLE": 1,
+        "FENCE_TYPE": 5,
+        "FENCE_ACTION": 2,
+        "FENCE_MARGIN": 2.0,
+        "FENCE_ALT_MAX": 120.0,
+    },
+    "report-only": {
+        "FENCE_ENABLE": 1,
+        "FENCE_TYPE": 5,
+        "FENCE_ACTION": 0,
+        "FENCE_MARGIN": 2.0,
+        "FENCE_ALT_MAX": 120.0,
+    },
 }
 INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
 
@@ -32,9 +56,15 @@ async def apply_params(vehicle, values: dict) -> ParamReport:
         except Exception as exc:
             raise ParamError(f"setting {name} = {value} failed ({exc})") from None
     got = await read_params(vehicle, values)
-    bad = {k: (v, got[k]) for k, v in values.items() if abs(float(got[k]) - float(v)) > 1e-4 * max(1.0, abs(v))}
+    bad = {
+        k: (v, got[k])
+        for k, v in values.items()
+        if abs(float(got[k]) - float(v)) > 1e-4 * max(1.0, abs(v))
+    }
     if bad:
-        raise ParamError("read back differs: " + ", ".join(f"{k} set {a} reads {b}" for k, (a, b) in bad.items()))
+        raise ParamError(
+            "read back differs: " + ", ".join(f"{k} set {a} reads {b}" for k, (a, b) in bad.items())
+        )
     return ParamReport(got)
 
 
