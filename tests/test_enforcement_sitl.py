@@ -1,0 +1,295 @@
+"""The uploaded fence is enforced by ArduPilot itself: real copter SITL, a flight into it.
+
+An exclusion square (100 m x 100 m, near edge 150 m north of home) is uploaded with the kit's
+own uploader, the ``copter-rtl`` parameters are applied (FENCE_ACTION 1: RTL or land), and the
+copter takes off in GUIDED to 20 m and is sent to a point 400 m north, *beyond* the square (a
+GUIDED target inside an exclusion zone is silently ignored, so the track has to cross it). The
+test asserts that ArduPilot reports the breach (FENCE_STATUS breach_status 1, a boundary
+breach, "Polygon fence breached") where the square is, switches to RTL within a few seconds of
+it, never gets across the square, and flies back out of it.
+
+MAVSDK's telemetry has no FENCE_STATUS, so it is read with the ``mavlink_direct`` plugin on the
+same MAVSDK connection (only one program can own the SITL UDP port), after asking for it with
+MAV_CMD_SET_MESSAGE_INTERVAL. ArduPilot streams nothing by default on this link: positions and
+velocities are asked for with ``set_rate_*`` too.
+
+Measured (egham, speedup 5, 2-core machine; 6 runs, two of them side by side; wall-clock
+seconds, x5 for sim time): arming succeeds at the first try (the fixture already waited for a
+position estimate); takeoff command to 18 m 2.44 s; goto to breach 3.50 s; takeoff command to
+breach 5.94-5.96 s; ground speed 10.0 m/s; the last position before the breach report
+149.4-150.1 m north, i.e. the breach is declared at the square's edge itself (FENCE_MARGIN does
+not move it); flight mode RTL reported 0.006-0.012 s after the FENCE_STATUS breach (the same
+scheduler tick: ArduPilot switches mode as it declares the breach); the STATUSTEXTs "Polygon
+fence breached", "Manual recovery started", later "Fence breach cleared"; farthest north
+171.2-171.8 m (about 21 m past the edge); back out of the square and FENCE_STATUS clear
+2.15-2.20 s after the breach. The test takes about 17 s wall, SITL start included.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from dataclasses import dataclass, field
+
+import pytest
+
+from kit.frame import LocalFrame
+from kit.vehicle.fence_transfer import upload_fence
+from kit.vehicle.link import open_vehicle
+from kit.vehicle.params import PROFILES, apply_params
+from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+
+pytestmark = pytest.mark.sitl
+
+EGHAM = {"home": "egham", "speedup": 5}
+
+# the exclusion square, in metres east (x) / north (y) of home
+HALF_WIDTH = 50.0
+NEAR_EDGE = 150.0
+FAR_EDGE = 250.0
+TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
+ALTITUDE = 20.0  # m above home
+SPEED = 10.0  # m/s: WPNAV_SPEED's default, also asked for with DO_CHANGE_SPEED
+
+WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
+ARM_TIMEOUT = 60.0  # "Need Position Estimate" and friends: keep retrying this long
+MODE_SWITCH_MAX = 3.0  # wall seconds between the breach report and RTL (measured: ~0)
+
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+FENCE_STATUS_ID = 162
+FENCE_BREACH_BOUNDARY = 3
+
+
+@dataclass
+class FlightLog:
+    """What the vehicle reported, each with its time.monotonic() of arrival."""
+
+    frame: LocalFrame
+    texts: object = ()  # the Vehicle's STATUSTEXT deque, once connected
+    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
+    speeds: list = field(default_factory=list)  # (t, horizontal speed m/s)
+    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
+    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
+
+    def mode(self):
+        return self.modes[-1][1] if self.modes else None
+
+    def last_position(self, before=float("inf")):
+        earlier = [p for p in self.positions if p[0] <= before]
+        return earlier[-1] if earlier else None
+
+    def first_breach(self):
+        return next(((t, f) for t, f in self.fence if f["breach_status"] == 1), None)
+
+    def summary(self) -> str:
+        pos = self.last_position()
+        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
+        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
+        fence = self.fence[-1][1] if self.fence else "none received"
+        said = "; ".join(text for _, text in list(self.texts)[-8:])
+        return (
+            f"last position {where}; modes {modes}; last FENCE_STATUS {fence}; vehicle said: {said}"
+        )
+
+
+async def _watch(log: FlightLog, vehicle, direct):
+    frame = log.frame
+
+    async def positions():
+        async for p in vehicle.telemetry.subscribe_position():
+            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
+            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
+
+    async def speeds():
+        async for v in vehicle.telemetry.subscribe_velocity_ned():
+            log.speeds.append((time.monotonic(), (v.north_m_s**2 + v.east_m_s**2) ** 0.5))
+
+    async def modes():
+        async for mode in vehicle.telemetry.subscribe_flight_mode():
+            if mode != log.mode():
+                log.modes.append((time.monotonic(), mode))
+
+    async def fence_status():
+        async for message in direct.subscribe_message("FENCE_STATUS"):
+            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
+
+    return [asyncio.create_task(c()) for c in (positions, speeds, modes, fence_status)]
+
+
+async def _until(what, predicate, timeout, log, vehicle, poll=0.05):
+    """Wait until ``predicate()`` is true; fail saying what the vehicle reported meanwhile."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            pytest.fail(f"{what}: not within {timeout:g} s | {log.summary()}")
+        await asyncio.sleep(poll)
+    return time.monotonic()
+
+
+async def _retry(what, call, timeout):
+    """``await call()`` until it succeeds (ArduPilot refuses arming until its checks pass)."""
+    from mavsdk.plugins.action import ActionError
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            return await call()
+        except ActionError as exc:
+            if time.monotonic() > deadline:
+                pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
+            await asyncio.sleep(1.0)
+
+
+def _exclusion_square(frame: LocalFrame):
+    xs = [-HALF_WIDTH, HALF_WIDTH, HALF_WIDTH, -HALF_WIDTH]
+    ys = [NEAR_EDGE, NEAR_EDGE, FAR_EDGE, FAR_EDGE]
+    lon, lat = frame.to_wgs84(xs, ys)
+    return [
+        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
+        for a, b in zip(lon, lat)
+    ]
+
+
+async def _ask_fence_status(direct, hz: float):
+    from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+    fields = {
+        "target_system": 1,
+        "target_component": 1,
+        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
+        "confirmation": 0,
+        "param1": FENCE_STATUS_ID,
+        "param2": 1e6 / hz,
+        "param3": 0,
+        "param4": 0,
+        "param5": 0,
+        "param6": 0,
+        "param7": 0,
+    }
+    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
+    result = json.loads(ack.fields_json or "{}").get("result")
+    assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
+
+
+@pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
+async def test_uploaded_exclusion_is_enforced_with_rtl(sitl):
+    log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
+    try:
+        await asyncio.wait_for(_fly_into_the_fence(sitl, log), WALL_TIMEOUT)
+    except asyncio.TimeoutError:
+        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+
+
+async def _fly_into_the_fence(sitl, log: FlightLog):
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+    from mavsdk.plugins.telemetry import FlightMode
+
+    home = sitl.home
+    frame = log.frame
+    async with open_vehicle(sitl.connection_url) as vehicle:
+        log.texts = vehicle.texts
+        action = ActionAsync(vehicle.system)
+        direct = MavlinkDirectAsync(vehicle.system)
+        watchers = await _watch(log, vehicle, direct)
+        try:
+            # -- the fence and its parameters, each read back by the kit
+            report = await upload_fence(vehicle, _exclusion_square(frame))
+            assert report.verified and report.items == 4
+            params = await apply_params(vehicle, PROFILES["copter-rtl"])
+            assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
+
+            await vehicle.telemetry.set_rate_position(10.0)
+            await vehicle.telemetry.set_rate_velocity_ned(10.0)
+            await _ask_fence_status(direct, 2.0)
+            await _until("a FENCE_STATUS", lambda: log.fence, 15, log, vehicle)
+            await _until("a position", lambda: log.positions, 15, log, vehicle)
+            assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
+
+            # -- arm and take off in GUIDED (MAVSDK shows GUIDED as OFFBOARD)
+            await action.set_takeoff_altitude(ALTITUDE)
+            await _retry("arming", action.arm, ARM_TIMEOUT)
+            t_takeoff = time.monotonic()
+            await _retry("takeoff", action.takeoff, 15)
+            t_up = await _until(
+                "climb to 90% of the takeoff altitude",
+                lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
+                60,
+                log,
+                vehicle,
+            )
+            assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"
+            assert not log.first_breach(), "breach before the vehicle was sent anywhere"
+
+            # -- across the square: a target beyond it, 400 m north, at 10 m/s
+            lon, lat = frame.to_wgs84(0.0, TARGET_NORTH)
+            await action.set_current_speed(SPEED)
+            await action.goto_location(float(lat), float(lon), home.alt + ALTITUDE, 0.0)
+            t_goto = time.monotonic()
+
+            # (a) ArduPilot reports the breach, at the square's near edge
+            await _until("FENCE_STATUS breach", log.first_breach, 60, log, vehicle, poll=0.01)
+            t_breach, status = log.first_breach()
+            assert status["breach_type"] == FENCE_BREACH_BOUNDARY, status
+            assert status["breach_count"] >= 1, status
+            _, x, y, alt = log.last_position(before=t_breach)
+            assert abs(x) < 10 and NEAR_EDGE - 15 <= y <= NEAR_EDGE + 15, (x, y)
+            assert alt > 0.8 * ALTITUDE, alt
+            speed = max(s for t, s in log.speeds if t_goto <= t <= t_breach)
+            assert speed > 0.8 * SPEED, f"only {speed:.1f} m/s on the way in"
+
+            # (b) ... and switches to the configured action, RTL, within a few seconds
+            await _until(
+                "RTL after the breach",
+                lambda: log.mode() == FlightMode.RETURN_TO_LAUNCH,
+                MODE_SWITCH_MAX,
+                log,
+                vehicle,
+                poll=0.01,
+            )
+            t_rtl = next(t for t, m in log.modes if m == FlightMode.RETURN_TO_LAUNCH)
+            assert abs(t_rtl - t_breach) <= MODE_SWITCH_MAX
+            await _until(
+                "the breach STATUSTEXT",
+                lambda: any(
+                    "fence breached" in text.lower() for t, text in vehicle.texts if t >= t_takeoff
+                ),
+                5,
+                log,
+                vehicle,
+            )
+
+            # the vehicle never got across the square (it overshoots the edge by about 20 m at
+            # 10 m/s), and RTL brings it back out of it
+            t_out = await _until(
+                "back south of the square",
+                lambda: log.positions[-1][2] < NEAR_EDGE - 10,
+                30,
+                log,
+                vehicle,
+            )
+            t_clear = await _until(
+                "FENCE_STATUS breach cleared",
+                lambda: log.fence[-1][1]["breach_status"] == 0,
+                30,
+                log,
+                vehicle,
+            )
+            farthest = max(p[2] for p in log.positions)
+            assert farthest < NEAR_EDGE + 40 < FAR_EDGE, f"flew {farthest:.0f} m north"
+            assert log.mode() == FlightMode.RETURN_TO_LAUNCH, log.mode()
+            said = [text for t, text in vehicle.texts if t >= t_takeoff]
+
+            print(
+                f"\nenforcement: takeoff->{ALTITUDE * 0.9:.0f} m {t_up - t_takeoff:.2f} s, "
+                f"goto->breach {t_breach - t_goto:.2f} s, takeoff->breach "
+                f"{t_breach - t_takeoff:.2f} s, breach at y={y:.1f} m, {speed:.1f} m/s, "
+                f"RTL {t_rtl - t_breach:+.3f} s after the breach, farthest {farthest:.1f} m, "
+                f"out {t_out - t_breach:.2f} s and cleared {t_clear - t_breach:.2f} s after it, "
+                f"speedup {sitl.speedup:g} | {'; '.join(said)}"
+            )
+        finally:
+            for task in watchers:
+                task.cancel()
+            await asyncio.gather(*watchers, return_exceptions=True)
