@@ -17,8 +17,9 @@ from rich.progress import (
 
 from kit.features import parse_bbox
 
-err_console = Console(stderr=True)
-out_console = Console()
+# piped or captured output gets a table-friendly width instead of rich's default 80 columns
+err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
+out_console = Console(width=None if sys.stdout.isatty() else 120)
 
 
 def add_database_options(p):
