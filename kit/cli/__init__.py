@@ -8,7 +8,7 @@ import sys
 from kit import __version__
 from kit.errors import InputError
 
-VERBS = ("build", "compare", "compile", "upload", "download", "monitor", "demo", "sitl")
+VERBS = ("build", "compare", "compile", "upload", "download", "monitor", "bundle", "demo", "sitl")
 
 
 def parser() -> argparse.ArgumentParser:
