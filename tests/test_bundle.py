@@ -75,3 +75,14 @@ def test_cli_round_trip(tmp_path, capsys):
     assert (
         main(["bundle", "verify", str(fences), "--trusted-key", str(tmp_path / "k.pem")]) == 2
     )  # a private key
+
+
+def test_upload_accepts_signed_fences_and_refuses_tampered_ones(signed, capsys):
+    fences, d = signed
+    base = ["upload", str(fences), "--bbox=-0.58,51.42,-0.52,51.44", "--dry-run"]
+    assert main(base + ["--trusted-key", str(d / "k.pub.pem")]) == 0
+    assert main(base + ["--trusted-key", str(d / "other.pub.pem")]) == 2
+    assert "not trusted" in capsys.readouterr().err
+    fences.write_text(fences.read_text().replace('"keep_out"', '"warning"', 1))
+    assert main(base + ["--trusted-key", str(d / "k.pub.pem")]) == 2
+    assert "changed after they were signed" in capsys.readouterr().err

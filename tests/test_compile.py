@@ -231,7 +231,20 @@ def test_upload_dry_run_and_missing_area(tmp_path, capsys):
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
-    assert main(["upload", str(fences), "--bbox=-0.58,51.42,-0.52,51.44", "--dry-run"]) == 0
+    assert main(["upload", str(fences), "--bbox=-0.58,51.42,-0.52,51.44", "--dry-run"]) == 2
+    assert "no trusted key" in capsys.readouterr().err  # unsigned fences are refused by default
+    assert (
+        main(
+            [
+                "upload",
+                str(fences),
+                "--bbox=-0.58,51.42,-0.52,51.44",
+                "--dry-run",
+                "--allow-unsigned",
+            ]
+        )
+        == 0
+    )
     assert "nothing sent" in capsys.readouterr().out
-    assert main(["upload", str(fences), "--dry-run"]) == 2
+    assert main(["upload", str(fences), "--dry-run", "--allow-unsigned"]) == 2
     assert "needs an operating area" in capsys.readouterr().err

@@ -90,6 +90,7 @@ async def test_cli_upload_then_download(sitl, tmp_path):
             "--bbox=-0.58,51.42,-0.52,51.44",
             "--params",
             "copter-rtl",
+            "--allow-unsigned",
         ],
     )
     assert code == 0

@@ -98,3 +98,43 @@ def callback(prog, description):
         prog.update(task, completed=done, total=total)
 
     return update
+
+
+def add_trust_options(p):
+    p.add_argument(
+        "--trusted-key",
+        action="append",
+        default=[],
+        metavar="KEY.pub.pem",
+        help="accept fences signed by this Ed25519 key (repeatable; also $ALPHAFENCE_TRUSTED_KEYS)",
+    )
+    p.add_argument(
+        "--allow-unsigned",
+        action="store_true",
+        help="use fences that are not signed by a trusted key (say so in the log)",
+    )
+
+
+def check_trust(args, path):
+    """Refuse fences that do not verify against a trusted key, unless --allow-unsigned."""
+    import os
+
+    from kit.bundle import verify
+    from kit.errors import InputError
+
+    keys = list(args.trusted_key) + [
+        k for k in os.environ.get("ALPHAFENCE_TRUSTED_KEYS", "").split(os.pathsep) if k
+    ]
+    try:
+        if not keys:
+            raise InputError(path, "no trusted key to verify the fences against (--trusted-key)")
+        return verify(path, keys)
+    except InputError as exc:
+        if args.allow_unsigned:
+            err_console.print(f"[yellow]warning:[/] using unverified fences: {exc}", soft_wrap=True)
+            return None
+        raise InputError(
+            exc.path,
+            exc.message + "; sign them (alphafence bundle sign) or pass --allow-unsigned",
+            exc.feature,
+        ) from None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import signal
 
-from kit.cli.common import err_console, out_console
+from kit.cli.common import add_trust_options, check_trust, err_console, out_console
 from kit.errors import InputError
 from kit.monitor.engine import ACTIONS, MonitorOptions
 from kit.monitor.fenceset import FenceSet
@@ -45,12 +45,14 @@ def register(sub):
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
+    add_trust_options(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     if args.horizon <= 0 or args.decel <= 0 or args.reaction < 0:
         raise InputError("monitor", "--horizon and --decel must be positive, --reaction >= 0")
+    check_trust(args, args.fences)
     fences = FenceSet.from_geojson(args.fences)
     options = MonitorOptions(
         horizon_s=args.horizon,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from kit.cli.common import err_console, out_console
+from kit.cli.common import add_trust_options, check_trust, err_console, out_console
 from kit.cli.compile import add_compile_options, compile_from_args, report
 from kit.errors import InputError
 from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
@@ -42,6 +42,7 @@ def register(sub):
         help="also set and verify these fence parameters",
     )
     p.add_argument("--dry-run", action="store_true", help="compile and check, but do not connect")
+    add_trust_options(p)
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
@@ -63,6 +64,7 @@ def load_items(args):
 
 
 def run(args) -> int:
+    check_trust(args, args.fences)
     items, compiled = load_items(args)
     if compiled is not None:
         report(compiled)
