@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 
-.PHONY: install demo test sitl-test bench lint clean
+.PHONY: install demo test sitl-test bench fuzz lint clean
 
 install: $(STAMP)
 
@@ -27,6 +27,10 @@ sitl-test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench --osm $(MALTA)
+
+# >= 100,000 generated inputs across the readers (7 fuzz tests x 15,000); `make test` runs 60 each
+fuzz: $(STAMP)
+	ALPHAFENCE_FUZZ_EXAMPLES=15000 $(BIN)/pytest -q -p no:cacheprovider tests/test_fuzz_readers.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check kit tests bench

@@ -6,9 +6,13 @@ class InputError(Exception):
 
     def __init__(self, path, message, feature=None):
         self.path = str(path) if path is not None else None
-        self.feature = feature
+        # one line, whatever a library or a hostile file put in the text
+        self.feature = None if feature is None else " ".join(str(feature).split())
+        message = " ".join(str(message).split())
+        if len(message) > 300:
+            message = message[:297] + "..."
         self.message = message
         where = self.path or "<input>"
-        if feature is not None:
-            where = f"{where}: {feature}"
+        if self.feature is not None:
+            where = f"{where}: {self.feature[:120]}"
         super().__init__(f"{where}: {message}")

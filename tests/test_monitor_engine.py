@@ -65,7 +65,7 @@ def test_pilot_mode_change_backs_off(fences):
     eng = Engine(fences, MonitorOptions(enforce=True, backoff_s=30))
     samples = list(north_run())
     for s in samples[150:]:
-        s.mode = "LOITER"  # the pilot takes over at t = 15 s, then still flies on
+        s.mode = "POSCTL"  # the pilot takes over (LOITER) at t = 15 s, then still flies on
     events = run(eng, samples)
     assert any(e["event"] == "pilot_mode_change" for e in events)
     assert not [e for e in events if e["event"] == "action" and e["time"] > 15]
@@ -95,3 +95,34 @@ def test_hovering_next_to_a_fence_does_not_flap(fences):
         lon, lat = FRAME.to_wgs84(0.0, y)
         events += eng.step(Sample(k * 0.1, float(lat), float(lon), 20.0))
     assert len([e for e in events if e["event"] == "level"]) <= 2
+
+
+def test_switching_into_guided_or_auto_is_not_the_pilot_taking_over(fences):
+    eng = Engine(fences, MonitorOptions(enforce=True))
+    samples = list(north_run(mode="HOLD"))
+    for s in samples[10:]:
+        s.mode = "OFFBOARD"  # GUIDED, as MAVSDK names it: an autonomous mode, no back-off
+    events = run(eng, samples)
+    assert not [e for e in events if e["event"] in ("pilot_mode_change", "action_withheld")]
+    assert [e["action"] for e in events if e["event"] == "action"] == ["brake", "rtl"]
+
+
+def test_undoing_the_monitors_brake_backs_off(fences):
+    eng = Engine(fences, MonitorOptions(enforce=True, backoff_s=60))
+    events = []
+    for s in north_run():
+        if eng.action_t > -1 and s.t > eng.action_t + 0.5:
+            s.mode = (
+                "HOLD" if s.t < eng.action_t + 1.5 else "OFFBOARD"
+            )  # our brake, then the pilot resumes
+        events += eng.step(s)
+    assert [e for e in events if e["event"] == "pilot_mode_change"]
+    assert [e["action"] for e in events if e["event"] == "action"] == ["brake"]
+
+
+def test_arrival_jitter_is_not_a_glitch(fences):
+    eng = Engine(fences)
+    lon0, lat0 = FRAME.to_wgs84(0.0, 0.0)
+    lon1, lat1 = FRAME.to_wgs84(0.0, 12.0)  # 12 m, but the two reports arrived 10 ms apart
+    eng.step(Sample(0.0, float(lat0), float(lon0), 20.0))
+    assert eng.step(Sample(0.01, float(lat1), float(lon1), 20.0)) == []

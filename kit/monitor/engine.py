@@ -13,6 +13,10 @@ from kit.monitor.state import Level, StateMachine, assess
 
 ACTIONS = ("none", "brake", "rtl", "land")
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
+# modes in which the pilot flies the vehicle (MAVSDK's names): switching into one of them, or
+# out of a mode the monitor commanded, is the pilot taking over
+PILOT_MODES = {"MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO", "RATTITUDE"}
+GLITCH_SLACK_M = 25.0  # telemetry arrival jitter must not look like a jump
 
 
 @dataclass
@@ -49,6 +53,8 @@ class Engine:
         self.last_t: float | None = None
         self.stale = False
         self.action_t = -math.inf  # when the monitor last commanded a mode
+        self.in_commanded_mode = False
+        self.expect_mode_change = False
         self.backoff_until = -math.inf
         self.checks = 0
 
@@ -57,12 +63,12 @@ class Engine:
         events = []
         if not _plausible(s):
             return [self._event(s.t, "gps_glitch", s, reason="position missing, NaN or at 0,0")]
-        if self.last is not None and s.t > self.last.t:
-            jump = _distance_m(self.last, s) / (s.t - self.last.t)
-            if jump > self.options.max_speed_mps:
-                return [
-                    self._event(s.t, "gps_glitch", s, reason=f"position jumped at {jump:.0f} m/s")
-                ]
+        if self.last is not None and s.t >= self.last.t:
+            dt = s.t - self.last.t
+            moved = _distance_m(self.last, s)
+            if moved > self.options.max_speed_mps * dt + GLITCH_SLACK_M:
+                why = f"position jumped {moved:.0f} m in {dt:.2f} s"
+                return [self._event(s.t, "gps_glitch", s, reason=why)]
         if self.stale:
             self.stale = False
             events.append(self._event(s.t, "telemetry_resumed", s))
@@ -111,9 +117,15 @@ class Engine:
     def _pilot(self, s):
         if s.mode is None or self.last is None or s.mode == self.last.mode:
             return []
-        if s.t - self.action_t <= COMMAND_SETTLE_S:
+        if self.expect_mode_change and s.t - self.action_t <= COMMAND_SETTLE_S:
+            self.expect_mode_change = False
+            self.in_commanded_mode = True
             return []  # the mode change the monitor itself commanded
-        # someone else (the pilot, a GCS) changed mode: do not fight them for a while
+        overridden = self.in_commanded_mode
+        self.in_commanded_mode = False
+        if s.mode not in PILOT_MODES and not overridden:
+            return []  # e.g. into GUIDED or AUTO: not the pilot taking the sticks
+        # the pilot took over (or undid the monitor's action): do not fight them for a while
         self.backoff_until = s.t + self.options.backoff_s
         return [
             self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)
@@ -138,6 +150,7 @@ class Engine:
         if s.armed is False:
             return []
         self.action_t = s.t
+        self.expect_mode_change = True
         return [self._event(s.t, "action", s, action=action)]
 
     def _site(self, index):

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import shapely
+from shapely.errors import ShapelyError
 
 from kit.coords import valid_lonlat
 from kit.errors import InputError
@@ -86,7 +87,7 @@ def _projection(path, label, proj):
     if ptype in ("Polygon", "MultiPolygon"):
         try:
             geom = shapely.geometry.shape({"type": ptype, "coordinates": proj.get("coordinates")})
-        except (ValueError, TypeError, IndexError, KeyError, AttributeError) as exc:
+        except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
             raise InputError(path, f"malformed {ptype} ({exc})", label) from None
         return geom, {}
     raise InputError(path, f"unknown horizontalProjection type {ptype!r}", label)

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
-from shapely.errors import GeometryTypeError
+from shapely.errors import ShapelyError
 
 from kit.errors import InputError
 from kit.features import check_coordinates
@@ -49,7 +49,7 @@ def read_fences(path) -> list:
         try:
             geom = shapely.geometry.shape(feat.get("geometry"))
         except (
-            GeometryTypeError,
+            ShapelyError,
             ValueError,
             TypeError,
             AttributeError,

@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 import shapely
-from shapely.errors import GeometryTypeError
+from shapely.errors import GeometryTypeError, ShapelyError
 
 from kit.errors import InputError
 from kit.features import Feature, check_coordinates, flag_invalid, geomtype_of
@@ -89,7 +89,7 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
             geom = shapely.geometry.shape(gj)
         except GeometryTypeError:
             raise InputError(path, f"unknown geometry type {gj.get('type')!r}", label) from None
-        except (ValueError, TypeError, IndexError, KeyError, AttributeError) as exc:
+        except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
             raise InputError(path, f"malformed {gj.get('type')} geometry ({exc})", label) from None
         if geom.geom_type == "GeometryCollection":
             parts = shapely.get_parts(geom)

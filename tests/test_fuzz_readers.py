@@ -1,0 +1,232 @@
+"""Readers fed malformed input: only clean one-line InputErrors, never another exception.
+
+`make test` runs a small sample; `make fuzz` runs many more (ALPHAFENCE_FUZZ_EXAMPLES)."""
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from kit.errors import InputError
+from kit.readers import read_database
+from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
+from kit.readers.fences import read_fences
+from kit.rules import load_rules
+
+N = int(os.environ.get("ALPHAFENCE_FUZZ_EXAMPLES", "60"))
+FUZZ = settings(max_examples=N, deadline=None, suppress_health_check=list(HealthCheck))
+RULES = load_rules()
+
+scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=12),
+)
+json_values = st.recursive(
+    scalars,
+    lambda kids: st.one_of(
+        st.lists(kids, max_size=5), st.dictionaries(st.text(max_size=8), kids, max_size=5)
+    ),
+    max_leaves=30,
+)
+coords = st.lists(
+    st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-1000, 1000), scalars),
+    min_size=0,
+    max_size=3,
+)
+rings = st.lists(coords, max_size=6)
+geometry = st.one_of(
+    st.fixed_dictionaries(
+        {
+            "type": st.sampled_from(
+                ["Point", "LineString", "Polygon", "MultiPolygon", "Curve", "GeometryCollection"]
+            ),
+            "coordinates": st.one_of(coords, rings, st.lists(rings, max_size=3), json_values),
+        }
+    ),
+    json_values,
+)
+feature = st.fixed_dictionaries(
+    {
+        "type": st.sampled_from(["Feature", "Feature", "Nope"]),
+        "properties": st.one_of(
+            st.dictionaries(
+                st.sampled_from(
+                    [
+                        "amenity",
+                        "aeroway",
+                        "name",
+                        "osm_id",
+                        "osm_way_id",
+                        "other_tags",
+                        "landuse",
+                        "kind",
+                        "site_id",
+                    ]
+                ),
+                st.one_of(st.sampled_from(["hospital", "prison", "keep_out", "helipad"]), scalars),
+                max_size=4,
+            ),
+            json_values,
+        ),
+        "geometry": geometry,
+    }
+)
+
+
+def write(suffix, data):
+    fd, path = tempfile.mkstemp(suffix=suffix)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data if isinstance(data, bytes) else data.encode("utf-8", "surrogatepass"))
+    return Path(path)
+
+
+def only_input_errors(fn, path):
+    try:
+        fn(path)
+    except InputError as exc:
+        assert "\n" not in str(exc) and str(exc)
+    finally:
+        path.unlink(missing_ok=True)
+
+
+@FUZZ
+@given(
+    st.one_of(
+        st.fixed_dictionaries(
+            {"type": st.just("FeatureCollection"), "features": st.lists(feature, max_size=4)}
+        ),
+        json_values,
+    )
+)
+def test_geojson_reader(doc):
+    only_input_errors(lambda p: read_database([p], RULES), write(".geojson", json.dumps(doc)))
+
+
+zone = st.fixed_dictionaries(
+    {
+        "identifier": st.one_of(st.text(max_size=6), scalars),
+        "restriction": st.one_of(
+            st.sampled_from(["PROHIBITED", "CONDITIONAL", "REQ_AUTHORISATION"]), scalars
+        ),
+        "geometry": st.one_of(
+            st.lists(
+                st.fixed_dictionaries(
+                    {
+                        "uomDimensions": st.one_of(st.sampled_from(["M", "FT"]), scalars),
+                        "lowerLimit": scalars,
+                        "upperLimit": scalars,
+                        "horizontalProjection": st.one_of(
+                            st.fixed_dictionaries(
+                                {"type": st.just("Circle"), "center": coords, "radius": scalars}
+                            ),
+                            st.fixed_dictionaries(
+                                {
+                                    "type": st.sampled_from(["Polygon", "Spline"]),
+                                    "coordinates": st.lists(rings, max_size=2),
+                                }
+                            ),
+                            json_values,
+                        ),
+                    }
+                ),
+                max_size=3,
+            ),
+            json_values,
+        ),
+    }
+)
+
+
+@FUZZ
+@given(st.fixed_dictionaries({"features": st.lists(zone, min_size=1, max_size=3)}))
+def test_ed269_reader(doc):
+    only_input_errors(lambda p: read_database([p], RULES), write(".json", json.dumps(doc)))
+
+
+@FUZZ
+@given(
+    st.one_of(
+        json_values,
+        st.fixed_dictionaries(
+            {"type": st.just("FeatureCollection"), "features": st.lists(feature, max_size=4)}
+        ),
+    )
+)
+def test_fence_geojson_reader(doc):
+    only_input_errors(read_fences, write(".geojson", json.dumps(doc)))
+
+
+@FUZZ
+@given(
+    st.one_of(
+        json_values,
+        st.fixed_dictionaries(
+            {
+                "geoFence": st.fixed_dictionaries(
+                    {
+                        "polygons": st.lists(
+                            st.fixed_dictionaries(
+                                {"inclusion": scalars, "polygon": st.lists(coords, max_size=5)}
+                            ),
+                            max_size=3,
+                        ),
+                        "circles": st.lists(
+                            st.fixed_dictionaries({"inclusion": scalars, "circle": json_values}),
+                            max_size=2,
+                        ),
+                    }
+                )
+            }
+        ),
+    )
+)
+def test_plan_reader(doc):
+    only_input_errors(read_plan_fence, write(".plan", json.dumps(doc)))
+
+
+@FUZZ
+@given(
+    st.lists(
+        st.lists(
+            st.one_of(
+                st.sampled_from(["0", "1", "5002", "5004", "3.5", "nan", "inf", "200", "-95"]),
+                st.text(max_size=4),
+            ),
+            max_size=13,
+        ),
+        max_size=6,
+    ),
+    st.sampled_from(["QGC WPL 110", "QGC WPL 120", "garbage"]),
+)
+def test_waypoints_reader(rows, header):
+    text = "\n".join([header] + ["\t".join(r) for r in rows]) + "\n"
+    only_input_errors(read_waypoints_fence, write(".waypoints", text))
+
+
+@FUZZ
+@given(st.binary(max_size=400), st.sampled_from([".osm.pbf", ".osm"]))
+def test_osm_reader_on_garbage(data, suffix):
+    only_input_errors(lambda p: read_database([p], RULES), write(suffix, data))
+
+
+@FUZZ
+@given(st.text(max_size=300))
+def test_rules_reader(text):
+    only_input_errors(load_rules, write(".toml", text))
+
+
+def test_truncated_pbf_at_many_lengths(tmp_path):
+    from tests.conftest import MONACO
+
+    if not MONACO.is_file():
+        pytest.skip("Monaco extract not found")
+    data = MONACO.read_bytes()
+    for cut in (0, 1, 17, 100, 4096, 65_537, len(data) // 3, len(data) - 1):
+        only_input_errors(lambda p: read_database([p], RULES), write(".osm.pbf", data[:cut]))
