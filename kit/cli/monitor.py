@@ -39,7 +39,7 @@ def register(sub):
         help="braking deceleration (default 2.5)",
     )
     p.add_argument(
-        "--reaction", type=float, default=1.0, metavar="S", help="reaction time (default 1.0)"
+        "--reaction", type=float, default=1.5, metavar="S", help="reaction time (default 1.5)"
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
     p.add_argument(

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Braking:
-    reaction_s: float = 1.0  # link + decision + autopilot mode change
+    reaction_s: float = 1.5  # link + decision + autopilot mode change and response
     decel_mps2: float = 2.5  # a Copter in BRAKE decelerates at a few m/s²
     margin_m: float = 2.0
 
