@@ -20,9 +20,9 @@ switch to RTL, the "fence breached" STATUSTEXT.
 
 Measured (egham, speedup 5, effective 5.02-5.03; 4 runs of each test): WARNING ("breach
 predicted in 15 s") 13.2-13.3 s of flight before ArduPilot's breach, about 131 m before the
-edge; IMMINENT ("cannot stop before the fence ahead": 32 m stopping distance at 10 m/s with the
-default Braking) 3.15-3.22 s of flight before it (31-32 m) -- only 0.15-0.2 s above the 3 s
-requirement, since at 10 m/s the default braking model puts IMMINENT at 3.2 s by construction.
+edge; IMMINENT ("cannot stop before the fence ahead") 3.15-3.22 s of flight before it (31-32 m)
+with the earlier 1.0 s reaction time (32 m stopping distance at 10 m/s); the default is now
+1.5 s (37 m), which puts IMMINENT about 3.7 s ahead by construction.
 With enforce, the brake is MAVSDK's hold(), which ArduCopter carries out as BRAKE (custom mode
 17; MAVSDK reports it as HOLD): the copter stops 0.93-0.95 s wall (about 4.7 s of flight) after
 the IMMINENT, 10.2-10.8 m short of the edge (farthest 139.2-139.8 m north), and ArduPilot
