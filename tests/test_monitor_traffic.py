@@ -39,3 +39,46 @@ def test_an_older_report_never_replaces_a_newer_one():
     tr.report(Aircraft("a", 2.0, 0.0, 500.0, 100.0, 0.0, 0.0))
     tr.report(Aircraft("a", 1.0, 0.0, 5000.0, 100.0, 0.0, 0.0))
     assert tr.aircraft["a"].y == 500.0
+
+
+def test_engine_turns_adsb_reports_into_conflict_events():
+    import json
+
+    import shapely
+
+    from kit.frame import LocalFrame
+    from kit.monitor.engine import Engine, Sample, alert_text
+    from kit.monitor.fenceset import FenceSet
+    from kit.monitor.runner import parse_adsb
+    from kit.readers.fences import FenceRecord
+
+    frame = LocalFrame(-0.55, 51.43)
+    far = frame.geom_to_wgs84(shapely.box(5000, 5000, 5100, 5100))
+    eng = Engine(FenceSet([FenceRecord("x", "keep_out", far)], frame=frame))
+    lon, lat = frame.to_wgs84(0.0, 600.0)  # 600 m north, flying south at 60 m/s, 120 m AMSL
+    msg = {
+        "ICAO_address": 0x4CA123,
+        "lat": round(float(lat) * 1e7),
+        "lon": round(float(lon) * 1e7),
+        "altitude": 120_000,
+        "heading": 18000,
+        "hor_velocity": 6000,
+        "ver_velocity": 0,
+        "callsign": "RYR1\x00\x00",
+    }
+    report = parse_adsb(json.dumps(msg))
+    assert report["callsign"] == "RYR1" and report["vn"] == pytest.approx(-60, abs=1e-6)
+    eng.aircraft(t=0.0, **report)
+    own = Sample(0.0, 51.43, -0.55, 20.0, alt_amsl_m=100.0)
+    events = eng.step(own)
+    conflict = [e for e in events if e["event"] == "traffic_conflict"]
+    assert conflict and conflict[0]["callsign"] == "RYR1"
+    assert conflict[0]["t_cpa_s"] == pytest.approx(10.0, abs=0.1)
+    assert alert_text(conflict[0]).startswith("AF TRAFFIC RYR1")
+    assert [
+        e
+        for e in eng.step(Sample(0.5, 51.43, -0.55, 20.0, alt_amsl_m=100.0))
+        if e["event"] == "traffic_conflict"
+    ] == []
+    assert parse_adsb(json.dumps({**msg, "lat": 0, "lon": 0})) is None
+    assert parse_adsb("not json") is None

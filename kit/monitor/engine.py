@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from kit.monitor.fenceset import FenceSet
 from kit.monitor.predict import Braking
 from kit.monitor.state import Level, StateMachine, assess
+from kit.monitor.traffic import Traffic, TrafficOptions
 
 ACTIONS = ("none", "brake", "rtl", "land")
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
@@ -29,6 +30,8 @@ class Sample:
     ve: float = 0.0  # m/s east
     mode: str | None = None
     armed: bool | None = None
+    alt_amsl_m: float | None = None  # for other aircraft, whose ADS-B altitudes are AMSL
+    vd: float = 0.0  # m/s down
 
 
 @dataclass
@@ -42,6 +45,7 @@ class MonitorOptions:
     backoff_s: float = 15.0  # after the pilot changes mode, alert only
     stale_s: float = 1.0
     max_speed_mps: float = 60.0  # a position jump faster than this is a GPS glitch
+    traffic: TrafficOptions = field(default_factory=TrafficOptions)
 
 
 class Engine:
@@ -57,6 +61,8 @@ class Engine:
         self.expect_mode_change = False
         self.backoff_until = -math.inf
         self.checks = 0
+        self.traffic = Traffic(self.options.traffic)
+        self.conflicts: set = set()
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
@@ -98,6 +104,44 @@ class Engine:
                 )
             )
             events += self._act(s, level)
+        events += self._traffic(s, float(x), float(y))
+        return events
+
+    def aircraft(self, key, t, lat, lon, alt_amsl_m, ve, vn, vu=0.0, callsign=""):
+        """Another aircraft's report (ADS-B or another MAVLink system) for the dynamic fences."""
+        from kit.monitor.traffic import Aircraft
+
+        x, y = self.fences.frame.to_local(lon, lat)
+        self.traffic.report(
+            Aircraft(str(key), t, float(x), float(y), alt_amsl_m, ve, vn, vu, callsign)
+        )
+
+    def _traffic(self, s, x, y):
+        if s.alt_amsl_m is None or not self.traffic.aircraft:
+            return []
+        found = self.traffic.conflicts(
+            s.t, x, y, s.alt_amsl_m, s.ve, s.vn, -s.vd, self.options.horizon_s
+        )
+        events = []
+        keys = {c.key for c in found}
+        for c in found:
+            if c.key not in self.conflicts:
+                events.append(
+                    self._event(
+                        s.t,
+                        "traffic_conflict",
+                        s,
+                        aircraft=c.key,
+                        callsign=c.callsign,
+                        t_cpa_s=_r(c.t_cpa_s),
+                        separation_m=_r(c.horizontal_m),
+                        vertical_m=_r(c.vertical_m),
+                        radius_m=_r(c.radius_m),
+                    )
+                )
+        for key in self.conflicts - keys:
+            events.append(self._event(s.t, "traffic_clear", s, aircraft=key))
+        self.conflicts = keys
         return events
 
     def tick(self, now: float) -> list:
@@ -190,6 +234,9 @@ def alert_text(event) -> str | None:
         if event.get("time_to_breach_s") is not None and event["level"] in ("WARNING", "IMMINENT"):
             text += f" {event['time_to_breach_s']:.0f}s"
         return text[:50]
+    if kind == "traffic_conflict":
+        who = event.get("callsign") or event["aircraft"]
+        return f"AF TRAFFIC {who} CPA {event['t_cpa_s']:.0f}s {event['separation_m']:.0f}m"[:50]
     if kind in ("gps_glitch", "telemetry_stale", "action", "action_withheld"):
         return f"AF {kind} {event.get('action', '')}".strip()[:50]
     return None

@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import time
 
 from kit.monitor.engine import Engine, Sample, alert_text
@@ -51,6 +52,34 @@ class EventLog:
                 await self.task
 
 
+def parse_adsb(fields_json):
+    """An ADSB_VEHICLE message's fields (MAVSDK mavlink_direct JSON) -> Engine.aircraft kwargs,
+    or None when it carries no usable position."""
+    try:
+        f = json.loads(fields_json)
+        lat, lon = f["lat"] / 1e7, f["lon"] / 1e7
+        alt = f["altitude"] / 1000.0
+        speed = f.get("hor_velocity", 0) / 100.0
+        heading = math.radians(f.get("heading", 0) / 100.0)
+        climb = f.get("ver_velocity", 0) / 100.0
+        callsign = str(f.get("callsign", "")).strip("\x00 ")
+        key = f.get("ICAO_address")
+    except (ValueError, KeyError, TypeError):
+        return None
+    if key is None or not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
+        return None
+    return {
+        "key": key,
+        "lat": lat,
+        "lon": lon,
+        "alt_amsl_m": alt,
+        "ve": speed * math.sin(heading),
+        "vn": speed * math.cos(heading),
+        "vu": climb,
+        "callsign": callsign,
+    }
+
+
 def _append(path, lines):
     with open(path, "a", encoding="utf-8") as fh:
         fh.write("\n".join(lines) + "\n")
@@ -77,6 +106,7 @@ class Monitor:
             asyncio.create_task(self._follow(tel.subscribe_velocity_ned(), "velocity")),
             asyncio.create_task(self._follow(tel.subscribe_flight_mode(), "mode")),
             asyncio.create_task(self._follow(tel.subscribe_armed(), "armed")),
+            asyncio.create_task(self._adsb()),
         ]
         try:
             while not stop.is_set():
@@ -104,6 +134,23 @@ class Monitor:
             if wake:
                 self.new_position.set()
 
+    async def _adsb(self):
+        """ADSB_VEHICLE reports (forwarded by ArduPilot from its ADS-B receiver) -> traffic."""
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+
+        try:
+            stream = MavlinkDirectAsync(self.vehicle.system).subscribe_message("ADSB_VEHICLE")
+            async for message in stream:
+                report = parse_adsb(message.fields_json)
+                if report is not None:
+                    self.engine.aircraft(t=time.monotonic(), **report)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # no ADS-B is an event, never a crash
+            self.log.put(
+                {"time": round(time.monotonic(), 3), "event": "adsb_unavailable", "error": str(exc)}
+            )
+
     def _sample(self):
         pos = self.latest["position"]
         if pos is None:
@@ -122,6 +169,8 @@ class Monitor:
             ve,
             mode[1].name if mode else None,
             armed[1] if armed else None,
+            alt_amsl_m=p.absolute_altitude_m,
+            vd=vel[1].down_m_s if vel else 0.0,
         )
 
     def _handle(self, event):
