@@ -81,7 +81,9 @@ def test_gps_glitches_and_stale_telemetry_are_events(fences):
     assert "jumped" in eng.step(Sample(0.3, 51.53, -0.55, 20.0))[0]["reason"]  # 11 km in 0.3 s
     assert eng.tick(0.5) == []
     stale = eng.tick(1.5)
-    assert stale[0]["event"] == "telemetry_stale" and eng.tick(1.6) == []
+    assert (
+        stale[0]["event"] == "telemetry_stale" and stale[0]["age_s"] == 1.5 and eng.tick(1.6) == []
+    )
     resumed = eng.step(Sample(1.7, 51.43, -0.55, 20.0))
     assert resumed[0]["event"] == "telemetry_resumed"
     assert eng.checks == 2  # glitches were never checked against the fences
@@ -126,3 +128,21 @@ def test_arrival_jitter_is_not_a_glitch(fences):
     lon1, lat1 = FRAME.to_wgs84(0.0, 12.0)  # 12 m, but the two reports arrived 10 ms apart
     eng.step(Sample(0.0, float(lat0), float(lon0), 20.0))
     assert eng.step(Sample(0.01, float(lat1), float(lon1), 20.0)) == []
+
+
+def test_failsafe_events_take_their_configured_actions(fences):
+    opts = MonitorOptions(enforce=True, on_glitch="brake", on_stale="none", on_link_lost="land")
+    eng = Engine(fences, opts)
+    assert eng.step(Sample(0.0, 51.43, -0.55, 20.0)) == []
+    glitch = eng.step(Sample(0.1, 0.0, 0.0, 20.0))
+    assert [e["event"] for e in glitch] == ["gps_glitch", "action"] and glitch[1][
+        "action"
+    ] == "brake"
+    assert [e["event"] for e in eng.tick(1.5)] == ["telemetry_stale"]  # on_stale = none
+    lost = eng.tick(5.5)
+    assert [e["event"] for e in lost] == ["link_lost", "action"] and lost[1]["action"] == "land"
+    assert eng.tick(9.0) == []  # once
+    # alerting only: the same events, no actions
+    quiet = Engine(fences, MonitorOptions(on_glitch="brake", on_link_lost="land"))
+    quiet.step(Sample(0.0, 51.43, -0.55, 20.0))
+    assert [e["event"] for e in quiet.step(Sample(0.1, 0.0, 0.0, 20.0))] == ["gps_glitch"]

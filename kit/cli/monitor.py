@@ -42,6 +42,14 @@ def register(sub):
         "--reaction", type=float, default=1.5, metavar="S", help="reaction time (default 1.5)"
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
+    for flag, what in (
+        ("--on-glitch", "a GPS glitch"),
+        ("--on-stale", "telemetry older than 1 s"),
+        ("--on-link-lost", "no telemetry for 5 s"),
+    ):
+        p.add_argument(
+            flag, choices=ACTIONS, default="none", help=f"action (with --enforce) on {what}"
+        )
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
@@ -59,6 +67,9 @@ def run(args) -> int:
         enforce=args.enforce,
         imminent_action=args.imminent_action,
         breach_action=args.breach_action,
+        on_glitch=args.on_glitch,
+        on_stale=args.on_stale,
+        on_link_lost=args.on_link_lost,
         braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
     )
     return asyncio.run(_run(args, fences, options))

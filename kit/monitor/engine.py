@@ -46,6 +46,11 @@ class MonitorOptions:
     stale_s: float = 1.0
     max_speed_mps: float = 60.0  # a position jump faster than this is a GPS glitch
     traffic: TrafficOptions = field(default_factory=TrafficOptions)
+    link_lost_s: float = 5.0  # no telemetry this long: the link is lost
+    # what to command (with --enforce) on each failsafe event
+    on_glitch: str = "none"
+    on_stale: str = "none"
+    on_link_lost: str = "none"
 
 
 class Engine:
@@ -63,20 +68,24 @@ class Engine:
         self.checks = 0
         self.traffic = Traffic(self.options.traffic)
         self.conflicts: set = set()
+        self.link_lost = False
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
         events = []
         if not _plausible(s):
-            return [self._event(s.t, "gps_glitch", s, reason="position missing, NaN or at 0,0")]
+            return self._failsafe(
+                s, "gps_glitch", self.options.on_glitch, reason="position missing, NaN or at 0,0"
+            )
         if self.last is not None and s.t >= self.last.t:
             dt = s.t - self.last.t
             moved = _distance_m(self.last, s)
             if moved > self.options.max_speed_mps * dt + GLITCH_SLACK_M:
                 why = f"position jumped {moved:.0f} m in {dt:.2f} s"
-                return [self._event(s.t, "gps_glitch", s, reason=why)]
+                return self._failsafe(s, "gps_glitch", self.options.on_glitch, reason=why)
         if self.stale:
             self.stale = False
+            self.link_lost = False
             events.append(self._event(s.t, "telemetry_resumed", s))
         events += self._pilot(s)
         self.last, self.last_t = s, s.t
@@ -145,17 +154,31 @@ class Engine:
         return events
 
     def tick(self, now: float) -> list:
-        """Called on a timer: telemetry older than ``stale_s`` is an event (once)."""
-        if self.last_t is not None and not self.stale and now - self.last_t > self.options.stale_s:
+        """Called on a timer: telemetry older than ``stale_s`` is an event, and older than
+        ``link_lost_s`` the link is lost (each once, until telemetry resumes)."""
+        if self.last_t is None:
+            return []
+        age = now - self.last_t
+        if not self.stale and age > self.options.stale_s:
             self.stale = True
-            return [
-                {
-                    "time": round(now, 3),
-                    "event": "telemetry_stale",
-                    "age_s": round(now - self.last_t, 2),
-                }
-            ]
+            return self._failsafe(
+                self.last, "telemetry_stale", self.options.on_stale, t=now, age_s=round(age, 2)
+            )
+        if self.stale and not self.link_lost and age > self.options.link_lost_s:
+            self.link_lost = True
+            return self._failsafe(
+                self.last, "link_lost", self.options.on_link_lost, t=now, age_s=round(age, 2)
+            )
         return []
+
+    def _failsafe(self, s, kind, action, t=None, **extra):
+        t = s.t if t is None else t
+        events = [self._event(t, kind, s, **extra)]
+        if self.options.enforce and action != "none" and t >= self.backoff_until:
+            self.action_t = t
+            self.expect_mode_change = True
+            events.append(self._event(t, "action", s, action=action, reason=kind))
+        return events
 
     # -- decisions ------------------------------------------------------------------
     def _pilot(self, s):
@@ -237,6 +260,6 @@ def alert_text(event) -> str | None:
     if kind == "traffic_conflict":
         who = event.get("callsign") or event["aircraft"]
         return f"AF TRAFFIC {who} CPA {event['t_cpa_s']:.0f}s {event['separation_m']:.0f}m"[:50]
-    if kind in ("gps_glitch", "telemetry_stale", "action", "action_withheld"):
+    if kind in ("gps_glitch", "telemetry_stale", "link_lost", "action", "action_withheld"):
         return f"AF {kind} {event.get('action', '')}".strip()[:50]
     return None
