@@ -11,7 +11,7 @@ import sys
 from rich.console import Console
 from rich.table import Table
 
-from bench import build_bench, compile_bench, monitor_bench, upload_bench
+from bench import build_bench, compile_bench, monitor_bench, route_bench, upload_bench
 
 
 def main(argv=None) -> int:
@@ -24,7 +24,7 @@ def main(argv=None) -> int:
         help="sites timed against alphashape.optimizealpha (it is slow)",
     )
     p.add_argument(
-        "--only", choices=["build", "compile", "upload", "monitor"], help="run one group"
+        "--only", choices=["build", "compile", "upload", "monitor", "route"], help="run one group"
     )
     args = p.parse_args(argv)
     console = Console(width=150)
@@ -37,6 +37,8 @@ def main(argv=None) -> int:
         rows += upload_bench.run(build_bench.Row)
     if args.only in (None, "monitor"):
         rows += monitor_bench.run(args.osm, build_bench.Row)
+    if args.only in (None, "route"):
+        rows += route_bench.run(args.osm, build_bench.Row)
     table = Table(title="AlphaFence benchmarks (this machine, one run)")
     for col in ("benchmark", "result", "target", "peer", "ratio", "ok"):
         table.add_column(col, justify="left" if col in ("benchmark", "peer") else "right")

@@ -8,7 +8,19 @@ import sys
 from kit import __version__
 from kit.errors import InputError
 
-VERBS = ("build", "compare", "compile", "upload", "download", "monitor", "bundle", "demo", "sitl")
+VERBS = (
+    "build",
+    "compare",
+    "compile",
+    "upload",
+    "download",
+    "monitor",
+    "bundle",
+    "demo",
+    "sitl",
+    "route",
+    "check-mission",
+)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -21,7 +33,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"alphafence {__version__}")
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     for verb in VERBS:
-        importlib.import_module(f"kit.cli.{verb}").register(sub)
+        importlib.import_module(f"kit.cli.{verb.replace('-', '_')}").register(sub)
     return p
 
 
