@@ -11,7 +11,14 @@ import sys
 from rich.console import Console
 from rich.table import Table
 
-from bench import build_bench, compile_bench, monitor_bench, route_bench, upload_bench
+from bench import (
+    build_bench,
+    compile_bench,
+    monitor_bench,
+    monitor_cpu_bench,
+    route_bench,
+    upload_bench,
+)
 
 
 def main(argv=None) -> int:
@@ -37,6 +44,7 @@ def main(argv=None) -> int:
         rows += upload_bench.run(build_bench.Row)
     if args.only in (None, "monitor"):
         rows += monitor_bench.run(args.osm, build_bench.Row)
+        rows += monitor_cpu_bench.run(args.osm, build_bench.Row)
     if args.only in (None, "route"):
         rows += route_bench.run(args.osm, build_bench.Row)
     table = Table(title="AlphaFence benchmarks (this machine, one run)")
