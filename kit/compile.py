@@ -206,30 +206,12 @@ def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
 
 
 def operating_area_from_plan(path):
-    """Positions of a QGroundControl plan's mission items and home, as (lon, lat)."""
-    from kit.readers import read_json
+    """The operating area of a mission (.plan or waypoint file): the convex hull of the
+    positions it flies through, home included; and its first position."""
+    from kit.route.mission import read_mission
 
-    doc = read_json(path)
-    mission = doc.get("mission") if isinstance(doc, dict) else None
-    if not isinstance(mission, dict):
-        raise InputError(path, "no mission section (not a QGroundControl plan?)")
-    pts = []
-    home = mission.get("plannedHomePosition")
-    if isinstance(home, list) and len(home) >= 2:
-        pts.append((home[1], home[0]))
-    for item in mission.get("items", []):
-        params = item.get("params") if isinstance(item, dict) else None
-        if (
-            isinstance(params, list)
-            and len(params) >= 6
-            and all(isinstance(v, (int, float)) for v in params[4:6])
-        ):
-            lat, lon = params[4], params[5]
-            if lat or lon:
-                pts.append((lon, lat))
-    if not pts:
-        raise InputError(path, "the plan has no positions to define an operating area")
-    return shapely.MultiPoint(pts).convex_hull, (pts[0] if home else None)
+    pts = [(w.lon, w.lat) for w in read_mission(path, min_positions=1)]
+    return shapely.MultiPoint(pts).convex_hull, pts[0]
 
 
 def compile_fences(

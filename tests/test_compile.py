@@ -1,6 +1,7 @@
 """The fence compiler: onboard fences always contain the keep-out fences they stand for,
 fit the vehicle's storage, and pass ArduPilot's own validation rules."""
 
+import json
 import math
 
 import numpy as np
@@ -221,7 +222,7 @@ def test_compile_rejects_a_plan_without_positions(tmp_path):
 
     p = tmp_path / "empty.plan"
     p.write_text('{"fileType": "Plan", "mission": {"items": []}}')
-    with pytest.raises(InputError, match="no positions"):
+    with pytest.raises(InputError, match="no positions to use"):
         operating_area_from_plan(p)
 
 
@@ -248,3 +249,20 @@ def test_upload_dry_run_and_missing_area(tmp_path, capsys):
     assert "nothing sent" in capsys.readouterr().out
     assert main(["upload", str(fences), "--dry-run", "--allow-unsigned"]) == 2
     assert "needs an operating area" in capsys.readouterr().err
+
+
+def test_operating_area_from_a_mission(tmp_path):
+    from pathlib import Path
+
+    from kit.cli import main
+    from kit.cli.demo import scene_path
+    from kit.compile import operating_area_from_plan
+
+    mission = Path(__file__).resolve().parents[1] / "missions" / "demo-route.plan"
+    area, first = operating_area_from_plan(mission)
+    assert area.geom_type == "Polygon" and area.covers(shapely.Point(first))
+    fences = tmp_path / "f.geojson"
+    assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
+    out = tmp_path / "onboard.plan"
+    assert main(["compile", str(fences), "--area", str(mission), "--distance", "200", "-o", str(out)]) == 0
+    assert json.loads(out.read_text())["geoFence"]["polygons"]

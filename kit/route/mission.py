@@ -120,7 +120,7 @@ class Waypoint:
     lat: float
 
 
-def read_mission(path):
+def read_mission(path, min_positions=2):
     """The positions a mission flies through, in order (home first; RTL returns home)."""
     try:
         with open(path, encoding="utf-8") as fh:
@@ -129,9 +129,11 @@ def read_mission(path):
         raise InputError(path, "no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read ({exc})") from None
-    if head.startswith("QGC WPL"):
-        return _read_wpl(path)
-    return _read_plan(path)
+    out = _read_wpl(path) if head.startswith("QGC WPL") else _read_plan(path)
+    if len(out) < min_positions:
+        what = "no legs to check" if min_positions > 1 else "no positions to use"
+        raise InputError(path, f"the mission has fewer than {min_positions} position(s): {what}")
+    return out
 
 
 def _position(path, where, lat, lon):
@@ -201,8 +203,6 @@ def _read_plan(path):
                 home_wp = out[-1]
 
     visit(mission.get("items", []), "")
-    if len(out) < 2:
-        raise InputError(path, "the mission has fewer than two positions: no legs to check")
     return out
 
 
@@ -233,8 +233,6 @@ def _read_wpl(path):
         out.append(Waypoint(label, *_position(path, where, lat, lon)))
         if home is None:
             home = out[-1]
-    if len(out) < 2:
-        raise InputError(path, "the mission has fewer than two positions: no legs to check")
     return out
 
 
