@@ -51,6 +51,13 @@ class FenceSet:
         self.alt_max = np.array(
             [math.inf if r.alt_max_m is None else r.alt_max_m for r in self.records]
         )
+        self.applicability = [
+            ((r.properties or {}).get("zone") or {}).get("applicability") for r in self.records
+        ]
+        from kit.monitor.applicability import timed
+
+        self.timed = [k for k, a in enumerate(self.applicability) if timed(a)]
+        self.active = np.ones(len(self.records), dtype=bool)
         self._build(geoms)
 
     @classmethod
@@ -65,16 +72,30 @@ class FenceSet:
         self.boundary = shapely.boundary(self.local)
         self.tree = shapely.STRtree(self.local)
         self._by_kind = {}
+        timed = np.zeros(len(self.records), dtype=bool)
+        timed[self.timed] = True
         for code in (KEEP_OUT, WARNING, KEEP_IN):
-            idx = np.flatnonzero(self.kind == code)
+            # the nearest-fence tree holds the fences always in force; time-windowed ones
+            # (few) are measured directly while they are active
+            idx = np.flatnonzero((self.kind == code) & ~timed)
             self._by_kind[code] = (idx, shapely.STRtree(self.local[idx]) if idx.size else None)
+        self._timed_keep_out = [k for k in self.timed if self.kind[k] == KEEP_OUT]
+        self._keep_in = [int(k) for k in np.flatnonzero(self.kind == KEEP_IN)]
 
     def recentre(self, lon, lat):
         self.frame = LocalFrame(lon, lat)
         self._build(np.array([r.geometry for r in self.records], dtype=object))
 
     def _in_alt(self, idx, alt):
-        return (self.alt_min[idx] <= alt) & (alt <= self.alt_max[idx])
+        return (self.alt_min[idx] <= alt) & (alt <= self.alt_max[idx]) & self.active[idx]
+
+    def set_time(self, when):
+        """Switch time-windowed (ED-269 applicability) fences on or off for ``when`` (an aware
+        datetime). Inactive fences are neither inside nor nearest. Call it every few seconds."""
+        from kit.monitor.applicability import is_active
+
+        for k in self.timed:
+            self.active[k] = is_active(self.applicability[k], when)
 
     def check(self, x, y, alt=0.0, vx=0.0, vy=0.0, lookahead_m=0.0) -> Check:
         """Position (metres in ``self.frame``), altitude and horizontal velocity.
@@ -89,10 +110,7 @@ class FenceSet:
             inside_out = inside[kinds == KEEP_OUT].tolist()
             inside_warn = inside[kinds == WARNING].tolist()
             inside_in = set(inside[kinds == KEEP_IN].tolist())
-        keep_in_idx, _ = self._by_kind[KEEP_IN]
-        outside_in = (
-            [int(k) for k in keep_in_idx if int(k) not in inside_in] if keep_in_idx.size else []
-        )
+        outside_in = [k for k in self._keep_in if self.active[k] and k not in inside_in]
         nearest = None
         ahead = None
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
@@ -101,18 +119,28 @@ class FenceSet:
             if j.size:
                 k = int(ko_idx[j[0]])
                 nearest = Hit(k, float(d[0]), float(d[0]) == 0.0)
-            speed = math.hypot(vx, vy)
-            # a fence can only lie ahead within the look-ahead if the nearest one does
-            if nearest is not None and 0 < nearest.distance_m <= lookahead_m and speed > 0.05:
-                ahead = self._ahead(p, x, y, vx / speed, vy / speed, lookahead_m, inside_out)
+        for k in self._timed_keep_out:
+            if self.active[k]:
+                d = float(shapely.distance(p, self.local[k]))
+                if nearest is None or d < nearest.distance_m:
+                    nearest = Hit(k, d, d == 0.0)
+        speed = math.hypot(vx, vy)
+        # a fence can only lie ahead within the look-ahead if the nearest one does
+        if nearest is not None and 0 < nearest.distance_m <= lookahead_m and speed > 0.05:
+            ahead = self._ahead(p, x, y, vx / speed, vy / speed, lookahead_m, inside_out)
         return Check(inside_out, inside_warn, outside_in, nearest, ahead)
 
     def _ahead(self, p, x, y, ux, uy, lookahead_m, skip):
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
         ray = shapely.LineString([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
         best = None
-        for j in ko_tree.query(ray, predicate="intersects"):
-            k = int(ko_idx[j])
+        cand = (
+            [int(ko_idx[j]) for j in ko_tree.query(ray, predicate="intersects")] if ko_tree else []
+        )
+        cand += [
+            k for k in self._timed_keep_out if self.active[k] and ray.intersects(self.local[k])
+        ]
+        for k in cand:
             if k in skip:
                 continue
             along = float(shapely.distance(p, shapely.intersection(ray, self.local[k])))

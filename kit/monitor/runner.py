@@ -12,6 +12,7 @@ import contextlib
 import json
 import math
 import time
+from datetime import datetime, timezone
 
 from kit.monitor.engine import Engine, Sample, alert_text
 
@@ -95,6 +96,7 @@ class Monitor:
         self.new_position = asyncio.Event()
         self.tasks = []
         self.pending = set()
+        self._clock_t = -math.inf
 
     async def run(self, stop: asyncio.Event):
         tel = self.vehicle.telemetry
@@ -119,6 +121,9 @@ class Monitor:
                     if sample is not None:
                         events += self.engine.step(sample)
                 events += self.engine.tick(time.monotonic())
+                if time.monotonic() - self._clock_t > 1.0:  # ED-269 time windows
+                    self._clock_t = time.monotonic()
+                    self.engine.fences.set_time(datetime.now(timezone.utc))
                 for e in events:
                     self._handle(e)
         finally:

@@ -1,0 +1,72 @@
+"""ED-269 applicability: when a zone is in force (permanent, date ranges, weekly schedules)."""
+
+from __future__ import annotations
+
+from datetime import datetime, time, timezone
+
+DAYS = ("MON", "TUE", "WED", "THU", "FRI", "SAT", "SUN")
+
+
+def _dt(text):
+    if not isinstance(text, str) or not text:
+        return None
+    try:
+        value = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    return value if value.tzinfo else value.replace(tzinfo=timezone.utc)
+
+
+def _clock(text):
+    if not isinstance(text, str):
+        return None
+    try:
+        return time.fromisoformat(text.replace("Z", ""))
+    except ValueError:
+        return None
+
+
+def _in_schedule(entry, when):
+    days = entry.get("day") or []
+    if isinstance(days, str):
+        days = [days]
+    if days and "ANY" not in days and DAYS[when.weekday()] not in days:
+        return False
+    start, end = _clock(entry.get("startTime")), _clock(entry.get("endTime"))
+    now = when.time().replace(tzinfo=None)
+    if start and end:
+        return start <= now <= end if start <= end else (now >= start or now <= end)
+    return True
+
+
+def is_active(applicability, when: datetime) -> bool:
+    """Is a zone in force at ``when`` (aware datetime)? No or unreadable applicability: always
+    (a restriction we cannot read is a restriction)."""
+    if not applicability:
+        return True
+    if isinstance(applicability, dict):
+        applicability = [applicability]
+    for entry in applicability:
+        if not isinstance(entry, dict):
+            return True
+        if str(entry.get("permanent", "")).upper() == "YES":
+            return True
+        start, end = _dt(entry.get("startDateTime")), _dt(entry.get("endDateTime"))
+        if start and when < start or end and when > end:
+            continue
+        schedule = entry.get("schedule")
+        if not schedule:
+            return True
+        if any(_in_schedule(s, when) for s in schedule if isinstance(s, dict)):
+            return True
+    return False
+
+
+def timed(applicability) -> bool:
+    """Does the zone switch on and off at all (else it is always in force)?"""
+    if not applicability:
+        return False
+    entries = applicability if isinstance(applicability, list) else [applicability]
+    return not any(
+        isinstance(e, dict) and str(e.get("permanent", "")).upper() == "YES" for e in entries
+    )
