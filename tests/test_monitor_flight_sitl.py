@@ -261,6 +261,7 @@ class _Flight:
         self.log = FlightLog(self.frame)
         self.enforce = enforce
         self.monitor_log = None
+        self.trace = []  # every telemetry sample the monitor saw, for the replay check
         self.t_goto = None
 
     async def run(self, body):
@@ -295,6 +296,7 @@ class _Flight:
                     _monitor_fences(frame),
                     _options(self.enforce, self.sitl.speedup),
                     self.monitor_log,
+                    record=self.trace,
                 )
                 monitor_task = asyncio.create_task(monitor.run(stop))
 
@@ -400,6 +402,7 @@ async def test_monitor_warns_well_before_the_onboard_fence_breach(sitl):
         assert lead_flight >= MIN_LEAD_S, lines[-1]
         assert lead_distance >= MIN_LEAD_S, lines[-1]
     assert imminent["time"] >= warning["time"]
+    _replay_matches(flight, events)
     print(
         f"\nmonitor alert lead before ArduPilot's breach (effective speedup {speedup:.2f}, "
         f"{ground:.1f} m/s, ArduPilot breach at y={y_ap:.1f} m): "
@@ -482,3 +485,23 @@ async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(sitl):
         f"y={final[2]:.1f} m, no breach for {results['t_end'] - results['t_stop']:.1f} s wall "
         f"after stopping | monitor: {_brief(events)} | {'; '.join(s for _, s in log.texts)}"
     )
+
+
+def _replay_matches(flight, live_events):
+    """Replaying the recorded telemetry through a fresh engine gives the same level changes
+    (the engine is deterministic); ALPHAFENCE_RECORD_TRACE=path keeps the trace as JSON lines."""
+    import dataclasses
+    import os
+
+    from kit.monitor.engine import Engine
+
+    assert len(flight.trace) >= 50, len(flight.trace)
+    engine = Engine(_monitor_fences(flight.frame), _options(False, flight.sitl.speedup))
+    replayed = [e for s in flight.trace for e in engine.step(s) if e["event"] == "level"]
+    live = [e for e in live_events if e["event"] == "level"]
+    assert [(e["time"], e["level"]) for e in replayed] == [(e["time"], e["level"]) for e in live]
+    path = os.environ.get("ALPHAFENCE_RECORD_TRACE")
+    if path:
+        with open(path, "w", encoding="utf-8") as fh:
+            for s in flight.trace:
+                fh.write(json.dumps(dataclasses.asdict(s)) + "\n")

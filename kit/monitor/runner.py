@@ -87,8 +87,9 @@ def _append(path, lines):
 
 
 class Monitor:
-    def __init__(self, vehicle, fences, options, log: EventLog, rate_hz: float = 10.0):
+    def __init__(self, vehicle, fences, options, log: EventLog, rate_hz: float = 10.0, record=None):
         self.vehicle = vehicle
+        self.record = record  # a list that receives every telemetry sample (for replay tests)
         self.engine = Engine(fences, options)
         self.log = log
         self.rate_hz = rate_hz
@@ -119,6 +120,8 @@ class Monitor:
                     self.new_position.clear()
                     sample = self._sample()
                     if sample is not None:
+                        if self.record is not None:
+                            self.record.append(sample)
                         events += self.engine.step(sample)
                 events += self.engine.tick(time.monotonic())
                 if time.monotonic() - self._clock_t > 1.0:  # ED-269 time windows

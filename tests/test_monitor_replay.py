@@ -1,0 +1,69 @@
+"""Replay of a recorded telemetry trace: ArduPilot SITL (egham, speedup 5) flying north at
+10 m/s into a 100 m keep-out square whose near edge is 150 m north of home, recorded by the
+monitor itself (tests/test_monitor_flight_sitl.py with ALPHAFENCE_RECORD_TRACE). Times are
+wall seconds of telemetry arrival; one wall second is five seconds of flight."""
+
+import json
+from pathlib import Path
+
+import shapely
+
+from kit.frame import LocalFrame
+from kit.monitor.engine import Engine, MonitorOptions, Sample
+from kit.monitor.fenceset import FenceSet
+from kit.readers.fences import FenceRecord
+
+TRACE = Path(__file__).parent / "data" / "trace-egham-fence-x5.jsonl"
+SPEEDUP = 5.0
+FRAME = LocalFrame(-0.55, 51.43)  # the egham home
+
+
+def fences():
+    square = shapely.box(-50, 150, 50, 250)
+    return FenceSet(
+        [
+            FenceRecord("test/square", "keep_out", FRAME.geom_to_wgs84(square)),
+            FenceRecord("test/square-warning", "warning", FRAME.geom_to_wgs84(square.buffer(30.0))),
+        ]
+    )
+
+
+def options(**kw):
+    o = MonitorOptions(**kw)  # wall-clock durations scaled to the recording's speedup
+    o.hold_s /= SPEEDUP
+    o.backoff_s /= SPEEDUP
+    o.stale_s /= SPEEDUP
+    o.max_speed_mps *= SPEEDUP
+    return o
+
+
+def samples():
+    return [Sample(**json.loads(line)) for line in TRACE.read_text().splitlines()]
+
+
+def north(s):
+    return float(FRAME.to_local(s.lon, s.lat)[1])
+
+
+def test_recorded_flight_warns_and_predicts_before_the_edge():
+    trace = samples()
+    eng = Engine(fences(), options())
+    levels = {}
+    for s in trace:
+        for e in eng.step(s):
+            if e["event"] == "level":
+                levels.setdefault(e["level"], s)
+    crossing = next(s for s in trace if north(s) >= 150.0)  # where the vehicle reached the fence
+    assert levels["BREACH"].t >= crossing.t - 0.05
+    for level, min_lead_s in (("WARNING", 10.0), ("IMMINENT", 3.0)):
+        lead_flight = (crossing.t - levels[level].t) * SPEEDUP
+        assert lead_flight >= min_lead_s, (level, lead_flight)
+    assert not [
+        e for s in trace for e in Engine(fences(), options()).step(s) if e["event"] == "gps_glitch"
+    ]
+
+
+def test_recorded_flight_with_enforce_commands_the_brake_first():
+    eng = Engine(fences(), options(enforce=True))
+    actions = [e for s in samples() for e in eng.step(s) if e["event"] == "action"]
+    assert actions and actions[0]["action"] == "brake"
