@@ -146,3 +146,15 @@ def test_failsafe_events_take_their_configured_actions(fences):
     quiet = Engine(fences, MonitorOptions(on_glitch="brake", on_link_lost="land"))
     quiet.step(Sample(0.0, 51.43, -0.55, 20.0))
     assert [e["event"] for e in quiet.step(Sample(0.1, 0.0, 0.0, 20.0))] == ["gps_glitch"]
+
+
+def test_losing_the_3d_fix_is_a_glitch_event_once(fences):
+    eng = Engine(fences, MonitorOptions(enforce=True, on_glitch="land"))
+    assert eng.step(Sample(0.0, 51.43, -0.55, 20.0, gps_fix=3)) == []
+    degraded = eng.step(Sample(0.1, 51.43, -0.55, 20.0, gps_fix=1))
+    assert [e["event"] for e in degraded] == ["gps_glitch", "action"] and "fix type 1" in degraded[
+        0
+    ]["reason"]
+    assert eng.step(Sample(0.2, 51.43, -0.55, 20.0, gps_fix=0)) == []  # once
+    assert eng.step(Sample(0.3, 51.43, -0.55, 20.0, gps_fix=4)) == []  # back to normal
+    assert eng.checks == 2

@@ -82,3 +82,28 @@ def test_engine_turns_adsb_reports_into_conflict_events():
     ] == []
     assert parse_adsb(json.dumps({**msg, "lat": 0, "lon": 0})) is None
     assert parse_adsb("not json") is None
+
+
+def test_other_mavlink_systems_become_traffic():
+    import json
+
+    from kit.monitor.runner import parse_global_position
+
+    r = parse_global_position(
+        7,
+        json.dumps(
+            {
+                "lat": 514300000,
+                "lon": -5500000,
+                "alt": 120000,
+                "relative_alt": 0,
+                "vx": 500,
+                "vy": -300,
+                "vz": -100,
+                "hdg": 0,
+            }
+        ),
+    )
+    assert r["key"] == "mavlink/7" and r["callsign"] == "MAV7"
+    assert (r["vn"], r["ve"], r["vu"]) == (5.0, -3.0, 1.0) and r["alt_amsl_m"] == 120.0
+    assert parse_global_position(7, json.dumps({"lat": 0, "lon": 0, "alt": 0})) is None

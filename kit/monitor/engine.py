@@ -32,6 +32,7 @@ class Sample:
     armed: bool | None = None
     alt_amsl_m: float | None = None  # for other aircraft, whose ADS-B altitudes are AMSL
     vd: float = 0.0  # m/s down
+    gps_fix: int | None = None  # MAVLink GPS_FIX_TYPE (3 = 3D); None if unknown
 
 
 @dataclass
@@ -69,10 +70,22 @@ class Engine:
         self.traffic = Traffic(self.options.traffic)
         self.conflicts: set = set()
         self.link_lost = False
+        self.gps_degraded = False
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
         events = []
+        if s.gps_fix is not None and s.gps_fix < 3:
+            if not self.gps_degraded:
+                self.gps_degraded = True
+                return self._failsafe(
+                    s,
+                    "gps_glitch",
+                    self.options.on_glitch,
+                    reason=f"GPS fix type {s.gps_fix} (no 3D fix)",
+                )
+            return []
+        self.gps_degraded = False
         if not _plausible(s):
             return self._failsafe(
                 s, "gps_glitch", self.options.on_glitch, reason="position missing, NaN or at 0,0"

@@ -81,6 +81,28 @@ def parse_adsb(fields_json):
     }
 
 
+def parse_global_position(system_id, fields_json):
+    """Another MAVLink system's GLOBAL_POSITION_INT -> Engine.aircraft kwargs, or None."""
+    try:
+        f = json.loads(fields_json)
+        lat, lon = f["lat"] / 1e7, f["lon"] / 1e7
+        out = {
+            "key": f"mavlink/{int(system_id)}",
+            "lat": lat,
+            "lon": lon,
+            "alt_amsl_m": f["alt"] / 1000.0,
+            "ve": f.get("vy", 0) / 100.0,
+            "vn": f.get("vx", 0) / 100.0,
+            "vu": -f.get("vz", 0) / 100.0,
+            "callsign": f"MAV{int(system_id)}",
+        }
+    except (ValueError, KeyError, TypeError):
+        return None
+    if not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
+        return None
+    return out
+
+
 def _append(path, lines):
     with open(path, "a", encoding="utf-8") as fh:
         fh.write("\n".join(lines) + "\n")
@@ -93,7 +115,7 @@ class Monitor:
         self.engine = Engine(fences, options)
         self.log = log
         self.rate_hz = rate_hz
-        self.latest = {"position": None, "velocity": None, "mode": None, "armed": None}
+        self.latest = {"position": None, "velocity": None, "mode": None, "armed": None, "gps": None}
         self.new_position = asyncio.Event()
         self.tasks = []
         self.pending = set()
@@ -109,7 +131,9 @@ class Monitor:
             asyncio.create_task(self._follow(tel.subscribe_velocity_ned(), "velocity")),
             asyncio.create_task(self._follow(tel.subscribe_flight_mode(), "mode")),
             asyncio.create_task(self._follow(tel.subscribe_armed(), "armed")),
+            asyncio.create_task(self._follow(tel.subscribe_gps_info(), "gps")),
             asyncio.create_task(self._adsb()),
+            asyncio.create_task(self._other_systems()),
         ]
         try:
             while not stop.is_set():
@@ -159,6 +183,40 @@ class Monitor:
                 {"time": round(time.monotonic(), 3), "event": "adsb_unavailable", "error": str(exc)}
             )
 
+    async def _other_systems(self):
+        """Other MAVLink systems on the link (other drones, a chase aircraft) -> traffic."""
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+
+        own = None
+        try:
+            own = (
+                self.vehicle.system.get_system_id()
+                if hasattr(self.vehicle.system, "get_system_id")
+                else 1
+            )
+        except Exception:
+            own = 1
+        try:
+            stream = MavlinkDirectAsync(self.vehicle.system).subscribe_message(
+                "GLOBAL_POSITION_INT"
+            )
+            async for message in stream:
+                if message.system_id in (own, 0):
+                    continue
+                report = parse_global_position(message.system_id, message.fields_json)
+                if report is not None:
+                    self.engine.aircraft(t=time.monotonic(), **report)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            self.log.put(
+                {
+                    "time": round(time.monotonic(), 3),
+                    "event": "traffic_link_unavailable",
+                    "error": str(exc),
+                }
+            )
+
     def _sample(self):
         pos = self.latest["position"]
         if pos is None:
@@ -178,6 +236,7 @@ class Monitor:
             mode[1].name if mode else None,
             armed[1] if armed else None,
             alt_amsl_m=p.absolute_altitude_m,
+            gps_fix=int(self.latest["gps"][1].fix_type) if self.latest["gps"] else None,
             vd=vel[1].down_m_s if vel else 0.0,
         )
 
