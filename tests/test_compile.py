@@ -264,5 +264,8 @@ def test_operating_area_from_a_mission(tmp_path):
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
     out = tmp_path / "onboard.plan"
-    assert main(["compile", str(fences), "--area", str(mission), "--distance", "200", "-o", str(out)]) == 0
+    assert (
+        main(["compile", str(fences), "--area", str(mission), "--distance", "200", "-o", str(out)])
+        == 0
+    )
     assert json.loads(out.read_text())["geoFence"]["polygons"]

@@ -39,6 +39,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+from tests.sitl_flight import ask_fence_status
 
 pytestmark = pytest.mark.sitl
 
@@ -56,8 +57,6 @@ WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
 ARM_TIMEOUT = 60.0  # "Need Position Estimate" and friends: keep retrying this long
 MODE_SWITCH_MAX = 3.0  # wall seconds between the breach report and RTL (measured: ~0)
 
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-FENCE_STATUS_ID = 162
 FENCE_BREACH_BOUNDARY = 3
 
 
@@ -151,27 +150,6 @@ def _exclusion_square(frame: LocalFrame):
     ]
 
 
-async def _ask_fence_status(direct, hz: float):
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
-    fields = {
-        "target_system": 1,
-        "target_component": 1,
-        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
-        "confirmation": 0,
-        "param1": FENCE_STATUS_ID,
-        "param2": 1e6 / hz,
-        "param3": 0,
-        "param4": 0,
-        "param5": 0,
-        "param6": 0,
-        "param7": 0,
-    }
-    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
-    result = json.loads(ack.fields_json or "{}").get("result")
-    assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
-
-
 @pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
 async def test_uploaded_exclusion_is_enforced_with_rtl(sitl):
     log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
@@ -202,7 +180,7 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
 
             await vehicle.telemetry.set_rate_position(10.0)
             await vehicle.telemetry.set_rate_velocity_ned(10.0)
-            await _ask_fence_status(direct, 2.0)
+            await ask_fence_status(direct, 2.0)
             await _until("a FENCE_STATUS", lambda: log.fence, 15, log, vehicle)
             await _until("a position", lambda: log.positions, 15, log, vehicle)
             assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"

@@ -49,6 +49,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+from tests.sitl_flight import ask_fence_status
 
 pytestmark = pytest.mark.sitl
 
@@ -69,8 +70,6 @@ STOPPED_MPS = 0.3
 WATCH_AFTER_STOP = 6.0  # wall seconds (30 s of flight at speedup 5) of no breach after stopping
 
 COPTER_MODES = {4: "GUIDED", 5: "LOITER", 6: "RTL", 17: "BRAKE"}  # ArduCopter custom_mode
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-FENCE_STATUS_ID = 162
 
 
 @dataclass
@@ -207,27 +206,6 @@ def _monitor_fences(frame: LocalFrame) -> FenceSet:
     )
 
 
-async def _ask_fence_status(direct, hz: float):
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
-    fields = {
-        "target_system": 1,
-        "target_component": 1,
-        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
-        "confirmation": 0,
-        "param1": FENCE_STATUS_ID,
-        "param2": 1e6 / hz,
-        "param3": 0,
-        "param4": 0,
-        "param5": 0,
-        "param6": 0,
-        "param7": 0,
-    }
-    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
-    result = json.loads(ack.fields_json or "{}").get("result")
-    assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
-
-
 def _brief(events) -> str:
     return ", ".join(
         f"{e['event']} {e.get('level') or e.get('action') or e.get('mode') or ''}@{e['time']:.2f}"
@@ -286,7 +264,7 @@ class _Flight:
 
                 await vehicle.telemetry.set_rate_position(10.0)
                 await vehicle.telemetry.set_rate_velocity_ned(10.0)
-                await _ask_fence_status(direct, 2.0)
+                await ask_fence_status(direct, 2.0)
                 await _until("a FENCE_STATUS", lambda: log.fence, 15, log)
                 await _until("a position", lambda: log.positions, 15, log)
                 assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"

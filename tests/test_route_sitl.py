@@ -50,6 +50,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+from tests.sitl_flight import ask_fence_status
 
 pytestmark = pytest.mark.sitl
 
@@ -68,8 +69,6 @@ TRACKING = 5.0  # metres the copter may stray from the planned legs towards the 
 WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
 ARM_TIMEOUT = 60.0
 
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-FENCE_STATUS_ID = 162
 FRAME_GLOBAL = 0
 MISSION_TYPE_MISSION = 0
 
@@ -218,27 +217,6 @@ def to_mission_raw(items, home):
     return raw
 
 
-async def _ask_fence_status(direct, hz: float):
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
-    fields = {
-        "target_system": 1,
-        "target_component": 1,
-        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
-        "confirmation": 0,
-        "param1": FENCE_STATUS_ID,
-        "param2": 1e6 / hz,
-        "param3": 0,
-        "param4": 0,
-        "param5": 0,
-        "param6": 0,
-        "param7": 0,
-    }
-    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
-    result = json.loads(ack.fields_json or "{}").get("result")
-    assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
-
-
 @pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
 async def test_routed_mission_flies_around_the_keep_out_without_a_breach(sitl):
     log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
@@ -297,7 +275,7 @@ async def _fly_the_route(sitl, log: FlightLog):
             print(f"\nitem 0 sent {raw[0]}\nitem 0 read back {got[0]}")
 
             await vehicle.telemetry.set_rate_position(10.0)
-            await _ask_fence_status(direct, 2.0)
+            await ask_fence_status(direct, 2.0)
             await _until("a FENCE_STATUS", lambda: log.fence, 15, log)
             await _until("a position", lambda: log.positions, 15, log)
             assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"

@@ -1,0 +1,29 @@
+"""Helpers shared by the SITL flight tests."""
+
+import json
+
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+FENCE_STATUS_ID = 162
+
+
+async def ask_fence_status(direct, hz: float):
+    """Ask the vehicle to stream FENCE_STATUS (MAVSDK's telemetry has none) through MAVSDK's
+    mavlink_direct plugin on the test's own connection."""
+    from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+    fields = {
+        "target_system": 1,
+        "target_component": 1,
+        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
+        "confirmation": 0,
+        "param1": FENCE_STATUS_ID,
+        "param2": 1e6 / hz,
+        "param3": 0,
+        "param4": 0,
+        "param5": 0,
+        "param6": 0,
+        "param7": 0,
+    }
+    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
+    result = json.loads(ack.fields_json or "{}").get("result")
+    assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
