@@ -394,3 +394,12 @@ def test_demo_scene_ships_with_the_package(rules):
         "power",
         "military",
     }
+
+
+def test_oversized_json_is_refused_before_reading(write_json, rules, monkeypatch):
+    path = write_json("big.geojson", QGIS_DOC)
+    monkeypatch.setenv("ALPHAFENCE_MAX_JSON_MB", "0.0001")  # about 100 bytes
+    with pytest.raises(InputError, match=r"more than the 0 MB limit .*ALPHAFENCE_MAX_JSON_MB"):
+        read_database([path], rules)
+    monkeypatch.delenv("ALPHAFENCE_MAX_JSON_MB")
+    assert read_database([path], rules).features

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from collections import Counter
 from pathlib import Path
 
@@ -15,7 +16,27 @@ from kit.readers.osm import read_osm
 OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
 
 
+MAX_JSON_MB_DEFAULT = 512  # JSON is parsed whole: refuse what would not fit, before reading it
+
+
+def max_json_bytes() -> int:
+    return int(float(os.environ.get("ALPHAFENCE_MAX_JSON_MB", MAX_JSON_MB_DEFAULT)) * 1024 * 1024)
+
+
 def read_json(path):
+    try:
+        size = os.path.getsize(path)
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror})") from None
+    limit = max_json_bytes()
+    if size > limit:
+        raise InputError(
+            path,
+            f"{size / 2**20:.0f} MB of JSON is more than the {limit / 2**20:.0f} MB limit "
+            "(set ALPHAFENCE_MAX_JSON_MB to allow more, or use .osm.pbf, which is streamed)",
+        )
     try:
         with open(path, encoding="utf-8") as fh:
             return json.load(fh)
