@@ -44,3 +44,6 @@ async def test_monitor_sees_a_vehicle_parked_in_a_keep_out_zone(sitl, tmp_path):
     # position checks run at the telemetry rate (>= 5 Hz over the last few seconds)
     assert monitor.engine.checks >= 10
     assert not [e for e in events if e["event"] in ("action", "alert_failed")]
+    # the vehicle's own GLOBAL_POSITION_INT is not traffic; there is no other aircraft here
+    assert not [e for e in events if e["event"].startswith("traffic")], events
+    assert monitor.engine.traffic.aircraft == {}

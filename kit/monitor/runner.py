@@ -187,15 +187,10 @@ class Monitor:
         """Other MAVLink systems on the link (other drones, a chase aircraft) -> traffic."""
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 
-        own = None
         try:
-            own = (
-                self.vehicle.system.get_system_id()
-                if hasattr(self.vehicle.system, "get_system_id")
-                else 1
-            )
+            own = int(await self.vehicle.system.get_system_id())
         except Exception:
-            own = 1
+            own = 1  # ArduPilot's default SYSID_THISMAV
         try:
             stream = MavlinkDirectAsync(self.vehicle.system).subscribe_message(
                 "GLOBAL_POSITION_INT"
