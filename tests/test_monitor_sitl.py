@@ -31,9 +31,8 @@ async def test_monitor_sees_a_vehicle_parked_in_a_keep_out_zone(sitl, tmp_path):
     )
     log = tmp_path / "events.jsonl"
     stop = asyncio.Event()
-    task = asyncio.create_task(
-        run_monitor(sitl.connection_url, fences, MonitorOptions(enforce=False), log, stop)
-    )
+    options = MonitorOptions(enforce=False, mavlink_traffic=True)
+    task = asyncio.create_task(run_monitor(sitl.connection_url, fences, options, log, stop))
     await asyncio.sleep(4.0)
     stop.set()
     monitor = await asyncio.wait_for(task, 10)

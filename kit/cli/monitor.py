@@ -42,6 +42,11 @@ def register(sub):
         "--reaction", type=float, default=1.5, metavar="S", help="reaction time (default 1.5)"
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
+    p.add_argument(
+        "--mavlink-traffic",
+        action="store_true",
+        help="also treat other MAVLink systems on the link as traffic (ADS-B always is)",
+    )
     for flag, what in (
         ("--on-glitch", "a GPS glitch"),
         ("--on-stale", "telemetry older than 1 s"),
@@ -70,6 +75,7 @@ def run(args) -> int:
         on_glitch=args.on_glitch,
         on_stale=args.on_stale,
         on_link_lost=args.on_link_lost,
+        mavlink_traffic=args.mavlink_traffic,
         braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
     )
     return asyncio.run(_run(args, fences, options))

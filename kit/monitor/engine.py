@@ -47,6 +47,7 @@ class MonitorOptions:
     stale_s: float = 1.0
     max_speed_mps: float = 60.0  # a position jump faster than this is a GPS glitch
     traffic: TrafficOptions = field(default_factory=TrafficOptions)
+    mavlink_traffic: bool = False  # other MAVLink systems' positions as traffic (ADS-B always)
     link_lost_s: float = 5.0  # no telemetry this long: the link is lost
     # what to command (with --enforce) on each failsafe event
     on_glitch: str = "none"

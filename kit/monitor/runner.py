@@ -133,8 +133,11 @@ class Monitor:
             asyncio.create_task(self._follow(tel.subscribe_armed(), "armed")),
             asyncio.create_task(self._follow(tel.subscribe_gps_info(), "gps")),
             asyncio.create_task(self._adsb()),
-            asyncio.create_task(self._other_systems()),
         ]
+        if self.engine.options.mavlink_traffic:
+            # every GLOBAL_POSITION_INT on the link, the vehicle's own at the telemetry rate
+            # included, crosses into Python: opt-in, for links that carry other aircraft
+            self.tasks.append(asyncio.create_task(self._other_systems()))
         try:
             while not stop.is_set():
                 with contextlib.suppress(asyncio.TimeoutError):
