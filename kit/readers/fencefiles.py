@@ -70,7 +70,9 @@ def read_plan_fence(path):
     return items
 
 
-def read_waypoints_fence(path):
+def wpl_rows(path):
+    """The rows of a QGC WPL waypoint file: (where, seq, command, param1, lat, lon), with
+    one-line errors for unreadable files, wrong field counts and non-numbers."""
     try:
         with open(path, encoding="utf-8") as fh:
             lines = fh.read().splitlines()
@@ -80,7 +82,6 @@ def read_waypoints_fence(path):
         raise InputError(path, f"cannot read ({exc})") from None
     if not lines or not lines[0].startswith("QGC WPL"):
         raise InputError(path, "not a QGC WPL waypoint file (first line must be 'QGC WPL 110')")
-    items = []
     for n, line in enumerate(lines[1:], start=2):
         if not line.strip():
             continue
@@ -89,10 +90,14 @@ def read_waypoints_fence(path):
         if len(f) != 12:
             raise InputError(path, f"expected 12 fields, got {len(f)}", where)
         try:
-            cmd = int(f[3])
-            p1, lat, lon = float(f[4]), float(f[8]), float(f[9])
+            yield where, int(f[0]), int(f[3]), float(f[4]), float(f[8]), float(f[9])
         except ValueError:
             raise InputError(path, "non-numeric field", where) from None
+
+
+def read_waypoints_fence(path):
+    items = []
+    for where, _seq, cmd, p1, lat, lon in wpl_rows(path):
         if cmd not in FENCE_COMMANDS:
             raise InputError(path, f"command {cmd} is not a fence item (5000-5004)", where)
         if not valid_lonlat(lon, lat):

@@ -207,22 +207,11 @@ def _read_plan(path):
 
 
 def _read_wpl(path):
-    with open(path, encoding="utf-8") as fh:
-        lines = fh.read().splitlines()
+    from kit.readers.fencefiles import wpl_rows
+
     out = []
     home = None
-    for n, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
-        where = f"line {n}"
-        f = line.split()
-        if len(f) != 12:
-            raise InputError(path, f"expected 12 fields, got {len(f)}", where)
-        try:
-            seq, cmd = int(f[0]), int(f[3])
-            lat, lon = float(f[8]), float(f[9])
-        except ValueError:
-            raise InputError(path, "non-numeric field", where) from None
+    for where, seq, cmd, _p1, lat, lon in wpl_rows(path):
         label = "home" if seq == 0 else f"seq {seq} ({COMMAND_NAMES.get(cmd, f'command {cmd}')})"
         if cmd == NAV_RETURN_TO_LAUNCH:
             if home is not None:
