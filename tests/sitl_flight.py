@@ -1,6 +1,10 @@
 """Helpers shared by the SITL flight tests."""
 
+import asyncio
 import json
+import time
+
+import pytest
 
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 FENCE_STATUS_ID = 162
@@ -27,3 +31,28 @@ async def ask_fence_status(direct, hz: float):
     ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
     result = json.loads(ack.fields_json or "{}").get("result")
     assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
+
+
+async def until(what, predicate, timeout, log, poll=0.05):
+    """Wait until ``predicate()`` is true, returning when; fail saying what the vehicle
+    reported meanwhile (``log.summary()``)."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            pytest.fail(f"{what}: not within {timeout:g} s | {log.summary()}")
+        await asyncio.sleep(poll)
+    return time.monotonic()
+
+
+async def retry(what, call, timeout):
+    """``await call()`` until it succeeds (ArduPilot refuses arming until its checks pass)."""
+    from mavsdk.plugins.action import ActionError
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            return await call()
+        except ActionError as exc:
+            if time.monotonic() > deadline:
+                pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
+            await asyncio.sleep(1.0)

@@ -39,7 +39,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status
+from tests.sitl_flight import ask_fence_status, retry, until
 
 pytestmark = pytest.mark.sitl
 
@@ -116,30 +116,6 @@ async def _watch(log: FlightLog, vehicle, direct):
     return [asyncio.create_task(c()) for c in (positions, speeds, modes, fence_status)]
 
 
-async def _until(what, predicate, timeout, log, vehicle, poll=0.05):
-    """Wait until ``predicate()`` is true; fail saying what the vehicle reported meanwhile."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"{what}: not within {timeout:g} s | {log.summary()}")
-        await asyncio.sleep(poll)
-    return time.monotonic()
-
-
-async def _retry(what, call, timeout):
-    """``await call()`` until it succeeds (ArduPilot refuses arming until its checks pass)."""
-    from mavsdk.plugins.action import ActionError
-
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            return await call()
-        except ActionError as exc:
-            if time.monotonic() > deadline:
-                pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
-            await asyncio.sleep(1.0)
-
-
 def _exclusion_square(frame: LocalFrame):
     xs = [-HALF_WIDTH, HALF_WIDTH, HALF_WIDTH, -HALF_WIDTH]
     ys = [NEAR_EDGE, NEAR_EDGE, FAR_EDGE, FAR_EDGE]
@@ -181,21 +157,20 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
             await vehicle.telemetry.set_rate_position(10.0)
             await vehicle.telemetry.set_rate_velocity_ned(10.0)
             await ask_fence_status(direct, 2.0)
-            await _until("a FENCE_STATUS", lambda: log.fence, 15, log, vehicle)
-            await _until("a position", lambda: log.positions, 15, log, vehicle)
+            await until("a FENCE_STATUS", lambda: log.fence, 15, log)
+            await until("a position", lambda: log.positions, 15, log)
             assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
 
             # -- arm and take off in GUIDED (MAVSDK shows GUIDED as OFFBOARD)
             await action.set_takeoff_altitude(ALTITUDE)
-            await _retry("arming", action.arm, ARM_TIMEOUT)
+            await retry("arming", action.arm, ARM_TIMEOUT)
             t_takeoff = time.monotonic()
-            await _retry("takeoff", action.takeoff, 15)
-            t_up = await _until(
+            await retry("takeoff", action.takeoff, 15)
+            t_up = await until(
                 "climb to 90% of the takeoff altitude",
                 lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
                 60,
                 log,
-                vehicle,
             )
             assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"
             assert not log.first_breach(), "breach before the vehicle was sent anywhere"
@@ -207,7 +182,7 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
             t_goto = time.monotonic()
 
             # (a) ArduPilot reports the breach, at the square's near edge
-            await _until("FENCE_STATUS breach", log.first_breach, 60, log, vehicle, poll=0.01)
+            await until("FENCE_STATUS breach", log.first_breach, 60, log, poll=0.01)
             t_breach, status = log.first_breach()
             assert status["breach_type"] == FENCE_BREACH_BOUNDARY, status
             assert status["breach_count"] >= 1, status
@@ -218,41 +193,37 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
             assert speed > 0.8 * SPEED, f"only {speed:.1f} m/s on the way in"
 
             # (b) ... and switches to the configured action, RTL, within a few seconds
-            await _until(
+            await until(
                 "RTL after the breach",
                 lambda: log.mode() == FlightMode.RETURN_TO_LAUNCH,
                 MODE_SWITCH_MAX,
                 log,
-                vehicle,
                 poll=0.01,
             )
             t_rtl = next(t for t, m in log.modes if m == FlightMode.RETURN_TO_LAUNCH)
             assert abs(t_rtl - t_breach) <= MODE_SWITCH_MAX
-            await _until(
+            await until(
                 "the breach STATUSTEXT",
                 lambda: any(
                     "fence breached" in text.lower() for t, text in vehicle.texts if t >= t_takeoff
                 ),
                 5,
                 log,
-                vehicle,
             )
 
             # the vehicle never got across the square (it overshoots the edge by about 20 m at
             # 10 m/s), and RTL brings it back out of it
-            t_out = await _until(
+            t_out = await until(
                 "back south of the square",
                 lambda: log.positions[-1][2] < NEAR_EDGE - 10,
                 30,
                 log,
-                vehicle,
             )
-            t_clear = await _until(
+            t_clear = await until(
                 "FENCE_STATUS breach cleared",
                 lambda: log.fence[-1][1]["breach_status"] == 0,
                 30,
                 log,
-                vehicle,
             )
             farthest = max(p[2] for p in log.positions)
             assert farthest < NEAR_EDGE + 40 < FAR_EDGE, f"flew {farthest:.0f} m north"

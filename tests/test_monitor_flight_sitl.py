@@ -32,6 +32,7 @@ reports no breach. Each test takes about 18 s wall, SITL start included.
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import statistics
 import time
@@ -49,8 +50,9 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status
+from tests.sitl_flight import ask_fence_status, retry, until
 
+_until = functools.partial(until, poll=0.02)  # finer timing for the lead measurements
 pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
@@ -140,28 +142,6 @@ async def _watch(log: FlightLog, vehicle, direct):
                 log.custom_modes.append((time.monotonic(), mode))
 
     return [asyncio.create_task(c()) for c in (positions, speeds, modes, fence_status, heartbeats)]
-
-
-async def _until(what, predicate, timeout, log, poll=0.02):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"{what}: not within {timeout:g} s | {log.summary()}")
-        await asyncio.sleep(poll)
-    return time.monotonic()
-
-
-async def _retry(what, call, timeout):
-    from mavsdk.plugins.action import ActionError
-
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            return await call()
-        except ActionError as exc:
-            if time.monotonic() > deadline:
-                pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
-            await asyncio.sleep(1.0)
 
 
 def _options(enforce: bool, speedup: float) -> MonitorOptions:
@@ -280,8 +260,8 @@ class _Flight:
 
                 action = vehicle.action
                 await action.set_takeoff_altitude(ALTITUDE)
-                await _retry("arming", action.arm, ARM_TIMEOUT)
-                await _retry("takeoff", action.takeoff, 15)
+                await retry("arming", action.arm, ARM_TIMEOUT)
+                await retry("takeoff", action.takeoff, 15)
                 await _until(
                     "climb to 90% of the takeoff altitude",
                     lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,

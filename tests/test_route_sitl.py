@@ -50,7 +50,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status
+from tests.sitl_flight import ask_fence_status, retry, until
 
 pytestmark = pytest.mark.sitl
 
@@ -129,28 +129,6 @@ async def _watch(log: FlightLog, vehicle, direct):
             log.progress.append((time.monotonic(), p.current, p.total))
 
     return [asyncio.create_task(c()) for c in (positions, modes, armed, fence_status, progress)]
-
-
-async def _until(what, predicate, timeout, log, poll=0.05):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f"{what}: not within {timeout:g} s | {log.summary()}")
-        await asyncio.sleep(poll)
-    return time.monotonic()
-
-
-async def _retry(what, call, timeout):
-    from mavsdk.plugins.action import ActionError
-
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            return await call()
-        except ActionError as exc:
-            if time.monotonic() > deadline:
-                pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
-            await asyncio.sleep(1.0)
 
 
 def _square_local():
@@ -276,28 +254,28 @@ async def _fly_the_route(sitl, log: FlightLog):
 
             await vehicle.telemetry.set_rate_position(10.0)
             await ask_fence_status(direct, 2.0)
-            await _until("a FENCE_STATUS", lambda: log.fence, 15, log)
-            await _until("a position", lambda: log.positions, 15, log)
+            await until("a FENCE_STATUS", lambda: log.fence, 15, log)
+            await until("a position", lambda: log.positions, 15, log)
             assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
 
             # -- arm, then AUTO: the mission's NAV_TAKEOFF takes off
-            await _retry("arming", action.arm, ARM_TIMEOUT)
+            await retry("arming", action.arm, ARM_TIMEOUT)
             t_start = time.monotonic()
             await vehicle.mission_raw.start_mission()
-            await _until("AUTO", lambda: log.mode() == FlightMode.MISSION, 5, log)
-            t_up = await _until(
+            await until("AUTO", lambda: log.mode() == FlightMode.MISSION, 5, log)
+            t_up = await until(
                 "climb to 90% of the mission altitude",
                 lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
                 30,
                 log,
             )
-            t_far = await _until(
+            t_far = await until(
                 "the far side", lambda: log.positions[-1][2] > FAR_SIDE, 60, log, poll=0.02
             )
-            t_back = await _until(
+            t_back = await until(
                 "back home", lambda: np.hypot(*log.positions[-1][1:3]) < 10.0, 60, log
             )
-            t_landed = await _until("landed and disarmed", lambda: not log.is_armed(), 40, log)
+            t_landed = await until("landed and disarmed", lambda: not log.is_armed(), 40, log)
         finally:
             for task in watchers:
                 task.cancel()
