@@ -56,3 +56,18 @@ async def retry(what, call, timeout):
             if time.monotonic() > deadline:
                 pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
             await asyncio.sleep(1.0)
+
+
+def speedup_options(speedup: float, **kw):
+    """MonitorOptions for SITL at ``speedup``: the engine's own durations are wall seconds
+    (telemetry arrival times) while speeds and the braking model are the vehicle's, so the
+    wall-clock ones are scaled. Unscaled, at speedup 5, 10 m/s is 50 m/s per wall second,
+    within arrival jitter of ``max_speed_mps``, and ``backoff_s`` lasts 75 s of flight."""
+    from kit.monitor.engine import MonitorOptions
+
+    o = MonitorOptions(**kw)
+    o.hold_s /= speedup
+    o.backoff_s /= speedup
+    o.stale_s /= speedup
+    o.max_speed_mps *= speedup
+    return o

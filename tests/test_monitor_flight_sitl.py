@@ -42,7 +42,6 @@ import pytest
 import shapely
 
 from kit.frame import LocalFrame
-from kit.monitor.engine import MonitorOptions
 from kit.monitor.fenceset import FenceSet
 from kit.monitor.runner import EventLog, Monitor
 from kit.readers.fences import FenceRecord
@@ -50,7 +49,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status, retry, until
+from tests.sitl_flight import ask_fence_status, retry, speedup_options, until
 
 _until = functools.partial(until, poll=0.02)  # finer timing for the lead measurements
 pytestmark = pytest.mark.sitl
@@ -142,22 +141,6 @@ async def _watch(log: FlightLog, vehicle, direct):
                 log.custom_modes.append((time.monotonic(), mode))
 
     return [asyncio.create_task(c()) for c in (positions, speeds, modes, fence_status, heartbeats)]
-
-
-def _options(enforce: bool, speedup: float) -> MonitorOptions:
-    """The engine's own durations are wall seconds (telemetry arrival times) while speeds and
-    the braking model are the vehicle's: scale the wall-clock ones to the SITL speedup.
-
-    Unscaled, at speedup 5, 10 m/s is 50 m/s per wall second, within a few samples' arrival
-    jitter of ``max_speed_mps`` (60): positions are dropped as GPS glitches; and the takeoff's
-    switch to GUIDED counts as a pilot mode change whose 15 s wall ``backoff_s`` (75 s of
-    flight) withholds the brake (both seen in a run with the defaults)."""
-    o = MonitorOptions(enforce=enforce)
-    o.hold_s /= speedup
-    o.backoff_s /= speedup
-    o.stale_s /= speedup
-    o.max_speed_mps *= speedup
-    return o
 
 
 def _square():
@@ -252,7 +235,7 @@ class _Flight:
                 monitor = Monitor(
                     vehicle,
                     _monitor_fences(frame),
-                    _options(self.enforce, self.sitl.speedup),
+                    speedup_options(self.sitl.speedup, enforce=self.enforce),
                     self.monitor_log,
                     record=self.trace,
                 )
@@ -454,7 +437,7 @@ def _replay_matches(flight, live_events):
     from kit.monitor.engine import Engine
 
     assert len(flight.trace) >= 50, len(flight.trace)
-    engine = Engine(_monitor_fences(flight.frame), _options(False, flight.sitl.speedup))
+    engine = Engine(_monitor_fences(flight.frame), speedup_options(flight.sitl.speedup))
     replayed = [e for s in flight.trace for e in engine.step(s) if e["event"] == "level"]
     live = [e for e in live_events if e["event"] == "level"]
     assert [(e["time"], e["level"]) for e in replayed] == [(e["time"], e["level"]) for e in live]

@@ -9,9 +9,10 @@ from pathlib import Path
 import shapely
 
 from kit.frame import LocalFrame
-from kit.monitor.engine import Engine, MonitorOptions, Sample
+from kit.monitor.engine import Engine, Sample
 from kit.monitor.fenceset import FenceSet
 from kit.readers.fences import FenceRecord
+from tests.sitl_flight import speedup_options
 
 TRACE = Path(__file__).parent / "data" / "trace-egham-fence-x5.jsonl"
 SPEEDUP = 5.0
@@ -29,12 +30,7 @@ def fences():
 
 
 def options(**kw):
-    o = MonitorOptions(**kw)  # wall-clock durations scaled to the recording's speedup
-    o.hold_s /= SPEEDUP
-    o.backoff_s /= SPEEDUP
-    o.stale_s /= SPEEDUP
-    o.max_speed_mps *= SPEEDUP
-    return o
+    return speedup_options(SPEEDUP, **kw)
 
 
 def samples():
