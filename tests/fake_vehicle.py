@@ -258,6 +258,7 @@ class FakeVehicle:
         upload_timeout: float = 8.0,
         rerequest_interval: float = 1.0,
         port: int | None = None,
+        signing_key: bytes | None = None,
     ):
         self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
         self.faults = faults or Faults()
@@ -275,6 +276,9 @@ class FakeVehicle:
         self._buffer = _Buffer()
         self._mav = mav.MAVLink(self._buffer, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self._mav.robust_parsing = True
+        self.dropped = 0  # messages that did not decode, or were not signed with the key
+        self.signing_setups: list[bytes] = []  # keys received in SETUP_SIGNING
+        self._set_key(signing_key)
         self._rng_in = random.Random(self.faults.seed * 2 + 1)
         self._rng_out = random.Random(self.faults.seed * 2)
         self._n_in = 0
@@ -382,7 +386,8 @@ class FakeVehicle:
             return
         for msg in msgs:
             name = msg.get_type()
-            if name == "BAD_DATA":
+            if name == "BAD_DATA":  # garbled, or (signing on) not signed with the key
+                self.dropped += 1
                 continue
             target = getattr(msg, "target_system", None)
             if target not in (None, 0, SYSTEM_ID):
@@ -403,6 +408,24 @@ class FakeVehicle:
                 handler(msg)
             if self.disconnected:
                 return
+
+    # ---------------------------------------------------------------- signing
+
+    def _set_key(self, key: bytes | None, timestamp: int | None = None):
+        """As ArduPilot's channel 1 (not the trusted USB channel 0): with a key, sign every
+        message sent and drop every message not signed with it; an all-zero key: off."""
+        signing = self._mav.signing
+        if key is None or key == bytes(32):
+            signing.secret_key, signing.sign_outgoing = None, False
+            return
+        signing.secret_key, signing.sign_outgoing = bytes(key), True
+        signing.timestamp = timestamp or int((time.time() - 1420070400) * 100_000)
+        signing.allow_unsigned_callback = None
+
+    def _on_setup_signing(self, msg):
+        key = bytes(msg.secret_key)
+        self.signing_setups.append(key)
+        self._set_key(key, msg.initial_timestamp)
 
     # ---------------------------------------------------------------- periodic
 

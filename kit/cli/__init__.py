@@ -16,6 +16,7 @@ VERBS = (
     "download",
     "monitor",
     "bundle",
+    "signing",
     "demo",
     "sitl",
     "route",

@@ -138,3 +138,36 @@ def check_trust(args, path):
             exc.message + "; sign them (alphafence bundle sign) or pass --allow-unsigned",
             exc.feature,
         ) from None
+
+
+def add_signing_option(p):
+    p.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        default=None,
+        help="MAVLink 2 signing key file (64 hex digits or a passphrase; also "
+        "$ALPHAFENCE_SIGNING_KEY): sign what is sent, accept only what is signed",
+    )
+
+
+def signing_key(args):
+    """The 32-byte MAVLink signing key from --signing-key or $ALPHAFENCE_SIGNING_KEY (a file
+    path), or None for an unsigned link."""
+    import os
+
+    from kit.vehicle.signing import key_file_warning, load_key
+
+    path = args.signing_key or os.environ.get("ALPHAFENCE_SIGNING_KEY") or None
+    if path is None:
+        return None
+    warning = key_file_warning(path)
+    if warning:
+        err_console.print(f"[yellow]warning:[/] {warning}", soft_wrap=True)
+    return load_key(path)
+
+
+def unsigned_hint(args, exc) -> str:
+    """A hint after a transfer over an unsigned link timed out: the vehicle may be signing."""
+    if getattr(args, "signing_key", None) or getattr(exc, "result", None) != "TIMEOUT":
+        return ""
+    return " (if the vehicle has MAVLink signing on, give --signing-key)"

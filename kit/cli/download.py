@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from kit.cli.common import err_console, out_console
+from kit.cli.common import add_signing_option, err_console, out_console, signing_key, unsigned_hint
 from kit.writers import plan, waypoints
 from kit.writers.atomic import write_all
 
@@ -21,10 +21,12 @@ def register(sub):
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
     )
     p.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    add_signing_option(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    args.key = signing_key(args)
     return asyncio.run(_download(args))
 
 
@@ -33,10 +35,12 @@ async def _download(args) -> int:
     from kit.vehicle.link import LinkError, open_vehicle
 
     try:
-        async with open_vehicle(args.connect, args.timeout) as vehicle:
+        async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
             items = await download_fence(vehicle)
     except (FenceTransferError, LinkError) as exc:
-        err_console.print(f"alphafence download: error: {exc}", soft_wrap=True)
+        err_console.print(
+            f"alphafence download: error: {exc}{unsigned_hint(args, exc)}", soft_wrap=True
+        )
         return 3
     out = {args.output: plan.dumps(plan.plan_document(items))}
     if args.waypoints:

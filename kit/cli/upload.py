@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import asyncio
 
-from kit.cli.common import add_trust_options, check_trust, err_console, out_console
+from kit.cli.common import (
+    add_signing_option,
+    add_trust_options,
+    check_trust,
+    err_console,
+    out_console,
+    signing_key,
+    unsigned_hint,
+)
 from kit.cli.compile import add_compile_options, compile_from_args, report
 from kit.errors import InputError
 from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
@@ -43,6 +51,7 @@ def register(sub):
     )
     p.add_argument("--dry-run", action="store_true", help="compile and check, but do not connect")
     add_trust_options(p)
+    add_signing_option(p)
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
@@ -73,6 +82,7 @@ def run(args) -> int:
         return 0
     if not args.connect:
         raise InputError("--connect", "needed unless --dry-run")
+    args.key = signing_key(args)
     return asyncio.run(_upload(args, items))
 
 
@@ -82,7 +92,7 @@ async def _upload(args, items) -> int:
     from kit.vehicle.params import ParamError, apply_params
 
     try:
-        async with open_vehicle(args.connect, args.timeout) as vehicle:
+        async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
             rep = await upload_fence(vehicle, items)
             out_console.print(
                 f"uploaded {rep.items} fence items and read them back identical ({rep.seconds:.2f} s)"
@@ -94,6 +104,8 @@ async def _upload(args, items) -> int:
                     + ", ".join(f"{k}={v:g}" for k, v in got.values.items())
                 )
     except (FenceTransferError, LinkError, ParamError) as exc:
-        err_console.print(f"alphafence upload: error: {exc}", soft_wrap=True)
+        err_console.print(
+            f"alphafence upload: error: {exc}{unsigned_hint(args, exc)}", soft_wrap=True
+        )
         return 3
     return 0

@@ -212,9 +212,11 @@ def sitl_command(
     speedup: float = 1,
     defaults: Iterable[str | Path] = (),
     model: str = MODEL,
+    radio_port: int | None = None,
 ) -> list[str]:
     """The SITL argument vector: MAVLink on SERIAL0 to ``udpin`` on loopback ``port``; SERIAL1
-    and SERIAL2 (TCP listeners by default) switched off."""
+    and SERIAL2 (TCP listeners by default) switched off, or SERIAL1 to loopback ``radio_port``
+    (a second MAVLink link, like a telemetry radio: ArduPilot's channel 1)."""
     defaults = [str(p) for p in defaults]
     for path in defaults:
         if "," in path:
@@ -234,7 +236,7 @@ def sitl_command(
         argv += ["--defaults", ",".join(defaults)]
     argv += [
         "--serial0", f"udpclient:{LOOPBACK}:{port}",
-        "--serial1", "none",
+        "--serial1", "none" if radio_port is None else f"udpclient:{LOOPBACK}:{radio_port}",
         "--serial2", "none",
     ]  # fmt: skip
     return argv
@@ -487,6 +489,8 @@ class SitlInstance:
     ``params`` are extra defaults files (loaded after the kit's), ``param_values`` a mapping
     of parameter names to values written to one more defaults file in the working directory.
     ``port`` is the loopback UDP port SITL sends MAVLink to (default: a free one).
+    ``radio=True`` opens a second MAVLink link on SERIAL1 (``radio_url``): ArduPilot trusts
+    channel 0 (SERIAL0, "USB") with unsigned messages once signing is on, channel 1 it does not.
     """
 
     def __init__(
@@ -501,6 +505,7 @@ class SitlInstance:
         binary: str | Path | None = None,
         model: str = MODEL,
         keep_dir: bool = False,
+        radio: bool = False,
     ):
         self.home = resolve_home(home)
         self.speedup = speedup
@@ -511,6 +516,8 @@ class SitlInstance:
         self.binary = Path(binary) if binary is not None else None
         self.model = model
         self.keep_dir = keep_dir
+        self.radio = radio
+        self.radio_port: int | None = None
         self.instance: int | None = None
         self.port: int | None = None
         self.workdir: Path | None = None
@@ -532,6 +539,13 @@ class SitlInstance:
     def pymavlink_url(self) -> str:
         """For pymavlink's ``mavutil.mavlink_connection`` (and MAVProxy's ``--master``)."""
         return f"udpin:{LOOPBACK}:{self._port()}"
+
+    @property
+    def radio_url(self) -> str:
+        """For MAVSDK: the SERIAL1 link (``radio=True``), ``udpin://127.0.0.1:PORT``."""
+        if self.radio_port is None:
+            raise SitlError("SITL instance has no radio link (start it with radio=True)")
+        return f"udpin://{LOOPBACK}:{self.radio_port}"
 
     def _port(self) -> int:
         if self.port is None:
@@ -580,6 +594,9 @@ class SitlInstance:
                 raise SitlError(f"UDP port {self.port} is already used by another SITL instance")
             _ports_in_use.add(self.port)
             self._port_reserved = True
+            if self.radio:
+                self.radio_port = free_udp_port()
+                _ports_in_use.add(self.radio_port)
             self.workdir = Path(tempfile.mkdtemp(prefix=f"alphafence-sitl-{self.instance}-"))
             extra = list(self.params)
             if self.param_values:
@@ -592,6 +609,7 @@ class SitlInstance:
                 speedup=self.speedup,
                 defaults=defaults_files(self.binary, extra),
                 model=self.model,
+                radio_port=self.radio_port,
             )
             with open(self.workdir / LOG_NAME, "wb") as log:
                 log.write(("$ " + " ".join(self.argv) + "\n").encode())
@@ -691,6 +709,7 @@ class SitlInstance:
     def _release(self) -> None:
         if self._port_reserved:
             _ports_in_use.discard(self.port)
+            _ports_in_use.discard(self.radio_port)
             self._port_reserved = False
         if self._lock is not None:
             self._lock.release()

@@ -47,7 +47,8 @@ REASONS = {
 
 
 class FenceTransferError(RuntimeError):
-    def __init__(self, message, vehicle_says=(), holds=None):
+    def __init__(self, message, vehicle_says=(), holds=None, result=None):
+        self.result = result  # MAVSDK's MissionRawResult name, when MAVSDK gave one
         self.vehicle_says = [" ".join(str(t).split()) for t in vehicle_says]  # one line
         self.holds = holds
         parts = [message]
@@ -108,9 +109,13 @@ def same_items(sent, got) -> list:
     return diffs
 
 
-def _reason(exc) -> str:
+def _result_name(exc) -> str:
     result = getattr(exc, "result", None)
-    name = getattr(result, "name", str(result))
+    return str(getattr(result, "name", result))
+
+
+def _reason(exc) -> str:
+    name = _result_name(exc)
     return REASONS.get(name, f"transfer failed ({name})")
 
 
@@ -122,7 +127,9 @@ async def download_fence(vehicle):
     except MissionRawError as exc:
         if getattr(exc.result, "name", "") == "NO_MISSION_AVAILABLE":
             return []
-        raise FenceTransferError(f"download failed: {_reason(exc)}") from None
+        raise FenceTransferError(
+            f"download failed: {_reason(exc)}", result=_result_name(exc)
+        ) from None
     return from_raw(_in_sequence(raw))
 
 
@@ -156,7 +163,10 @@ async def upload_fence(vehicle, items) -> UploadReport:
             return UploadReport(len(items), time.monotonic() - t0, True)
         says = await vehicle.texts_since(t0)
         raise FenceTransferError(
-            f"upload of {len(items)} fence items failed: {_reason(exc)}", says, holds
+            f"upload of {len(items)} fence items failed: {_reason(exc)}",
+            says,
+            holds,
+            result=_result_name(exc),
         ) from None
     got = await download_fence(vehicle)
     seconds = time.monotonic() - t0

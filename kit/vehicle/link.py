@@ -29,8 +29,31 @@ def quiet_mavsdk():
 
 
 @contextlib.asynccontextmanager
-async def open_vehicle(url: str, timeout: float = 10.0):
-    """``async with open_vehicle("udpin://127.0.0.1:14550") as vehicle`` -> Vehicle."""
+async def open_vehicle(url: str, timeout: float = 10.0, signing_key: bytes | None = None):
+    """``async with open_vehicle("udpin://127.0.0.1:14550") as vehicle`` -> Vehicle.
+
+    With ``signing_key`` (32 bytes) every message to the vehicle is signed and every message
+    from it must be signed with that key, through a loopback :class:`SigningBridge`."""
+    if signing_key is None:
+        async with _open_mavsdk(url, url, timeout) as vehicle:
+            yield vehicle
+        return
+    from kit.vehicle.bridge import BridgeError, SigningBridge
+
+    try:
+        bridge = await SigningBridge(url, signing_key).open()
+    except BridgeError as exc:
+        raise LinkError(str(exc)) from None
+    try:
+        async with _open_mavsdk(bridge.local_url, url, timeout, bridge) as vehicle:
+            vehicle.bridge = bridge
+            yield vehicle
+    finally:
+        await bridge.close()
+
+
+@contextlib.asynccontextmanager
+async def _open_mavsdk(url: str, shown_url: str, timeout: float, bridge=None):
     import mavsdk.asyncio as ms
 
     quiet_mavsdk()
@@ -40,14 +63,17 @@ async def open_vehicle(url: str, timeout: float = 10.0):
         try:
             await mavsdk.add_any_connection(url)
         except Exception as exc:  # mavsdk raises its own error types
-            raise LinkError(f"{url}: cannot open the connection ({exc})") from None
+            raise LinkError(f"{shown_url}: cannot open the connection ({exc})") from None
         try:
             system = await mavsdk.first_autopilot(timeout_s=timeout)
         except Exception:
             system = None
         if system is None:
-            raise LinkError(f"{url}: no autopilot answered within {timeout:g} s")
-        vehicle = Vehicle(system, url)
+            why = f"{shown_url}: no autopilot answered within {timeout:g} s"
+            if bridge is not None and bridge.diagnosis():
+                why += f" ({bridge.diagnosis()})"
+            raise LinkError(why)
+        vehicle = Vehicle(system, shown_url)
         await vehicle.start()
         try:
             yield vehicle
@@ -69,6 +95,7 @@ class Vehicle:
         self.param = ParamAsync(system)
         self.telemetry = TelemetryAsync(system)
         self.texts: deque = deque(maxlen=50)  # (monotonic time, text)
+        self.bridge = None  # the SigningBridge of a signed link
         self._task = None
 
     async def start(self):
