@@ -199,6 +199,9 @@ class Faults:
     nack_text: str | None = None  # STATUSTEXT after a scripted NACK
     stall_after: int | None = None  # after this many items of an upload: stop requesting
     disconnect_after: int | None = None  # after this many items of an upload: go silent
+    # a faulty or hostile vehicle's downloads
+    claim_count: int | None = None  # MISSION_COUNT says this many, whatever is stored
+    item_fields: Mapping[int, Mapping] = field(default_factory=dict)  # seq -> fields replaced
 
 
 @dataclass
@@ -659,10 +662,8 @@ class FakeVehicle:
         if self.upload is not None:
             self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
             return
-        self._send(
-            mav.MAVLink_mission_count_message(sysid, compid, len(self.fence), FENCE),
-            len(self.fence),
-        )
+        count = len(self.fence) if self.faults.claim_count is None else self.faults.claim_count
+        self._send(mav.MAVLink_mission_count_message(sysid, compid, count, FENCE), count)
 
     def _on_mission_request_int(self, msg):
         if self._other_type(msg) or not self._mavlink2(msg):
@@ -679,26 +680,26 @@ class FakeVehicle:
             return
         it = self.fence[msg.seq]
         param1 = float(int(it.param1)) if it.command in POLYGONS else it.param1
-        self._send(
-            mav.MAVLink_mission_item_int_message(
-                sysid,
-                compid,
-                msg.seq,
-                mav.MAV_FRAME_GLOBAL,
-                RETURN_POINT if it.command == RETURN_POINT else it.command,
-                0,
-                0,
-                0.0 if it.command == RETURN_POINT else param1,
-                0.0,
-                0.0,
-                0.0,
-                it.x,
-                it.y,
-                0.0,
-                FENCE,
-            ),
+        item = mav.MAVLink_mission_item_int_message(
+            sysid,
+            compid,
             msg.seq,
+            mav.MAV_FRAME_GLOBAL,
+            RETURN_POINT if it.command == RETURN_POINT else it.command,
+            0,
+            0,
+            0.0 if it.command == RETURN_POINT else param1,
+            0.0,
+            0.0,
+            0.0,
+            it.x,
+            it.y,
+            0.0,
+            FENCE,
         )
+        for name, value in self.faults.item_fields.get(msg.seq, {}).items():
+            setattr(item, name, value)
+        self._send(item, msg.seq)
 
     def _on_mission_clear_all(self, msg):
         if self._other_type(msg):

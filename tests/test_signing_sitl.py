@@ -19,7 +19,10 @@ vehicle holds fails the same way (~11 s more). The whole test takes about 40 s w
 from __future__ import annotations
 
 import asyncio
+import re
+import signal
 import sys
+from importlib import resources
 
 import pytest
 
@@ -30,6 +33,7 @@ from kit.writers.mavlink_items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, Fence
 pytestmark = pytest.mark.sitl
 
 EGHAM = (-0.5520, 51.4300)  # lon, lat near the egham home
+DEMO_SCENE = resources.files("kit") / "data" / "demo-scene.geojson"
 
 
 def _fence(n_vertices, radius):
@@ -56,6 +60,26 @@ async def alphafence(*args, timeout=60.0):
     )
     out, err = await asyncio.wait_for(proc.communicate(), timeout)
     return proc.returncode, out.decode(), err.decode()
+
+
+async def monitor_checks(*args, seconds):
+    """Run ``alphafence monitor`` for ``seconds``, stop it as systemd would (SIGTERM), and
+    return the number of checks it reports."""
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "kit",
+        *map(str, args),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    await asyncio.sleep(seconds + 2.0)  # + start-up: imports, the bridge, MAVSDK discovery
+    proc.send_signal(signal.SIGTERM)
+    out, err = await asyncio.wait_for(proc.communicate(), 20)
+    assert proc.returncode == 0, err.decode()
+    found = re.search(r"stopped after (\d+) checks", out.decode())
+    assert found, out.decode()
+    return int(found.group(1))
 
 
 @pytest.mark.parametrize("sitl", [{"radio": True}], indirect=True)
@@ -96,6 +120,16 @@ async def test_signing_refuses_wrong_and_missing_keys(sitl, tmp_path):
     )
     assert code == 0, err
     assert read_plan_fence(tmp_path / "usb.plan") == read_plan_fence(first)
+
+    # the monitor over the signed link: telemetry flows and is checked; a wrong key is refused
+    fences = tmp_path / "fences.geojson"
+    code, out, err = await alphafence("build", DEMO_SCENE, "-o", fences)
+    assert code == 0, err
+    monitor = ("monitor", "--allow-unsigned", "--connect", url, "--fences", fences)
+    code, out, err = await alphafence(*monitor, "--signing-key", wrong, "--timeout", "4")
+    assert code == 3 and "signed with another key" in err, err
+    checks = await monitor_checks(*monitor, "--signing-key", key, seconds=4.0)
+    assert checks >= 10  # positions at 10 Hz (sim time) for 4 s of wall time at speedup 5
 
     # switching signing off needs the current key; afterwards the plain link works again
     code, out, err = await alphafence("signing", "remove", "--connect", url, "--signing-key", key)

@@ -79,7 +79,7 @@ class LinkStats:
     sent: int = 0  # messages sent to the vehicle
     unsigned: int = 0  # dropped: no signature (signing expected)
     bad_signature: int = 0  # dropped: signed with another key, or a replayed timestamp
-    garbage: int = 0  # bytes that were not MAVLink, or a bad CRC
+    garbage: int = 0  # bytes that were not MAVLink, a bad CRC, or an unknown message id
 
     def diagnosis(self, key_given: bool) -> str:
         """Why the vehicle may have stayed silent, from what was dropped."""
@@ -233,6 +233,11 @@ class VehicleLink:
             if isinstance(msg, mavlink.MAVLink_bad_data):
                 self._count_bad(msg)
                 continue
+            if isinstance(msg, mavlink.MAVLink_unknown):
+                # an id this dialect does not know: pymavlink returns it without checking
+                # the signature, so it is dropped, never forwarded
+                self.stats.garbage += 1
+                continue
             if self.key is not None:
                 self._follow_timestamp(msg)
             if self.kind == "udpin" and addr is not None:
@@ -331,7 +336,7 @@ class SigningBridge:
         except Exception:
             return
         for msg in messages:
-            if isinstance(msg, mavlink.MAVLink_bad_data):
+            if isinstance(msg, mavlink.MAVLink_bad_data | mavlink.MAVLink_unknown):
                 self.not_forwarded += 1
                 continue
             self.from_mavsdk += 1

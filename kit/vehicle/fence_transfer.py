@@ -9,11 +9,20 @@ ArduPilot keeps its previous fence when an upload fails, and the kit checks that
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from dataclasses import dataclass
 
 from kit.coords import from_e7, to_e7
-from kit.writers.mavlink_items import FenceItem
+from kit.writers.mavlink_items import (
+    CIRCLE_EXCLUSION,
+    CIRCLE_INCLUSION,
+    MAX_POLYGON_VERTICES,
+    POLYGON_EXCLUSION,
+    POLYGON_INCLUSION,
+    RETURN_POINT,
+    FenceItem,
+)
 
 MISSION_TYPE_FENCE = 1
 FRAME_GLOBAL = 0
@@ -89,8 +98,73 @@ def to_raw(items):
     ]
 
 
+FENCE_COMMANDS = {
+    RETURN_POINT: "return point",
+    POLYGON_INCLUSION: "inclusion polygon vertex",
+    POLYGON_EXCLUSION: "exclusion polygon vertex",
+    CIRCLE_INCLUSION: "inclusion circle",
+    CIRCLE_EXCLUSION: "exclusion circle",
+}
+MAX_DOWNLOAD_ITEMS = 1000  # ArduPilot's fence storage holds well under this (SD: a few hundred)
+
+
 def from_raw(raw):
-    return [FenceItem(int(r.command), float(r.param1), from_e7(r.y), from_e7(r.x)) for r in raw]
+    """The vehicle's items as FenceItems, after checking every one: what comes over the link
+    is input like any file (a faulty or hostile vehicle, a corrupted link), so an item out of
+    range, of another mission type, or a polygon whose vertex counts disagree is refused with
+    one line saying which item and what is wrong."""
+    if len(raw) > MAX_DOWNLOAD_ITEMS:
+        raise FenceTransferError(
+            f"the vehicle sent {len(raw)} fence items (over {MAX_DOWNLOAD_ITEMS})"
+        )
+    items = []
+    for i, r in enumerate(raw):
+        items.append(_checked_item(i, r))
+    _check_polygons(items)
+    return items
+
+
+def _bad(i, what):
+    return FenceTransferError(f"the vehicle sent an invalid fence: item {i}: {what}")
+
+
+def _checked_item(i, r):
+    try:
+        command, mission_type = int(r.command), int(r.mission_type)
+        x, y, param1 = int(r.x), int(r.y), float(r.param1)
+    except (TypeError, ValueError, OverflowError):
+        raise _bad(i, "a field is not a number") from None
+    if mission_type != MISSION_TYPE_FENCE:
+        raise _bad(i, f"mission type {mission_type}, not a fence item (1)")
+    if command not in FENCE_COMMANDS:
+        raise _bad(i, f"command {command} is not a fence item")
+    lat, lon = from_e7(x), from_e7(y)
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise _bad(i, f"position {lat:.7f}, {lon:.7f} is out of range")
+    if not math.isfinite(param1):
+        raise _bad(i, f"parameter 1 is {param1}")
+    if command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION) and not 0 < param1 <= 1e7:
+        raise _bad(i, f"circle radius {param1:g} m")
+    if command in (POLYGON_INCLUSION, POLYGON_EXCLUSION) and not (
+        param1 == int(param1) and 3 <= param1 <= MAX_POLYGON_VERTICES
+    ):
+        raise _bad(i, f"polygon vertex count {param1:g} (3 to {MAX_POLYGON_VERTICES})")
+    return FenceItem(command, param1, lon, lat)
+
+
+def _check_polygons(items):
+    """Each polygon is ``n`` consecutive vertices of one command, each saying ``n``."""
+    i = 0
+    while i < len(items):
+        it = items[i]
+        if it.command not in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
+            i += 1
+            continue
+        n = int(it.param1)
+        group = items[i : i + n]
+        if len(group) < n or any((g.command, g.param1) != (it.command, it.param1) for g in group):
+            raise _bad(i, f"a polygon of {n} vertices does not have {n} matching items")
+        i += n
 
 
 def same_items(sent, got) -> list:
