@@ -139,6 +139,8 @@ def load_rules(path: str | Path | None = None) -> Rules:
             text = Path(path).read_text(encoding="utf-8")
         except OSError as exc:
             raise InputError(path, f"cannot read rules: {exc.strerror}") from None
+        except UnicodeDecodeError as exc:
+            raise InputError(path, f"not UTF-8 text (byte {exc.start})") from None
         source = str(path)
     try:
         doc = tomllib.loads(text)

@@ -217,8 +217,8 @@ def test_osm_reader_on_garbage(data, suffix):
 
 
 @FUZZ
-@given(st.text(max_size=300))
-def test_rules_reader(text):
+@given(st.one_of(st.text(max_size=300), st.binary(max_size=300)))
+def test_rules_reader(text):  # bytes: not always UTF-8 (found by tests/atheris_fuzz.py)
     only_input_errors(load_rules, write(".toml", text))
 
 
