@@ -5,7 +5,14 @@ from __future__ import annotations
 import asyncio
 import signal
 
-from kit.cli.common import add_trust_options, check_trust, err_console, out_console
+from kit.cli.common import (
+    add_signing_option,
+    add_trust_options,
+    check_trust,
+    err_console,
+    out_console,
+    signing_key,
+)
 from kit.errors import InputError
 from kit.monitor.engine import ACTIONS, MonitorOptions
 from kit.monitor.fenceset import FenceSet
@@ -29,7 +36,20 @@ def register(sub):
         metavar="S",
         help="look-ahead in seconds (default 15)",
     )
-    p.add_argument("--imminent-action", choices=ACTIONS, default="brake")
+    p.add_argument(
+        "--imminent-action",
+        choices=ACTIONS,
+        default="brake",
+        help="with --enforce: brake (default), rtl, land, none, or reroute (fly around the "
+        "fence with the route planner; brake if no route exists)",
+    )
+    p.add_argument(
+        "--reroute-clearance",
+        type=float,
+        default=20.0,
+        metavar="M",
+        help="distance a re-route keeps from every keep-out fence (default 20)",
+    )
     p.add_argument("--breach-action", choices=ACTIONS, default="rtl")
     p.add_argument(
         "--decel",
@@ -59,6 +79,7 @@ def register(sub):
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
     add_trust_options(p)
+    add_signing_option(p)
     p.set_defaults(func=run)
 
 
@@ -77,7 +98,9 @@ def run(args) -> int:
         on_link_lost=args.on_link_lost,
         mavlink_traffic=args.mavlink_traffic,
         braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
+        reroute_clearance_m=args.reroute_clearance,
     )
+    args.key = signing_key(args)
     return asyncio.run(_run(args, fences, options))
 
 
@@ -93,7 +116,14 @@ async def _run(args, fences, options) -> int:
     out_console.print(f"monitoring {len(fences.records)} fences ({mode}); Ctrl-C to stop")
     try:
         monitor = await run_monitor(
-            args.connect, fences, options, args.log, stop, echo=_echo, timeout=args.timeout
+            args.connect,
+            fences,
+            options,
+            args.log,
+            stop,
+            echo=_echo,
+            timeout=args.timeout,
+            signing_key=args.key,
         )
     except LinkError as exc:
         err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)

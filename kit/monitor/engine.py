@@ -5,14 +5,17 @@ traces; kit.monitor.runner feeds it from MAVSDK and carries out what it decides.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+from kit.errors import InputError
 from kit.monitor.fenceset import FenceSet
 from kit.monitor.predict import Braking
-from kit.monitor.state import Level, StateMachine, assess
+from kit.monitor.state import Assessment, Level, StateMachine, assess
 from kit.monitor.traffic import Traffic, TrafficOptions
 
-ACTIONS = ("none", "brake", "rtl", "land")
+REROUTE = "reroute"  # fly around the fence with the route planner (IMMINENT only)
+ACTIONS = ("none", "brake", "rtl", "land", REROUTE)
+REROUTE_FALLBACK = "brake"  # when no route (or no goal) exists
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
 # modes in which the pilot flies the vehicle (MAVSDK's names): switching into one of them, or
 # out of a mode the monitor commanded, is the pilot taking over
@@ -53,6 +56,25 @@ class MonitorOptions:
     on_glitch: str = "none"
     on_stale: str = "none"
     on_link_lost: str = "none"
+    # --imminent-action reroute: how far the re-route keeps from every keep-out fence
+    reroute_clearance_m: float = 20.0
+
+    def __post_init__(self):
+        for name in ("breach_action", "on_glitch", "on_stale", "on_link_lost"):
+            if getattr(self, name) == REROUTE:
+                flag = "--" + name.replace("_", "-")
+                raise InputError(
+                    "monitor",
+                    f"{flag} {REROUTE}: re-routing is only an --imminent-action "
+                    "(a breach or a failsafe needs brake, rtl, land or none)",
+                )
+        c = self.reroute_clearance_m
+        if not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
+            raise InputError("monitor", f"--reroute-clearance {c}: must be a number >= 0")
+
+    @property
+    def reroute(self) -> bool:
+        return self.enforce and self.imminent_action == REROUTE
 
 
 class Engine:
@@ -72,9 +94,12 @@ class Engine:
         self.conflicts: set = set()
         self.link_lost = False
         self.gps_degraded = False
+        self.rerouting = False  # a re-route is being planned or flown (the runner's task)
+        self.handing_back = False  # the next commanded mode change returns control
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
+        s = _finite_velocity(s)
         events = []
         if s.gps_fix is not None and s.gps_fix < 3:
             if not self.gps_degraded:
@@ -109,6 +134,8 @@ class Engine:
         check = self.fences.check(float(x), float(y), s.alt_m, s.ve, s.vn, lookahead)
         self.checks += 1
         a = assess(check, speed, self.options.horizon_s, self.options.braking)
+        if self.options.reroute:
+            a = self._reroute_assessment(a, check)
         previous = self.sm.level
         level, changed = self.sm.update(a.level, s.t)
         if changed:
@@ -189,10 +216,86 @@ class Engine:
         t = s.t if t is None else t
         events = [self._event(t, kind, s, **extra)]
         if self.options.enforce and action != "none" and t >= self.backoff_until:
-            self.action_t = t
-            self.expect_mode_change = True
-            events.append(self._event(t, "action", s, action=action, reason=kind))
+            events += self._command(t, s, action, reason=kind)
         return events
+
+    # -- re-routing (the runner reports its progress) ---------------------------------
+    def reroute_started(self, t, mode_change: bool = False, **extra) -> list:
+        """The runner is about to fly a re-route: the vehicle now flies the monitor's
+        commands (a mode change that is not the monitor's is the pilot taking over), and
+        ``mode_change``: its first command switches the mode (to GUIDED)."""
+        self.rerouting = True
+        self.in_commanded_mode = True
+        if mode_change:
+            self._expect(t)
+        return [self._event(t, "reroute", self.last, **extra)]
+
+    def reroute_done(self, t, resume: bool = False, **extra) -> list:
+        """The vehicle reached the re-route's goal; ``resume``: the runner now switches back
+        to the mode it had (AUTO), which hands control back."""
+        self.rerouting = False
+        if resume:
+            self._expect(t)
+            self.handing_back = True
+        else:
+            self.in_commanded_mode = False
+        return [self._event(t, "reroute_done", self.last, **extra)]
+
+    def reroute_failed(self, t, reason, **extra) -> list:
+        """No route (or no goal, or a leg not flown in time): brake instead."""
+        self.rerouting = False
+        s = self.last
+        events = [self._event(t, "reroute_failed", s, reason=reason, **extra)]
+        if not self.options.enforce:
+            return events
+        if t < self.backoff_until:
+            return events + [
+                self._event(
+                    t,
+                    "action_withheld",
+                    s,
+                    action=REROUTE_FALLBACK,
+                    reason="pilot changed mode recently",
+                )
+            ]
+        if s is not None and s.armed is False:
+            return events
+        return events + self._command(t, s, REROUTE_FALLBACK, reason="reroute_failed")
+
+    def _reroute_assessment(self, a, check):
+        """With re-routing, IMMINENT comes while the vehicle can still stop the re-route
+        clearance short of the fence ahead: from there it can turn away and keep it."""
+        ahead = check.breach_ahead
+        if a.level >= Level.IMMINENT or ahead is None:
+            return a
+        clearance = self.options.reroute_clearance_m
+        if a.stopping_m + clearance < ahead[1]:
+            return a
+        return Assessment(
+            Level.IMMINENT,
+            ahead[0],
+            ahead[1],
+            a.time_to_breach_s,
+            a.stopping_m,
+            f"cannot stop {clearance:g} m (the re-route clearance) before the fence ahead",
+        )
+
+    def _expect(self, t):
+        """The monitor is about to command a mode change: it is not the pilot's."""
+        self.action_t = t
+        self.expect_mode_change = True
+
+    def _command(self, t, s, action, **extra):
+        """An action event; any other action ends a re-route in progress."""
+        events = []
+        if action == REROUTE:
+            self.rerouting = True
+        elif self.rerouting:
+            self.rerouting = False
+            events.append(self._event(t, "reroute_cancelled", s, reason=f"action {action}"))
+        if action != REROUTE:  # a re-route tells when it changes the mode (reroute_started)
+            self._expect(t)
+        return events + [self._event(t, "action", s, action=action, **extra)]
 
     # -- decisions ------------------------------------------------------------------
     def _pilot(self, s):
@@ -200,17 +303,23 @@ class Engine:
             return []
         if self.expect_mode_change and s.t - self.action_t <= COMMAND_SETTLE_S:
             self.expect_mode_change = False
-            self.in_commanded_mode = True
+            self.in_commanded_mode = not self.handing_back
+            self.handing_back = False
             return []  # the mode change the monitor itself commanded
+        self.handing_back = False
         overridden = self.in_commanded_mode
         self.in_commanded_mode = False
         if s.mode not in PILOT_MODES and not overridden:
             return []  # e.g. into GUIDED or AUTO: not the pilot taking the sticks
         # the pilot took over (or undid the monitor's action): do not fight them for a while
         self.backoff_until = s.t + self.options.backoff_s
-        return [
+        events = [
             self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)
         ]
+        if self.rerouting:  # the pilot flies now: the runner stops the re-route
+            self.rerouting = False
+            events.append(self._event(s.t, "reroute_cancelled", s, reason="pilot changed mode"))
+        return events
 
     def _act(self, s, level):
         o = self.options
@@ -230,26 +339,35 @@ class Engine:
             ]
         if s.armed is False:
             return []
-        self.action_t = s.t
-        self.expect_mode_change = True
-        return [self._event(s.t, "action", s, action=action)]
+        if action == REROUTE and self.rerouting:
+            return []  # one re-route at a time: the one under way already turns away
+        return self._command(s.t, s, action)
 
     def _site(self, index):
         return None if index is None else self.fences.records[index].site_id
 
     def _event(self, t, kind, s, **extra):
-        return {
-            "time": round(t, 3),
-            "event": kind,
-            "lat": round(s.lat, 7),
-            "lon": round(s.lon, 7),
-            "alt_m": _r(s.alt_m),
-            **extra,
-        }
+        where = {}
+        if s is not None:
+            where = {"lat": _r(s.lat, 7), "lon": _r(s.lon, 7), "alt_m": _r(s.alt_m)}
+        return {"time": round(t, 3), "event": kind, **where, **extra}
 
 
-def _r(v):
-    return None if v is None or not math.isfinite(v) else round(float(v), 2)
+def _r(v, digits=2):
+    """Rounded for the log; None for what is missing or not finite (the log is strict JSON)."""
+    try:
+        return None if v is None or not math.isfinite(v) else round(float(v), digits)
+    except TypeError:
+        return None
+
+
+def _finite_velocity(s):
+    """A velocity that is missing or not finite counts as zero: positions are still checked,
+    only the prediction along the track is lost."""
+    if all(isinstance(v, (int, float)) and math.isfinite(v) for v in (s.vn, s.ve, s.vd)):
+        return s
+    fix = lambda v: v if isinstance(v, (int, float)) and math.isfinite(v) else 0.0  # noqa: E731
+    return replace(s, vn=fix(s.vn), ve=fix(s.ve), vd=fix(s.vd))
 
 
 def _plausible(s) -> bool:
@@ -276,4 +394,9 @@ def alert_text(event) -> str | None:
         return f"AF TRAFFIC {who} CPA {event['t_cpa_s']:.0f}s {event['separation_m']:.0f}m"[:50]
     if kind in ("gps_glitch", "telemetry_stale", "link_lost", "action", "action_withheld"):
         return f"AF {kind} {event.get('action', '')}".strip()[:50]
+    if kind == "reroute":
+        n = len(event.get("waypoints") or ())
+        return f"AF REROUTE {n} wp {event.get('length_m') or 0:.0f} m"[:50]
+    if kind in ("reroute_failed", "reroute_done", "reroute_cancelled"):
+        return f"AF {kind}"
     return None

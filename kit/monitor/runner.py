@@ -53,21 +53,34 @@ class EventLog:
                 await self.task
 
 
+def _num(fields, key, default=None) -> float:
+    """A finite number from a message's fields (ValueError when missing or not finite)."""
+    value = fields.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(key)
+    value = float(value)  # OverflowError for an absurd integer
+    if not math.isfinite(value):
+        raise ValueError(key)
+    return value
+
+
 def parse_adsb(fields_json):
     """An ADSB_VEHICLE message's fields (MAVSDK mavlink_direct JSON) -> Engine.aircraft kwargs,
-    or None when it carries no usable position."""
+    or None when it carries no usable position (missing, out of range, not finite)."""
     try:
         f = json.loads(fields_json)
-        lat, lon = f["lat"] / 1e7, f["lon"] / 1e7
-        alt = f["altitude"] / 1000.0
-        speed = f.get("hor_velocity", 0) / 100.0
-        heading = math.radians(f.get("heading", 0) / 100.0)
-        climb = f.get("ver_velocity", 0) / 100.0
-        callsign = str(f.get("callsign", "")).strip("\x00 ")
+        lat, lon = _num(f, "lat") / 1e7, _num(f, "lon") / 1e7
+        alt = _num(f, "altitude") / 1000.0
+        speed = _num(f, "hor_velocity", 0) / 100.0
+        heading = math.radians(_num(f, "heading", 0) / 100.0)
+        climb = _num(f, "ver_velocity", 0) / 100.0
+        callsign = str(f.get("callsign", "")).strip("\x00 ")[:16]
         key = f.get("ICAO_address")
-    except (ValueError, KeyError, TypeError):
+        if key is None or isinstance(key, dict | list | float):
+            return None
+    except (ValueError, KeyError, TypeError, OverflowError, AttributeError):
         return None
-    if key is None or not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
+    if not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
         return None
     return {
         "key": key,
@@ -85,18 +98,18 @@ def parse_global_position(system_id, fields_json):
     """Another MAVLink system's GLOBAL_POSITION_INT -> Engine.aircraft kwargs, or None."""
     try:
         f = json.loads(fields_json)
-        lat, lon = f["lat"] / 1e7, f["lon"] / 1e7
+        lat, lon = _num(f, "lat") / 1e7, _num(f, "lon") / 1e7
         out = {
             "key": f"mavlink/{int(system_id)}",
             "lat": lat,
             "lon": lon,
-            "alt_amsl_m": f["alt"] / 1000.0,
-            "ve": f.get("vy", 0) / 100.0,
-            "vn": f.get("vx", 0) / 100.0,
-            "vu": -f.get("vz", 0) / 100.0,
+            "alt_amsl_m": _num(f, "alt") / 1000.0,
+            "ve": _num(f, "vy", 0) / 100.0,
+            "vn": _num(f, "vx", 0) / 100.0,
+            "vu": -_num(f, "vz", 0) / 100.0,
             "callsign": f"MAV{int(system_id)}",
         }
-    except (ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError, OverflowError, AttributeError):
         return None
     if not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
         return None
@@ -109,6 +122,19 @@ def _append(path, lines):
 
 
 class Monitor:
+    """Commands to the vehicle go out one at a time (``_command``), each finishing even when
+    the task that sent it is cancelled: a brake or RTL is never overtaken by a re-route's goto.
+    """
+
+    # re-routing (--imminent-action reroute)
+    TARGET_HZ = 2.0  # the GUIDED target (POSITION_TARGET_GLOBAL_INT), asked for only then
+    TARGET_FRESH_S = 3.0  # an older GUIDED target is not the vehicle's current one
+    REROUTER_WAIT_S = 2.0  # a re-route asked for while the planner is still being built
+    MISSION_TIMEOUT_S = 5.0
+    MISSION_RETRY_S = 10.0  # a failed mission download is retried this often (and on demand)
+    ARRIVE_M = 2.0  # a re-route waypoint is reached within this
+    ARRIVE_POLL_S = 0.05
+
     def __init__(self, vehicle, fences, options, log: EventLog, rate_hz: float = 10.0, record=None):
         self.vehicle = vehicle
         self.record = record  # a list that receives every telemetry sample (for replay tests)
@@ -120,6 +146,16 @@ class Monitor:
         self.tasks = []
         self.pending = set()
         self._clock_t = -math.inf
+        self._command_lock = asyncio.Lock()
+        # re-routing (options.imminent_action "reroute" with enforce)
+        self.rerouter = None
+        self.rerouter_task = None
+        self.reroute_task = None
+        self.target = None  # (time, lon, lat): the GUIDED target the vehicle reports
+        self.progress = None  # (current, total): the AUTO mission's progress
+        self.mission = None  # (total, items): the mission as last downloaded
+        self._mission_fetch = None
+        self._mission_tried = -math.inf
 
     async def run(self, stop: asyncio.Event):
         tel = self.vehicle.telemetry
@@ -138,6 +174,13 @@ class Monitor:
             # every GLOBAL_POSITION_INT on the link, the vehicle's own at the telemetry rate
             # included, crosses into Python: opt-in, for links that carry other aircraft
             self.tasks.append(asyncio.create_task(self._other_systems()))
+        if self.engine.options.reroute:
+            self.rerouter_task = asyncio.create_task(self._build_rerouter())
+            self.tasks += [
+                self.rerouter_task,
+                asyncio.create_task(self._targets()),
+                asyncio.create_task(self._mission_progress()),
+            ]
         try:
             while not stop.is_set():
                 with contextlib.suppress(asyncio.TimeoutError):
@@ -243,13 +286,37 @@ class Monitor:
         text = alert_text(event)
         if text:
             self._spawn(self._alert(text, event))
+        if event["event"] == "reroute_cancelled":
+            task = self.reroute_task
+            if task is not None and not task.done() and task is not asyncio.current_task():
+                task.cancel()
         if event["event"] == "action":
-            self._spawn(self._act(event["action"]))
+            from kit.monitor.engine import REROUTE
+
+            if event["action"] == REROUTE:
+                self.reroute_task = self._spawn(self._reroute())
+            else:
+                self._spawn(self._act(event["action"]))
 
     def _spawn(self, coro):
         task = asyncio.create_task(coro)
         self.pending.add(task)
         task.add_done_callback(self.pending.discard)
+        return task
+
+    async def _command(self, call, *args):
+        """``await call(*args)`` (a MAVSDK command) after any command still under way, in a task
+        of its own: cancelling the caller does not cut it off halfway (MAVSDK's goto is a mode
+        change followed by DO_REPOSITION), and the next command waits for it."""
+
+        async def locked():
+            async with self._command_lock:
+                return await call(*args)
+
+        task = self._spawn(locked())
+        # its outcome is the caller's; retrieved here too in case the caller is gone
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())
+        return await asyncio.shield(task)
 
     async def _alert(self, text, event):
         from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
@@ -276,11 +343,11 @@ class Monitor:
         act = self.vehicle.action
         try:
             if action == "brake":
-                await act.hold()
+                await self._command(act.hold)
             elif action == "rtl":
-                await act.return_to_launch()
+                await self._command(act.return_to_launch)
             elif action == "land":
-                await act.land()
+                await self._command(act.land)
             self.log.put(
                 {"time": round(time.monotonic(), 3), "event": "action_done", "action": action}
             )
@@ -294,6 +361,233 @@ class Monitor:
                 }
             )
 
+    # -- re-routing -------------------------------------------------------------------
+    def _now_event(self, kind, **extra):
+        return {"time": round(time.monotonic(), 3), "event": kind, **extra}
+
+    async def _build_rerouter(self):
+        """The route planner over every fence, built once, in a worker thread."""
+        from kit.monitor.reroute import Rerouter
+
+        t0 = time.monotonic()
+        try:
+            self.rerouter = await Rerouter.build(
+                self.engine.fences.records, self.engine.options.reroute_clearance_m
+            )
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # no planner: every re-route falls back to the brake
+            self.log.put(self._now_event("reroute_unavailable", error=str(exc)))
+            return
+        self.log.put(
+            self._now_event(
+                "reroute_ready",
+                build_s=round(time.monotonic() - t0, 3),
+                clearance_m=self.rerouter.clearance,
+            )
+        )
+
+    async def _targets(self):
+        """The vehicle's GUIDED target (POSITION_TARGET_GLOBAL_INT, which ArduPilot sends only
+        when asked and only while it flies to a position in GUIDED)."""
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        from kit.monitor.reroute import (
+            MAV_CMD_SET_MESSAGE_INTERVAL,
+            POSITION_TARGET_GLOBAL_INT_ID,
+            parse_position_target,
+        )
+
+        try:
+            own = int(await self.vehicle.system.get_system_id())
+        except Exception:
+            own = 1
+        direct = MavlinkDirectAsync(self.vehicle.system)
+        fields = {
+            "target_system": own,
+            "target_component": 1,
+            "command": MAV_CMD_SET_MESSAGE_INTERVAL,
+            "confirmation": 0,
+            "param1": POSITION_TARGET_GLOBAL_INT_ID,
+            "param2": 1e6 / self.TARGET_HZ,
+            **{f"param{k}": 0 for k in range(3, 8)},
+        }
+        try:
+            stream = direct.subscribe_message("POSITION_TARGET_GLOBAL_INT")
+            await direct.send_command(
+                MavlinkMessage("COMMAND_LONG", 0, 0, own, 1, json.dumps(fields))
+            )
+            async for message in stream:
+                if message.system_id not in (own, 0):
+                    continue
+                target = parse_position_target(message.fields_json)
+                if target is not None:
+                    self.target = (time.monotonic(), *target)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # then GUIDED re-routes aim beyond the fence instead
+            self.log.put(self._now_event("reroute_target_unavailable", error=str(exc)))
+
+    async def _mission_progress(self):
+        """AUTO's current item; the mission itself is downloaded when it changes."""
+        try:
+            async for p in self.vehicle.mission_raw.subscribe_mission_progress():
+                self.progress = (int(p.current), int(p.total))
+                stale = self.mission is None or self.mission[0] != p.total
+                due = time.monotonic() - self._mission_tried > self.MISSION_RETRY_S
+                if self.progress[1] > 0 and stale and due:
+                    self._fetch_mission()
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            self.log.put(self._now_event("reroute_mission_unavailable", error=str(exc)))
+
+    def _fetch_mission(self):
+        if self._mission_fetch is None or self._mission_fetch.done():
+            self._mission_tried = time.monotonic()
+            self._mission_fetch = self._spawn(self._download_mission())
+        return self._mission_fetch
+
+    async def _download_mission(self):
+        total = self.progress[1] if self.progress else None
+        try:
+            items = await asyncio.wait_for(
+                self.vehicle.mission_raw.download_mission(), self.MISSION_TIMEOUT_S
+            )
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # then AUTO re-routes aim beyond the fence instead
+            self.log.put(self._now_event("reroute_mission_unavailable", error=str(exc)))
+            return None
+        self.mission = (total if total is not None else len(items), list(items))
+        return self.mission[1]
+
+    async def _mission_goal(self):
+        """(goal, resume_at) from the AUTO mission, or (None, current item) if it has none."""
+        from kit.monitor.reroute import mission_goal
+
+        if self.progress is None:
+            return None, None
+        current, total = self.progress
+        if self.mission is None or self.mission[0] != total:
+            with contextlib.suppress(Exception):
+                await asyncio.shield(self._fetch_mission())
+        if self.mission is None:
+            return None, current
+        goal = mission_goal(self.mission[1], current)
+        return (goal, current + 1) if goal is not None else (None, current)
+
+    async def _goal(self, s):
+        """(goal (lon, lat), where it came from, mission item to resume at) or Nones."""
+        if s.mode == "OFFBOARD" and self.target is not None:  # ArduPilot's GUIDED
+            t, lon, lat = self.target
+            if time.monotonic() - t <= self.TARGET_FRESH_S:
+                return (lon, lat), "guided target", None
+        resume_at = None
+        if s.mode == "MISSION":  # AUTO
+            goal, resume_at = await self._mission_goal()
+            if goal is not None:
+                return goal, f"mission item {resume_at - 1}", resume_at
+        goal = await asyncio.to_thread(self.rerouter.goal_beyond, s.lon, s.lat, s.ve, s.vn)
+        if goal is not None:
+            return goal, "beyond the fence", resume_at
+        return None, None, None
+
+    async def _reroute(self):
+        """Plan and fly a re-route; on no route (or any failure) the engine's fallback."""
+        from kit.monitor.reroute import RerouteFailed
+
+        try:
+            await self._fly_reroute()
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            failed = isinstance(exc, RerouteFailed)
+            why = str(exc) if failed else f"{type(exc).__name__}: {exc}"
+            for e in self.engine.reroute_failed(time.monotonic(), " ".join(why.split())):
+                self._handle(e)
+
+    async def _fly_reroute(self):
+        from kit.monitor.reroute import RerouteFailed, leg_timeout_s, metres, planning_lead_m
+        from kit.route.roadmap import NoRoute
+
+        s = self.engine.last
+        t0 = time.monotonic()
+        if self.rerouter is None and self.rerouter_task is not None:
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(self.rerouter_task), self.REROUTER_WAIT_S)
+        if self.rerouter is None:
+            raise RerouteFailed("no route planner (see reroute_unavailable)")
+        if s.alt_amsl_m is None:
+            raise RerouteFailed("no altitude (AMSL) to fly the re-route at")
+        goal, source, resume_at = await self._goal(s)
+        if goal is None:
+            raise RerouteFailed(
+                "no goal: no target known and no clear point beyond the fence ahead"
+            )
+        lead = planning_lead_m(math.hypot(s.vn, s.ve), self.engine.options.braking)
+        try:
+            plan = await asyncio.to_thread(self.rerouter.plan, s.lon, s.lat, s.ve, s.vn, goal, lead)
+        except NoRoute as exc:
+            raise RerouteFailed(str(exc)) from None
+        was_auto = s.mode == "MISSION"
+        for e in self.engine.reroute_started(
+            time.monotonic(),
+            mode_change=s.mode != "OFFBOARD",
+            goal=[round(goal[1], 7), round(goal[0], 7)],
+            goal_source=source,
+            waypoints=[list(w) for w in plan.waypoints],
+            length_m=round(plan.length_m, 1),
+            clearance_m=round(plan.clearance_m, 2),
+            plan_s=round(time.monotonic() - t0, 3),
+        ):
+            self._handle(e)
+        act = self.vehicle.action
+        alt = float(s.alt_amsl_m)
+        here = (s.lat, s.lon)
+        for k, (lat, lon) in enumerate(plan.waypoints):
+            await self._command(act.goto_location, lat, lon, alt, float("nan"))
+            leg = metres(here, (lat, lon))
+            if not await self._arrive(lat, lon, leg_timeout_s(leg)):
+                raise RerouteFailed(
+                    f"waypoint {k + 1} of {len(plan.waypoints)} not reached within "
+                    f"{leg_timeout_s(leg):.0f} s"
+                )
+            here = (lat, lon)
+        resume = was_auto and resume_at is not None and self.progress is not None
+        resume = resume and resume_at < self.progress[1]
+        for e in self.engine.reroute_done(
+            time.monotonic(),
+            resume=resume,
+            duration_s=round(time.monotonic() - t0, 2),
+            resume_at=resume_at if resume else None,
+        ):
+            self._handle(e)
+        if resume:
+            try:
+                await self._command(self.vehicle.mission_raw.set_current_mission_item, resume_at)
+                await self._command(self.vehicle.mission_raw.start_mission)
+            except Exception as exc:  # the vehicle holds at the goal in GUIDED
+                self.log.put(
+                    self._now_event(
+                        "action_failed", action="resume_mission", item=resume_at, error=str(exc)
+                    )
+                )
+
+    async def _arrive(self, lat, lon, timeout):
+        from kit.monitor.reroute import metres
+
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            pos = self.latest["position"]
+            if pos is not None:
+                p = pos[1]
+                if metres((p.latitude_deg, p.longitude_deg), (lat, lon)) <= self.ARRIVE_M:
+                    return True
+            await asyncio.sleep(self.ARRIVE_POLL_S)
+        return False
+
 
 async def run_monitor(
     url,
@@ -303,13 +597,14 @@ async def run_monitor(
     stop: asyncio.Event | None = None,
     echo=None,
     timeout: float = 10.0,
+    signing_key: bytes | None = None,
 ):
     from kit.vehicle.link import open_vehicle
 
     stop = stop or asyncio.Event()
     log = EventLog(log_path, echo)
     try:
-        async with open_vehicle(url, timeout) as vehicle:
+        async with open_vehicle(url, timeout, signing_key) as vehicle:
             monitor = Monitor(vehicle, fences, options, log)
             await monitor.run(stop)
             return monitor

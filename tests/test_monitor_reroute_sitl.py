@@ -1,0 +1,415 @@
+"""The monitor re-routes a copter around a keep-out square in flight (real copter SITL).
+
+The setup is test_monitor_flight_sitl.py's: an exclusion square (100 m x 100 m, near edge 150 m
+north of home) uploaded to ArduPilot with the ``copter-rtl`` parameters (so that ArduPilot's
+own fence would report a breach, and RTL, if the copter entered it), and a flight north at
+10 m/s straight through the square towards a point 400 m north. The monitor gets the same
+square as its only keep-out fence (no warning layer: the planner would otherwise route around
+that too, and the clearance would not be tested) and runs with ``enforce`` and
+``imminent_action="reroute"`` (20 m clearance) as ``Monitor(...).run(stop)`` on the test's own
+MAVSDK connection (only one program can own the SITL UDP port). FENCE_STATUS is read with the
+``mavlink_direct`` plugin.
+
+* GUIDED (the issue's case): GUIDED takeoff to 20 m, goto 400 m north. At IMMINENT the goal is
+  the vehicle's own GUIDED target (POSITION_TARGET_GLOBAL_INT); the waypoints are flown with goto
+  (DO_REPOSITION) in GUIDED and the copter ends hovering at the goal.
+* AUTO: a mission (takeoff, a waypoint 400 m north, one 450 m north, land) flown with
+  ``start_mission``. The goal is the mission item it flies to (item 2); goto switches to GUIDED,
+  and after the goal the mission resumes at item 3 in AUTO; none of those mode changes may be
+  taken for the pilot's.
+
+Asserted: exactly one ``reroute`` (goal from the GUIDED target / mission item 2, planned
+clearance >= 20 m) and a ``reroute_done`` in the monitor's log, no fallback, cancel, failure,
+pilot mode change or BREACH; ArduPilot never reports a breach (every FENCE_STATUS has
+breach_status 0, no RTL, no "fence breached"); every reported position from the goto (AUTO: the
+mission start) on is at least ``CLEARANCE - TOLERANCE`` from the square; the copter gets within
+5 m of the goal (GUIDED: ends there, stopped, at 20 m).
+
+Measured (egham, speedup 5, 2-core machine; 10 GUIDED and 6 AUTO runs, 4 of them side by side
+with another SITL test): IMMINENT ("cannot stop 20 m (the re-route clearance) before the fence
+ahead") 55.5-56.7 m before the edge at 9.9-10.0 m/s (37 m stopping distance + 20 m, to within
+one position sample); the roadmap of one fence built in 0.004-0.007 s, the route planned in
+0.005-0.014 s wall; 6 waypoints, 360-361 m, planned clearance 20.05 m, past the square's east
+side (in AUTO, in 3 of 6 runs, the mirror-image west side: a tie broken by centimetres). The
+planned route begins 35 m on along the track, where the monitor's braking model says the
+copter stops; it turned at y = 129.2-129.7 m, within about a metre of that: 20.3-20.8 m short
+of the edge. The least distance of any reported position to the square 20.08-20.11 m, on the
+side leg at x = +-70 m (GUIDED tracks the straight legs to within 0.1 m of the planned
+20.05 m); ``reroute_done`` 10.6-10.7 s wall (about 53 s of flight) after the re-route; GUIDED
+ends 0.04 m from the goal (AUTO passes within 0.03 m of it, then resumes at item 3);
+FENCE_STATUS breach_status 0 throughout; no mode change taken for the pilot's. TOLERANCE
+(1.5 m): the side legs keep 20.08 m, but the turn is only 0.3-0.8 m above the clearance and
+moves with IMMINENT's detection (one position sample: 1 m at 10 m/s) and with the monitor's
+wall-clock latency (times 5 in flight at speedup 5; it turned 0.2 m later side by side). Each
+test takes about 27 s wall, SITL start included.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+import shapely
+
+from kit.frame import LocalFrame
+from kit.monitor.fenceset import FenceSet
+from kit.monitor.runner import EventLog, Monitor
+from kit.readers.fences import FenceRecord
+from kit.route.mission import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
+from kit.vehicle.fence_transfer import upload_fence
+from kit.vehicle.link import open_vehicle
+from kit.vehicle.params import PROFILES, apply_params
+from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+from tests.sitl_flight import ask_fence_status, retry, speedup_options, until
+
+pytestmark = pytest.mark.sitl
+
+EGHAM = {"home": "egham", "speedup": 5}
+
+HALF_WIDTH = 50.0  # the exclusion square, metres east (x) / north (y) of home
+NEAR_EDGE = 150.0
+FAR_EDGE = 250.0
+TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
+AUTO_NEXT_M = 50.0  # AUTO: the mission item after the one beyond the square, further north
+NEXT_NORTH = TARGET_NORTH + AUTO_NEXT_M
+ALTITUDE = 20.0
+SPEED = 10.0
+CLEARANCE = 20.0
+TOLERANCE = 1.5  # metres the flown track may come closer than the clearance (see above)
+AT_GOAL_M = 5.0
+STOPPED_MPS = 0.3
+
+WALL_TIMEOUT = 150.0
+ARM_TIMEOUT = 60.0
+
+
+@dataclass
+class FlightLog:
+    frame: LocalFrame
+    texts: object = ()
+    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
+    speeds: list = field(default_factory=list)  # (t, horizontal m/s)
+    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
+    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
+    progress: list = field(default_factory=list)  # (t, current, total): AUTO's mission
+    events: list = field(default_factory=list)  # the monitor's
+
+    def mode(self):
+        return self.modes[-1][1] if self.modes else None
+
+    def speed(self):
+        return self.speeds[-1][1] if self.speeds else math.inf
+
+    def first_breach(self):
+        return next(((t, f) for t, f in self.fence if f["breach_status"] == 1), None)
+
+    def summary(self) -> str:
+        pos = self.positions[-1] if self.positions else None
+        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
+        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
+        fence = self.fence[-1][1] if self.fence else "none received"
+        said = "; ".join(text for _, text in list(self.texts)[-8:])
+        events = "; ".join(
+            f"{e['event']} {e.get('level') or e.get('action') or e.get('reason') or ''}"
+            f"@{e['time']:.2f}"
+            for e in list(self.events)[-10:]
+        )
+        return (
+            f"last position {where}; modes {modes}; last FENCE_STATUS {fence}; "
+            f"monitor: {events}; vehicle said: {said}"
+        )
+
+
+async def _watch(log: FlightLog, vehicle, direct):
+    frame = log.frame
+
+    async def positions():
+        async for p in vehicle.telemetry.subscribe_position():
+            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
+            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
+
+    async def speeds():
+        async for v in vehicle.telemetry.subscribe_velocity_ned():
+            log.speeds.append((time.monotonic(), math.hypot(v.north_m_s, v.east_m_s)))
+
+    async def modes():
+        async for mode in vehicle.telemetry.subscribe_flight_mode():
+            if mode != log.mode():
+                log.modes.append((time.monotonic(), mode))
+
+    async def fence_status():
+        async for message in direct.subscribe_message("FENCE_STATUS"):
+            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
+
+    async def progress():
+        async for p in vehicle.mission_raw.subscribe_mission_progress():
+            log.progress.append((time.monotonic(), p.current, p.total))
+
+    watchers = (positions, speeds, modes, fence_status, progress)
+    return [asyncio.create_task(c()) for c in watchers]
+
+
+def _square():
+    return shapely.box(-HALF_WIDTH, NEAR_EDGE, HALF_WIDTH, FAR_EDGE)
+
+
+def _exclusion_items(frame: LocalFrame):
+    xs, ys = np.asarray(_square().exterior.coords)[:-1].T
+    lon, lat = frame.to_wgs84(xs, ys)
+    return [
+        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
+        for a, b in zip(lon, lat)
+    ]
+
+
+def _events(log, kind):
+    return [e for e in log.events if e["event"] == kind]
+
+
+def _mission(frame: LocalFrame, home):
+    """mission_raw items: home (seq 0), takeoff here, a waypoint beyond the square (the leg to
+    it crosses the square), one 50 m further on, land there."""
+    from mavsdk.plugins.mission_raw import MissionItem
+
+    def item(seq, command, x_east=None, y_north=None, z=ALTITUDE, frame_id=3):
+        lat = lon = 0
+        if x_east is not None:
+            lo, la = frame.to_wgs84(x_east, y_north)
+            lat, lon = int(round(float(la) * 1e7)), int(round(float(lo) * 1e7))
+        return MissionItem(
+            seq,
+            frame_id,
+            command,
+            1 if seq == 1 else 0,
+            1,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            lat,
+            lon,
+            float(z),
+            0,
+        )
+
+    return [
+        item(0, NAV_WAYPOINT, 0.0, 0.0, home.alt, frame_id=0),
+        item(1, NAV_TAKEOFF),
+        item(2, NAV_WAYPOINT, 0.0, TARGET_NORTH),
+        item(3, NAV_WAYPOINT, 0.0, TARGET_NORTH + AUTO_NEXT_M),
+        item(4, NAV_LAND, z=0.0),
+    ]
+
+
+@pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
+async def test_monitor_reroutes_around_the_keep_out_without_a_breach(sitl):
+    """GUIDED: the goal is the vehicle's own GUIDED target; it ends there, hovering."""
+    log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
+    results = {}
+    try:
+        await asyncio.wait_for(_fly(sitl, log, results, auto=False), WALL_TIMEOUT)
+    except asyncio.TimeoutError:
+        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+    _check(sitl, log, results, auto=False)
+
+
+@pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
+async def test_monitor_reroutes_an_auto_mission_and_resumes_it(sitl):
+    """AUTO: the goal is the mission item the vehicle flies to; after it the mission resumes
+    at the next item, in AUTO, and none of the monitor's mode changes is taken for the
+    pilot's."""
+    log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
+    results = {}
+    try:
+        await asyncio.wait_for(_fly(sitl, log, results, auto=True), WALL_TIMEOUT)
+    except asyncio.TimeoutError:
+        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+    _check(sitl, log, results, auto=True)
+
+
+async def _fly(sitl, log: FlightLog, results, auto: bool):
+    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+    from mavsdk.plugins.telemetry import FlightMode
+
+    frame = log.frame
+    async with open_vehicle(sitl.connection_url) as vehicle:
+        log.texts = vehicle.texts
+        direct = MavlinkDirectAsync(vehicle.system)
+        watchers = await _watch(log, vehicle, direct)
+        monitor_log = EventLog()
+        log.events = monitor_log.events
+        stop = asyncio.Event()
+        monitor_task = None
+        try:
+            report = await upload_fence(vehicle, _exclusion_items(frame))
+            assert report.verified and report.items == 4
+            params = await apply_params(vehicle, PROFILES["copter-rtl"])
+            assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
+
+            await vehicle.telemetry.set_rate_position(10.0)
+            await vehicle.telemetry.set_rate_velocity_ned(10.0)
+            await ask_fence_status(direct, 2.0)
+            await until("a FENCE_STATUS", lambda: log.fence, 15, log)
+            await until("a position", lambda: log.positions, 15, log)
+            assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
+
+            fences = FenceSet(
+                [FenceRecord("test/square", "keep_out", frame.geom_to_wgs84(_square()))]
+            )
+            options = speedup_options(
+                sitl.speedup, enforce=True, imminent_action="reroute", reroute_clearance_m=CLEARANCE
+            )
+            monitor = Monitor(vehicle, fences, options, monitor_log)
+            monitor_task = asyncio.create_task(monitor.run(stop))
+            await until("the route planner", lambda: _events(log, "reroute_ready"), 10, log)
+
+            action = vehicle.action
+            if auto:  # the mission's own NAV_TAKEOFF takes off, then it flies north
+                await vehicle.mission_raw.upload_mission(_mission(frame, sitl.home))
+                await retry("arming", action.arm, ARM_TIMEOUT)
+                results["t_goto"] = time.monotonic()
+                await vehicle.mission_raw.start_mission()
+                await until("AUTO", lambda: log.mode() == FlightMode.MISSION, 5, log)
+            else:
+                await action.set_takeoff_altitude(ALTITUDE)
+                await retry("arming", action.arm, ARM_TIMEOUT)
+                await retry("takeoff", action.takeoff, 15)
+                await until(
+                    "climb to 90% of the takeoff altitude",
+                    lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
+                    60,
+                    log,
+                )
+                assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"
+                lon, lat = frame.to_wgs84(0.0, TARGET_NORTH)
+                await action.set_current_speed(SPEED)
+                await action.goto_location(float(lat), float(lon), sitl.home.alt + ALTITUDE, 0.0)
+                results["t_goto"] = time.monotonic()
+            await until(
+                "the monitor's re-route",
+                lambda: _events(log, "reroute") or _events(log, "reroute_failed"),
+                60,
+                log,
+                poll=0.01,
+            )
+            assert not _events(log, "reroute_failed"), log.summary()
+            await until(
+                "reroute_done",
+                lambda: _events(log, "reroute_done") or _events(log, "reroute_failed"),
+                90,
+                log,
+            )
+            results["t_done"] = time.monotonic()
+            if auto:
+                await until("AUTO again", lambda: log.mode() == FlightMode.MISSION, 10, log)
+                await until(
+                    "the next mission item",
+                    lambda: (
+                        math.hypot(log.positions[-1][1], log.positions[-1][2] - NEXT_NORTH)
+                        < AT_GOAL_M
+                    ),
+                    60,
+                    log,
+                )
+                await until("landing", lambda: log.progress[-1][1] >= 4, 30, log)
+            else:
+                await until(
+                    "stopped at the goal", lambda: log.speed() < STOPPED_MPS, 30, log, poll=0.02
+                )
+                await asyncio.sleep(2.0)  # 10 s of flight: still there, still no breach
+            results["t_end"] = time.monotonic()
+            assert not monitor_task.done(), "the monitor stopped by itself"
+            results["checks"] = monitor.engine.checks
+        finally:
+            stop.set()
+            if monitor_task is not None:
+                await asyncio.wait_for(asyncio.gather(monitor_task, return_exceptions=True), 5)
+            for task in watchers:
+                task.cancel()
+            await asyncio.gather(*watchers, return_exceptions=True)
+
+
+def _check(sitl, log: FlightLog, results, auto: bool):
+    from mavsdk.plugins.telemetry import FlightMode
+
+    frame = log.frame
+    square = _square()
+    events = list(log.events)
+    brief = ", ".join(
+        f"{e['event']} {e.get('level') or e.get('action') or ''}@{e['time']:.2f}" for e in events
+    )
+    (ready,) = [e for e in events if e["event"] == "reroute_ready"]
+    reroutes = [e for e in events if e["event"] == "reroute"]
+    assert len(reroutes) == 1, brief
+    reroute = reroutes[0]
+    assert [e for e in events if e["event"] == "reroute_done"], brief
+    assert [e["action"] for e in events if e["event"] == "action"] == ["reroute"], brief
+    bad = ("reroute_failed", "reroute_cancelled", "action_failed", "pilot_mode_change")
+    assert not [e for e in events if e["event"] in bad], brief
+    assert not [e for e in events if e["event"] == "level" and e["level"] == "BREACH"], brief
+    if auto:
+        assert reroute["goal_source"] == "mission item 2", reroute
+        (done,) = [e for e in events if e["event"] == "reroute_done"]
+        assert done["resume_at"] == 3, done
+        after = [m for t, m in log.modes if t >= reroute["time"]]
+        assert after == [FlightMode.OFFBOARD, FlightMode.MISSION], after
+    else:
+        assert reroute["goal_source"] == "guided target", reroute
+    assert reroute["clearance_m"] >= CLEARANCE, reroute
+    gx, gy = (float(v) for v in frame.to_local(reroute["goal"][1], reroute["goal"][0]))
+    assert abs(gx) < 0.5 and abs(gy - TARGET_NORTH) < 0.5, (gx, gy)
+
+    # ArduPilot: no breach from takeoff to the end, no RTL, FENCE_STATUS kept coming
+    assert log.first_breach() is None, [f for _, f in log.fence if f["breach_status"]]
+    assert log.fence[-1][0] > results["t_end"] - 2.0, "FENCE_STATUS stopped arriving"
+    assert FlightMode.RETURN_TO_LAUNCH not in [m for _, m in log.modes], log.summary()
+    assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
+
+    flown = [p for p in log.positions if p[0] >= results["t_goto"]]
+    xy = np.array([p[1:3] for p in flown])
+    distances = shapely.distance(shapely.points(xy), square)
+    worst = int(np.argmin(distances))
+    before = [s for t, s in log.speeds if results["t_goto"] <= t <= reroute["time"]]
+    final = log.positions[-1]
+    if auto:  # it flew through the goal (the mission item) and on to the next one
+        done_t = next(e["time"] for e in events if e["event"] == "reroute_done")
+        final = min(
+            (p for p in log.positions if p[0] <= done_t + 0.5),
+            key=lambda p: math.hypot(p[1] - gx, p[2] - gy),
+        )
+    to_goal = math.hypot(final[1] - gx, final[2] - gy)
+    t_imminent = next(
+        e["time"] for e in events if e["event"] == "level" and e["level"] == "IMMINENT"
+    )
+    y_imminent = float(frame.to_local(reroute["lon"], reroute["lat"])[1])
+    wps = np.array([frame.to_local(lon, lat) for lat, lon in reroute["waypoints"]], float)
+    planned = ", ".join(f"({x:.0f}, {y:.0f})" for x, y in wps)
+    # how far the copter carried on towards the square before it turned
+    turned = max(p[2] for p in flown if abs(p[1]) < HALF_WIDTH and p[2] < NEAR_EDGE)
+    print(
+        f"\nreroute: planner built in {ready['build_s']:.3f} s; IMMINENT at y={y_imminent:.1f} m "
+        f"({NEAR_EDGE - y_imminent:.1f} m before the edge) at {max(before):.1f} m/s; planned in "
+        f"{reroute['plan_s']:.3f} s wall ({reroute['time'] - t_imminent:.3f} s after IMMINENT): "
+        f"{len(reroute['waypoints'])} waypoints, {reroute['length_m']:.0f} m, planned clearance "
+        f"{reroute['clearance_m']:.2f} m [{planned}]; turned at y={turned:.1f} m "
+        f"({NEAR_EDGE - turned:.1f} m short of the edge); flown min distance to the square "
+        f"{distances[worst]:.2f} m at x={xy[worst, 0]:.1f} y={xy[worst, 1]:.1f}; reroute_done "
+        f"{results['t_done'] - reroute['time']:.2f} s wall after the reroute; final "
+        f"{to_goal:.2f} m from the goal at alt {final[3]:.1f} m; {len(log.fence)} FENCE_STATUS, "
+        f"breach_status {sorted({f['breach_status'] for _, f in log.fence})}; modes "
+        f"{[m.name for _, m in log.modes]}; {results['checks']} checks, speedup "
+        f"{sitl.speedup:g} | monitor: {brief}"
+    )
+    assert max(before) > 0.8 * SPEED, f"only {max(before):.1f} m/s before the re-route"
+    assert distances[worst] >= CLEARANCE - TOLERANCE, (
+        f"{distances[worst]:.2f} m from the square at x={xy[worst, 0]:.1f} y={xy[worst, 1]:.1f}"
+    )
+    assert to_goal <= AT_GOAL_M, f"{to_goal:.1f} m from the goal | {log.summary()}"
+    assert abs(final[3] - ALTITUDE) < 3.0, final
+    if not auto:
+        assert log.speed() < STOPPED_MPS, log.summary()
