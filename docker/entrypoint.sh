@@ -7,6 +7,8 @@
 #   ALPHAFENCE_ENFORCE        1 to brake/RTL/land, not only alert
 #   ALPHAFENCE_HORIZON        look-ahead seconds (default 15)
 #   ALPHAFENCE_BREACH_ACTION  rtl | land | brake | none (default rtl)
+#   ALPHAFENCE_IMMINENT_ACTION brake | reroute | rtl | land | none (default brake)
+#   ALPHAFENCE_SIGNING_KEY    MAVLink 2 signing key file (read by alphafence itself)
 #   ALPHAFENCE_LOG            JSON-lines event log path
 # Extra arguments are passed on to `alphafence monitor`.
 set -eu
@@ -30,6 +32,7 @@ case "${ALPHAFENCE_ALLOW_UNSIGNED:-0}" in
 esac
 [ -z "${ALPHAFENCE_HORIZON:-}" ] || set -- "$@" --horizon "$ALPHAFENCE_HORIZON"
 [ -z "${ALPHAFENCE_BREACH_ACTION:-}" ] || set -- "$@" --breach-action "$ALPHAFENCE_BREACH_ACTION"
+[ -z "${ALPHAFENCE_IMMINENT_ACTION:-}" ] || set -- "$@" --imminent-action "$ALPHAFENCE_IMMINENT_ACTION"
 [ -z "${ALPHAFENCE_LOG:-}" ] || set -- "$@" --log "$ALPHAFENCE_LOG"
-# ALPHAFENCE_TRUSTED_KEYS is read by alphafence itself
+# ALPHAFENCE_TRUSTED_KEYS and ALPHAFENCE_SIGNING_KEY are read by alphafence itself
 exec alphafence monitor "$@"

@@ -37,6 +37,7 @@ def test_builds_the_monitor_command(env):
         "ALPHAFENCE_HORIZON": "12",
         "ALPHAFENCE_LOG": "/tmp/e.jsonl",
         "ALPHAFENCE_BREACH_ACTION": "land",
+        "ALPHAFENCE_IMMINENT_ACTION": "reroute",
     }
     res = run(env, "--decel", "3")
     assert res.returncode == 0, res.stderr
@@ -53,6 +54,8 @@ def test_builds_the_monitor_command(env):
         "12",
         "--breach-action",
         "land",
+        "--imminent-action",
+        "reroute",
         "--log",
         "/tmp/e.jsonl",
     ]
