@@ -49,8 +49,9 @@ def _fence(n_vertices, radius):
     return items + [FenceItem(CIRCLE_EXCLUSION, radius, lon + 0.003, lat)]
 
 
-async def alphafence(*args, timeout=60.0):
-    proc = await asyncio.create_subprocess_exec(
+def _spawn(args):
+    """``alphafence ARGS`` as an operator runs it, in a child process."""
+    return asyncio.create_subprocess_exec(
         sys.executable,
         "-m",
         "kit",
@@ -58,6 +59,10 @@ async def alphafence(*args, timeout=60.0):
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
     )
+
+
+async def alphafence(*args, timeout=60.0):
+    proc = await _spawn(args)
     out, err = await asyncio.wait_for(proc.communicate(), timeout)
     return proc.returncode, out.decode(), err.decode()
 
@@ -65,14 +70,7 @@ async def alphafence(*args, timeout=60.0):
 async def monitor_checks(*args, seconds):
     """Run ``alphafence monitor`` for ``seconds``, stop it as systemd would (SIGTERM), and
     return the number of checks it reports."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "kit",
-        *map(str, args),
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-    )
+    proc = await _spawn(args)
     await asyncio.sleep(seconds + 2.0)  # + start-up: imports, the bridge, MAVSDK discovery
     proc.send_signal(signal.SIGTERM)
     out, err = await asyncio.wait_for(proc.communicate(), 20)

@@ -101,6 +101,10 @@ def run(args) -> int:
         reroute_clearance_m=args.reroute_clearance,
     )
     args.key = signing_key(args)
+    if args.log:
+        from kit.monitor.runner import check_log_path
+
+        check_log_path(args.log)
     return asyncio.run(_run(args, fences, options))
 
 
@@ -140,5 +144,7 @@ def _echo(event):
         )
     elif event["event"] != "telemetry_resumed":
         out_console.print(
-            f"{event['time']:.1f} {event['event']} {event.get('action') or event.get('reason') or ''}"
+            f"{event['time']:.1f} {event['event']} "
+            f"{event.get('action') or event.get('reason') or event.get('error') or ''}",
+            soft_wrap=True,
         )

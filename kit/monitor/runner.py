@@ -12,6 +12,7 @@ import contextlib
 import json
 import math
 import time
+from collections import deque
 from datetime import datetime, timezone
 
 from kit.monitor.engine import Engine, Sample, alert_text
@@ -20,20 +21,27 @@ TICK_S = 0.1
 
 
 class EventLog:
-    """JSON lines, appended by a background task (file I/O never blocks the loop)."""
+    """JSON lines, appended by a background task (file I/O never blocks the loop).
 
-    def __init__(self, path=None, echo=None):
+    ``events`` keeps the latest ``keep`` events in memory (for tests and the summary). A write
+    that fails (disk full, the directory gone) is reported once through ``echo`` and as a
+    ``log_write_failed`` event, the lines it held are counted as lost, and the writer keeps
+    trying with the next ones: the monitor itself never stops or hangs for its log."""
+
+    def __init__(self, path=None, echo=None, keep: int = 10_000):
         self.path = path
         self.echo = echo
         self.queue: asyncio.Queue = asyncio.Queue()
         self.task = asyncio.create_task(self._write()) if path else None
-        self.events = []
+        self.events: deque = deque(maxlen=keep)
+        self.lost = 0  # lines that could not be written
+        self.write_error: str | None = None
 
     def put(self, event):
         self.events.append(event)
         if self.echo:
             self.echo(event)
-        if self.task:
+        if self.task and not self.task.done():
             self.queue.put_nowait(json.dumps(event, separators=(",", ":")))
 
     async def _write(self):
@@ -41,16 +49,45 @@ class EventLog:
             lines = [await self.queue.get()]
             while not self.queue.empty():
                 lines.append(self.queue.get_nowait())
-            await asyncio.to_thread(_append, self.path, lines)
+            try:
+                await asyncio.to_thread(_append, self.path, lines)
+            except OSError as exc:
+                self.lost += len(lines)
+                if self.write_error is None:
+                    self.write_error = f"{self.path}: {exc.strerror or exc}"
+                    self.put(
+                        {
+                            "time": round(time.monotonic(), 3),
+                            "event": "log_write_failed",
+                            "error": self.write_error,
+                        }
+                    )
+            else:
+                self.write_error = None
 
-    async def close(self):
+    async def close(self, timeout: float = 5.0):
         if self.task:
-            while not self.queue.empty():
+            deadline = time.monotonic() + timeout
+            while not self.queue.empty() and not self.task.done():
+                if time.monotonic() > deadline:
+                    self.lost += self.queue.qsize()
+                    break
                 await asyncio.sleep(0.01)
             await asyncio.sleep(0.05)
             self.task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
+            with contextlib.suppress(asyncio.CancelledError, Exception):
                 await self.task
+
+
+def check_log_path(path) -> None:
+    """Refuse an event log that cannot be appended to, before any link is opened."""
+    from kit.errors import InputError
+
+    try:
+        with open(path, "a", encoding="utf-8"):
+            pass
+    except OSError as exc:
+        raise InputError(path, f"cannot write the event log: {exc.strerror}") from None
 
 
 def _num(fields, key, default=None) -> float:
@@ -146,6 +183,7 @@ class Monitor:
         self.tasks = []
         self.pending = set()
         self._clock_t = -math.inf
+        self._ended = set()  # tasks whose end has been reported
         self._command_lock = asyncio.Lock()
         # re-routing (options.imminent_action "reroute" with enforce)
         self.rerouter = None
@@ -162,14 +200,20 @@ class Monitor:
         for setter in (tel.set_rate_position, tel.set_rate_velocity_ned):
             with contextlib.suppress(Exception):
                 await setter(self.rate_hz)
+        streams = {
+            "position": tel.subscribe_position,
+            "velocity": tel.subscribe_velocity_ned,
+            "mode": tel.subscribe_flight_mode,
+            "armed": tel.subscribe_armed,
+            "gps": tel.subscribe_gps_info,
+        }
         self.tasks = [
-            asyncio.create_task(self._follow(tel.subscribe_position(), "position", wake=True)),
-            asyncio.create_task(self._follow(tel.subscribe_velocity_ned(), "velocity")),
-            asyncio.create_task(self._follow(tel.subscribe_flight_mode(), "mode")),
-            asyncio.create_task(self._follow(tel.subscribe_armed(), "armed")),
-            asyncio.create_task(self._follow(tel.subscribe_gps_info(), "gps")),
-            asyncio.create_task(self._adsb()),
+            asyncio.create_task(
+                self._follow(subscribe(), key, wake=key == "position"), name=f"telemetry:{key}"
+            )
+            for key, subscribe in streams.items()
         ]
+        self.tasks.append(asyncio.create_task(self._adsb()))
         if self.engine.options.mavlink_traffic:
             # every GLOBAL_POSITION_INT on the link, the vehicle's own at the telemetry rate
             # included, crosses into Python: opt-in, for links that carry other aircraft
@@ -197,6 +241,7 @@ class Monitor:
                 if time.monotonic() - self._clock_t > 1.0:  # ED-269 time windows
                     self._clock_t = time.monotonic()
                     self.engine.fences.set_time(datetime.now(timezone.utc))
+                    events += self._ended_tasks()
                 for e in events:
                     self._handle(e)
         finally:
@@ -205,6 +250,26 @@ class Monitor:
             for t in self.tasks + list(self.pending):
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await t
+
+    def _ended_tasks(self):
+        """A telemetry stream that ended (MAVSDK raised, or the stream closed) is an event,
+        once: its value would otherwise go stale without a word."""
+        events = []
+        for task in self.tasks:
+            if not task.get_name().startswith("telemetry:"):
+                continue
+            if task.done() and task not in self._ended and not task.cancelled():
+                self._ended.add(task)
+                exc = task.exception()
+                events.append(
+                    {
+                        "time": round(time.monotonic(), 3),
+                        "event": "telemetry_task_ended",
+                        "task": task.get_name(),
+                        "error": "" if exc is None else f"{type(exc).__name__}: {exc}",
+                    }
+                )
+        return events
 
     async def _follow(self, stream, key, wake=False):
         async for value in stream:

@@ -1,0 +1,126 @@
+"""The monitor's event log: written off the event loop, and a log that cannot be written never
+stops, hangs or grows the monitor (found by the soak bench: a failed write used to end the
+writer silently, queue every later event and make close() wait forever)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from pathlib import Path
+
+from kit.cli import main
+from kit.monitor.runner import EventLog
+
+DEMO_SCENE = Path(__file__).resolve().parents[1] / "kit" / "data" / "demo-scene.geojson"
+
+
+async def test_events_are_appended_as_json_lines(tmp_path):
+    path = tmp_path / "events.jsonl"
+    log = EventLog(path)
+    for i in range(50):
+        log.put({"time": i, "event": "level", "level": "CLEAR"})
+    await log.close()
+    lines = path.read_text().splitlines()
+    assert [json.loads(line)["time"] for line in lines] == list(range(50))
+    assert log.lost == 0
+
+
+async def test_a_failing_log_is_reported_once_and_close_returns(tmp_path):
+    folder = tmp_path / "gone"
+    folder.mkdir()
+    seen = []
+    log = EventLog(folder / "events.jsonl", echo=seen.append)
+    log.put({"time": 0, "event": "level"})
+    await asyncio.sleep(0.2)
+    folder.joinpath("events.jsonl").unlink()
+    folder.rmdir()  # the directory is gone: every later append fails
+    for i in range(1, 1001):
+        log.put({"time": i, "event": "level"})
+        if i % 100 == 0:
+            await asyncio.sleep(0.02)
+    t0 = time.monotonic()
+    await asyncio.wait_for(log.close(), 10)  # the old writer made this wait forever
+    assert time.monotonic() - t0 < 2.0
+    failures = [e for e in seen if e["event"] == "log_write_failed"]
+    assert len(failures) == 1 and "events.jsonl" in failures[0]["error"]
+    assert log.lost >= 1000 - 100  # what queued after the failure is counted, not kept
+    assert log.queue.qsize() == 0 or log.task.done()
+
+
+async def test_memory_holds_only_the_latest_events():
+    log = EventLog(None, keep=100)
+    for i in range(1000):
+        log.put({"time": i, "event": "level"})
+    assert len(log.events) == 100 and log.events[0]["time"] == 900
+    await log.close()
+
+
+def test_cli_refuses_an_unwritable_log_before_connecting(tmp_path, capsys):
+    fences = tmp_path / "f.geojson"
+    assert main(["build", str(DEMO_SCENE), "-o", str(fences)]) == 0
+    bad = tmp_path / "no-such-dir" / "events.jsonl"
+    code = main(
+        ["monitor", "--allow-unsigned", "--connect", "udpin://127.0.0.1:9",
+         "--fences", str(fences), "--log", str(bad)]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "cannot write the event log" in err and str(bad) in err
+    assert len([line for line in err.splitlines() if "error" in line]) == 1
+
+
+class _Telemetry:
+    """Positions at 50 Hz; the armed stream breaks after one value; the rest stay silent."""
+
+    async def set_rate_position(self, hz):
+        pass
+
+    async def set_rate_velocity_ned(self, hz):
+        pass
+
+    async def subscribe_position(self):
+        from types import SimpleNamespace
+
+        while True:
+            await asyncio.sleep(0.02)
+            yield SimpleNamespace(
+                latitude_deg=35.95, longitude_deg=14.45, relative_altitude_m=20.0,
+                absolute_altitude_m=60.0,
+            )  # fmt: skip
+
+    async def subscribe_armed(self):
+        yield True
+        raise RuntimeError("stream broke")
+
+    async def _silent(self):
+        await asyncio.Event().wait()
+        yield None
+
+    subscribe_velocity_ned = subscribe_flight_mode = subscribe_gps_info = _silent
+
+
+async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
+    from types import SimpleNamespace
+
+    import shapely
+
+    from kit.monitor.engine import MonitorOptions
+    from kit.monitor.fenceset import FenceSet
+    from kit.monitor.runner import Monitor
+    from kit.readers.fences import FenceRecord
+
+    fences = FenceSet([FenceRecord("sq", "keep_out", shapely.box(14.50, 35.90, 14.51, 35.91))])
+    vehicle = SimpleNamespace(telemetry=_Telemetry(), system=None)
+    log = EventLog(None)
+    monitor = Monitor(vehicle, fences, MonitorOptions(), log)
+    monitor._adsb = asyncio.Event().wait  # no MAVSDK system behind the stub: no ADS-B
+    stop = asyncio.Event()
+    task = asyncio.create_task(monitor.run(stop))
+    await asyncio.sleep(2.5)
+    stop.set()
+    await asyncio.wait_for(task, 5)
+    ended = [e for e in log.events if e["event"] == "telemetry_task_ended"]
+    assert len(ended) == 1, ended
+    assert ended[0]["task"] == "telemetry:armed" and "stream broke" in ended[0]["error"]
+    assert monitor.engine.checks > 20  # the monitor kept checking positions
