@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 
-.PHONY: install demo test sitl-test bench fuzz lint clean
+.PHONY: install demo test sitl-test bench soak fuzz fuzz-atheris lint clean
 
 install: $(STAMP)
 
@@ -28,9 +28,28 @@ sitl-test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench --osm $(MALTA)
 
-# >= 100,000 generated inputs across the readers (7 fuzz tests x 15,000); `make test` runs 60 each
+# the monitor against SITL (speedup 10, simulated ADS-B) for 30 minutes: not part of `make bench`
+soak: $(STAMP)
+	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
+	$(BIN)/python -m bench --osm $(MALTA) --only soak --soak-minutes 30
+
+# >= 100,000 generated inputs across the readers (7 fuzz tests x 15,000) and as many again for
+# what comes from the vehicle (6 x 15,000, plus hostile downloads); `make test` runs 60 each
 fuzz: $(STAMP)
-	ALPHAFENCE_FUZZ_EXAMPLES=15000 $(BIN)/pytest -q -p no:cacheprovider tests/test_fuzz_readers.py
+	ALPHAFENCE_FUZZ_EXAMPLES=15000 $(BIN)/pytest -q -p no:cacheprovider \
+		tests/test_fuzz_readers.py tests/test_fuzz_vehicle_input.py
+
+# coverage-guided (atheris/libFuzzer) byte mutation of every reader and the signed MAVLink link
+ATHERIS_RUNS ?= 50000
+ATHERIS_TARGETS := geojson ed269 osm fences plan waypoints rules mavlink
+fuzz-atheris: $(STAMP)
+	$(BIN)/pip install --quiet -e '.[fuzz]'
+	@for t in $(ATHERIS_TARGETS); do \
+		log=$${TMPDIR:-/tmp}/alphafence-atheris-$$t.log; \
+		$(BIN)/python tests/atheris_fuzz.py $$t -runs=$(ATHERIS_RUNS) -max_len=4096 >$$log 2>&1 \
+			|| { tail -25 $$log; echo "atheris $$t: crash (input saved as crash-*)"; exit 1; }; \
+		echo "atheris $$t: $$(grep -E '^Done' $$log)"; \
+	done
 
 lint: $(STAMP)
 	$(BIN)/ruff check kit tests bench

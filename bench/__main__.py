@@ -1,6 +1,7 @@
 """Run the benchmarks and print each result against its target and its named peer.
 
 python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf
+python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf --only soak  # 30 min (make soak)
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from bench import (
     monitor_bench,
     monitor_cpu_bench,
     route_bench,
+    soak_bench,
     upload_bench,
 )
 
@@ -31,7 +33,16 @@ def main(argv=None) -> int:
         help="sites timed against alphashape.optimizealpha (it is slow)",
     )
     p.add_argument(
-        "--only", choices=["build", "compile", "upload", "monitor", "route"], help="run one group"
+        "--only",
+        choices=["build", "compile", "upload", "monitor", "route", "soak"],
+        help="run one group (soak only runs when asked for: 30 minutes of SITL)",
+    )
+    p.add_argument(
+        "--soak-minutes",
+        type=float,
+        default=30.0,
+        metavar="N",
+        help="wall minutes of the soak (default 30)",
     )
     args = p.parse_args(argv)
     console = Console(width=150)
@@ -47,6 +58,19 @@ def main(argv=None) -> int:
         rows += monitor_cpu_bench.run(args.osm, build_bench.Row)
     if args.only in (None, "route"):
         rows += route_bench.run(args.osm, build_bench.Row)
+    if args.only == "soak":
+        rows += soak_bench.run(args.osm, build_bench.Row, args.soak_minutes, console)
+    elif args.only is None:  # too long for the default run
+        rows.append(
+            build_bench.Row(
+                "soak: monitor on SITL x10 with ADS-B, 30 min",
+                "not run: `make soak`",
+                "no missed check, 0 exceptions, < 20 MB",
+                "-",
+                "-",
+                True,
+            )
+        )
     table = Table(title="AlphaFence benchmarks (this machine, one run)")
     for col in ("benchmark", "result", "target", "peer", "ratio", "ok"):
         table.add_column(col, justify="left" if col in ("benchmark", "peer") else "right")
