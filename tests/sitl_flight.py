@@ -1,13 +1,131 @@
 """Helpers shared by the SITL flight tests."""
 
+from __future__ import annotations
+
 import asyncio
 import json
+import math
 import time
+from dataclasses import dataclass, field
 
 import pytest
 
+from kit.frame import LocalFrame
+
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 FENCE_STATUS_ID = 162
+
+
+@dataclass
+class FlightLog:
+    """What the vehicle reported, each with its time.monotonic() of arrival; a test fills the
+    lists it ``watch``es (each stream fills the list of its name), and ``events`` with the
+    monitor's if it runs one."""
+
+    frame: LocalFrame  # home's: positions are metres east (x) / north (y) of it
+    texts: object = ()  # the Vehicle's STATUSTEXT deque, once connected
+    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
+    speeds: list = field(default_factory=list)  # (t, horizontal speed m/s)
+    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
+    custom_modes: list = field(default_factory=list)  # (t, ArduCopter mode number), on change
+    armed: list = field(default_factory=list)  # (t, bool), on change only
+    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
+    progress: list = field(default_factory=list)  # (t, current, total): the mission's
+    events: list = field(default_factory=list)  # the monitor's (its EventLog's list)
+
+    def mode(self):
+        return self.modes[-1][1] if self.modes else None
+
+    def speed(self):
+        return self.speeds[-1][1] if self.speeds else math.inf
+
+    def is_armed(self):
+        return self.armed[-1][1] if self.armed else None
+
+    def last_position(self, before=math.inf):
+        earlier = [p for p in self.positions if p[0] <= before]
+        return earlier[-1] if earlier else None
+
+    def first_breach(self):
+        """(t, FENCE_STATUS fields) of the first one reporting a breach, or None."""
+        return next(((t, f) for t, f in self.fence if f["breach_status"] != 0), None)
+
+    def summary(self) -> str:
+        """For failure messages: the latest of each, mission progress and the monitor's events
+        if there are any."""
+        pos = self.last_position()
+        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
+        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
+        parts = [f"last position {where}", f"modes {modes}"]
+        if self.progress:
+            parts.append(f"mission progress {self.progress[-1][1:]}")
+        parts.append(f"last FENCE_STATUS {self.fence[-1][1] if self.fence else 'none received'}")
+        if self.events:
+            events = "; ".join(
+                f"{e['event']} {e.get('level') or e.get('action') or e.get('reason') or ''}"
+                f"@{e['time']:.2f}"
+                for e in list(self.events)[-10:]
+            )
+            parts.append(f"monitor: {events}")
+        said = "; ".join(text for _, text in list(self.texts)[-8:])
+        parts.append(f"vehicle said: {said}")
+        return "; ".join(parts)
+
+
+def watch(log: FlightLog, vehicle, direct, *streams: str) -> list[asyncio.Task]:
+    """Start the subscriptions named in ``streams``, each appending to the log's list of that
+    name: "positions", "speeds", "modes" and "armed" from MAVSDK's telemetry, "progress" from
+    mission_raw, "fence" (FENCE_STATUS) and "custom_modes" (HEARTBEAT) through ``direct``,
+    MAVSDK's mavlink_direct plugin. Returns the tasks, for ``unwatch``. Nothing is asked of the
+    vehicle here: the test sets the rates and asks for FENCE_STATUS itself."""
+    frame = log.frame
+
+    async def positions():
+        async for p in vehicle.telemetry.subscribe_position():
+            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
+            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
+
+    async def speeds():
+        async for v in vehicle.telemetry.subscribe_velocity_ned():
+            log.speeds.append((time.monotonic(), math.hypot(v.north_m_s, v.east_m_s)))
+
+    async def modes():
+        async for mode in vehicle.telemetry.subscribe_flight_mode():
+            if mode != log.mode():
+                log.modes.append((time.monotonic(), mode))
+
+    async def custom_modes():  # ArduPilot's own mode number (MAVSDK shows GUIDED as OFFBOARD)
+        async for message in direct.subscribe_message("HEARTBEAT"):
+            if (message.system_id, message.component_id) != (1, 1):
+                continue
+            mode = json.loads(message.fields_json)["custom_mode"]
+            if not log.custom_modes or log.custom_modes[-1][1] != mode:
+                log.custom_modes.append((time.monotonic(), mode))
+
+    async def armed():
+        async for is_armed in vehicle.telemetry.subscribe_armed():
+            if is_armed != log.is_armed():
+                log.armed.append((time.monotonic(), is_armed))
+
+    async def fence():
+        async for message in direct.subscribe_message("FENCE_STATUS"):
+            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
+
+    async def progress():
+        async for p in vehicle.mission_raw.subscribe_mission_progress():
+            log.progress.append((time.monotonic(), p.current, p.total))
+
+    watchers = {
+        w.__name__: w for w in (positions, speeds, modes, custom_modes, armed, fence, progress)
+    }
+    return [asyncio.create_task(watchers[name]()) for name in streams]
+
+
+async def unwatch(tasks):
+    """Cancel ``watch``'s tasks and wait for them to end."""
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
 
 
 async def ask_fence_status(direct, hz: float):

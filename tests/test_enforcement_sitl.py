@@ -28,9 +28,7 @@ fence breached", "Manual recovery started", later "Fence breach cleared"; farthe
 from __future__ import annotations
 
 import asyncio
-import json
 import time
-from dataclasses import dataclass, field
 
 import pytest
 
@@ -39,7 +37,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status, retry, until
+from tests.sitl_flight import FlightLog, ask_fence_status, retry, until, unwatch, watch
 
 pytestmark = pytest.mark.sitl
 
@@ -58,62 +56,6 @@ ARM_TIMEOUT = 60.0  # "Need Position Estimate" and friends: keep retrying this l
 MODE_SWITCH_MAX = 3.0  # wall seconds between the breach report and RTL (measured: ~0)
 
 FENCE_BREACH_BOUNDARY = 3
-
-
-@dataclass
-class FlightLog:
-    """What the vehicle reported, each with its time.monotonic() of arrival."""
-
-    frame: LocalFrame
-    texts: object = ()  # the Vehicle's STATUSTEXT deque, once connected
-    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
-    speeds: list = field(default_factory=list)  # (t, horizontal speed m/s)
-    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
-    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
-
-    def mode(self):
-        return self.modes[-1][1] if self.modes else None
-
-    def last_position(self, before=float("inf")):
-        earlier = [p for p in self.positions if p[0] <= before]
-        return earlier[-1] if earlier else None
-
-    def first_breach(self):
-        return next(((t, f) for t, f in self.fence if f["breach_status"] == 1), None)
-
-    def summary(self) -> str:
-        pos = self.last_position()
-        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
-        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
-        fence = self.fence[-1][1] if self.fence else "none received"
-        said = "; ".join(text for _, text in list(self.texts)[-8:])
-        return (
-            f"last position {where}; modes {modes}; last FENCE_STATUS {fence}; vehicle said: {said}"
-        )
-
-
-async def _watch(log: FlightLog, vehicle, direct):
-    frame = log.frame
-
-    async def positions():
-        async for p in vehicle.telemetry.subscribe_position():
-            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
-            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
-
-    async def speeds():
-        async for v in vehicle.telemetry.subscribe_velocity_ned():
-            log.speeds.append((time.monotonic(), (v.north_m_s**2 + v.east_m_s**2) ** 0.5))
-
-    async def modes():
-        async for mode in vehicle.telemetry.subscribe_flight_mode():
-            if mode != log.mode():
-                log.modes.append((time.monotonic(), mode))
-
-    async def fence_status():
-        async for message in direct.subscribe_message("FENCE_STATUS"):
-            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
-
-    return [asyncio.create_task(c()) for c in (positions, speeds, modes, fence_status)]
 
 
 def _exclusion_square(frame: LocalFrame):
@@ -146,7 +88,7 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
         log.texts = vehicle.texts
         action = ActionAsync(vehicle.system)
         direct = MavlinkDirectAsync(vehicle.system)
-        watchers = await _watch(log, vehicle, direct)
+        watchers = watch(log, vehicle, direct, "positions", "speeds", "modes", "fence")
         try:
             # -- the fence and its parameters, each read back by the kit
             report = await upload_fence(vehicle, _exclusion_square(frame))
@@ -239,6 +181,4 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
                 f"speedup {sitl.speedup:g} | {'; '.join(said)}"
             )
         finally:
-            for task in watchers:
-                task.cancel()
-            await asyncio.gather(*watchers, return_exceptions=True)
+            await unwatch(watchers)

@@ -72,6 +72,19 @@ def test_pilot_mode_change_backs_off(fences):
     assert [e for e in events if e["event"] == "action_withheld"]
 
 
+def test_the_first_mode_known_is_not_the_pilot_taking_over(fences):
+    # the position stream can start before the flight-mode stream (seen on SITL): the mode
+    # arriving with the second sample is where the vehicle already was, not a change
+    eng = Engine(fences, MonitorOptions(enforce=True))
+    samples = list(north_run(seconds=1))
+    samples[0].mode = None
+    for s in samples[1:]:
+        s.mode = "STABILIZED"  # a pilot mode: a change into it would start the back-off
+    events = run(eng, samples)
+    assert not [e for e in events if e["event"] == "pilot_mode_change"]
+    assert eng.backoff_until < 0
+
+
 def test_gps_glitches_and_stale_telemetry_are_events(fences):
     eng = Engine(fences)
     s0 = Sample(0.0, 51.43, -0.55, 20.0)

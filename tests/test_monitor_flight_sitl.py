@@ -25,8 +25,9 @@ with the earlier 1.0 s reaction time (32 m stopping distance at 10 m/s); the def
 1.5 s (37 m), which puts IMMINENT about 3.7 s ahead by construction.
 With enforce, the brake is MAVSDK's hold(), which ArduCopter carries out as BRAKE (custom mode
 17; MAVSDK reports it as HOLD): the copter stops 0.93-0.95 s wall (about 4.7 s of flight) after
-the IMMINENT, 10.2-10.8 m short of the edge (farthest 139.2-139.8 m north), and ArduPilot
-reports no breach. Each test takes about 18 s wall, SITL start included.
+the IMMINENT, 10.2-10.8 m short of the edge (farthest 139.2-139.8 m north) with the 1.0 s
+reaction time; with the 1.5 s default, IMMINENT at 36.4 m and the stop 15.8 m short (farthest
+134.2 m; one run, 2026-11-22). ArduPilot reports no breach. Each test takes about 18 s wall, SITL start included.
 """
 
 from __future__ import annotations
@@ -36,7 +37,6 @@ import functools
 import json
 import statistics
 import time
-from dataclasses import dataclass, field
 
 import pytest
 import shapely
@@ -49,7 +49,15 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status, retry, speedup_options, until
+from tests.sitl_flight import (
+    FlightLog,
+    ask_fence_status,
+    retry,
+    speedup_options,
+    until,
+    unwatch,
+    watch,
+)
 
 _until = functools.partial(until, poll=0.02)  # finer timing for the lead measurements
 pytestmark = pytest.mark.sitl
@@ -71,76 +79,6 @@ STOPPED_MPS = 0.3
 WATCH_AFTER_STOP = 6.0  # wall seconds (30 s of flight at speedup 5) of no breach after stopping
 
 COPTER_MODES = {4: "GUIDED", 5: "LOITER", 6: "RTL", 17: "BRAKE"}  # ArduCopter custom_mode
-
-
-@dataclass
-class FlightLog:
-    """What the vehicle reported, each with its time.monotonic() of arrival."""
-
-    frame: LocalFrame
-    texts: object = ()
-    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
-    speeds: list = field(default_factory=list)  # (t, horizontal speed m/s)
-    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
-    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
-    custom_modes: list = field(default_factory=list)  # (t, ArduCopter mode number), on change
-    events: list = ()  # the monitor's events
-
-    def mode(self):
-        return self.modes[-1][1] if self.modes else None
-
-    def speed(self):
-        return self.speeds[-1][1] if self.speeds else None
-
-    def first_breach(self):
-        return next((t for t, f in self.fence if f["breach_status"] != 0), None)
-
-    def summary(self) -> str:
-        pos = self.positions[-1] if self.positions else None
-        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
-        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
-        fence = self.fence[-1][1] if self.fence else "none received"
-        said = "; ".join(text for _, text in list(self.texts)[-8:])
-        events = "; ".join(
-            f"{e['event']} {e.get('level') or e.get('action') or ''}@{e['time']:.2f}"
-            for e in list(self.events)[-8:]
-        )
-        return (
-            f"last position {where}; modes {modes}; last FENCE_STATUS {fence}; "
-            f"monitor: {events}; vehicle said: {said}"
-        )
-
-
-async def _watch(log: FlightLog, vehicle, direct):
-    frame = log.frame
-
-    async def positions():
-        async for p in vehicle.telemetry.subscribe_position():
-            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
-            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
-
-    async def speeds():
-        async for v in vehicle.telemetry.subscribe_velocity_ned():
-            log.speeds.append((time.monotonic(), (v.north_m_s**2 + v.east_m_s**2) ** 0.5))
-
-    async def modes():
-        async for mode in vehicle.telemetry.subscribe_flight_mode():
-            if mode != log.mode():
-                log.modes.append((time.monotonic(), mode))
-
-    async def fence_status():
-        async for message in direct.subscribe_message("FENCE_STATUS"):
-            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
-
-    async def heartbeats():  # ArduPilot's own mode number (MAVSDK shows GUIDED as OFFBOARD)
-        async for message in direct.subscribe_message("HEARTBEAT"):
-            if (message.system_id, message.component_id) != (1, 1):
-                continue
-            mode = json.loads(message.fields_json)["custom_mode"]
-            if not log.custom_modes or log.custom_modes[-1][1] != mode:
-                log.custom_modes.append((time.monotonic(), mode))
-
-    return [asyncio.create_task(c()) for c in (positions, speeds, modes, fence_status, heartbeats)]
 
 
 def _square():
@@ -214,7 +152,9 @@ class _Flight:
             self.vehicle = vehicle
             log.texts = vehicle.texts
             direct = MavlinkDirectAsync(vehicle.system)
-            watchers = await _watch(log, vehicle, direct)
+            watchers = watch(
+                log, vehicle, direct, "positions", "speeds", "modes", "fence", "custom_modes"
+            )
             self.monitor_log = EventLog()
             log.events = self.monitor_log.events
             stop = asyncio.Event()
@@ -268,15 +208,14 @@ class _Flight:
                 stop.set()
                 if monitor_task is not None:
                     await asyncio.wait_for(asyncio.gather(monitor_task, return_exceptions=True), 5)
-                for task in watchers:
-                    task.cancel()
-                await asyncio.gather(*watchers, return_exceptions=True)
+                await unwatch(watchers)
 
 
 def _ardupilot_breach_time(log: FlightLog, since: float):
     from mavsdk.plugins.telemetry import FlightMode
 
-    times = [log.first_breach()]
+    breach = log.first_breach()
+    times = [breach[0] if breach else None]
     times.append(
         next((t for t, m in log.modes if m == FlightMode.RETURN_TO_LAUNCH and t >= since), None)
     )

@@ -47,10 +47,8 @@ test takes about 27 s wall, SITL start included.
 from __future__ import annotations
 
 import asyncio
-import json
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
@@ -65,7 +63,15 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status, retry, speedup_options, until
+from tests.sitl_flight import (
+    FlightLog,
+    ask_fence_status,
+    retry,
+    speedup_options,
+    until,
+    unwatch,
+    watch,
+)
 
 pytestmark = pytest.mark.sitl
 
@@ -86,72 +92,6 @@ STOPPED_MPS = 0.3
 
 WALL_TIMEOUT = 150.0
 ARM_TIMEOUT = 60.0
-
-
-@dataclass
-class FlightLog:
-    frame: LocalFrame
-    texts: object = ()
-    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
-    speeds: list = field(default_factory=list)  # (t, horizontal m/s)
-    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
-    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
-    progress: list = field(default_factory=list)  # (t, current, total): AUTO's mission
-    events: list = field(default_factory=list)  # the monitor's
-
-    def mode(self):
-        return self.modes[-1][1] if self.modes else None
-
-    def speed(self):
-        return self.speeds[-1][1] if self.speeds else math.inf
-
-    def first_breach(self):
-        return next(((t, f) for t, f in self.fence if f["breach_status"] == 1), None)
-
-    def summary(self) -> str:
-        pos = self.positions[-1] if self.positions else None
-        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
-        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
-        fence = self.fence[-1][1] if self.fence else "none received"
-        said = "; ".join(text for _, text in list(self.texts)[-8:])
-        events = "; ".join(
-            f"{e['event']} {e.get('level') or e.get('action') or e.get('reason') or ''}"
-            f"@{e['time']:.2f}"
-            for e in list(self.events)[-10:]
-        )
-        return (
-            f"last position {where}; modes {modes}; last FENCE_STATUS {fence}; "
-            f"monitor: {events}; vehicle said: {said}"
-        )
-
-
-async def _watch(log: FlightLog, vehicle, direct):
-    frame = log.frame
-
-    async def positions():
-        async for p in vehicle.telemetry.subscribe_position():
-            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
-            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
-
-    async def speeds():
-        async for v in vehicle.telemetry.subscribe_velocity_ned():
-            log.speeds.append((time.monotonic(), math.hypot(v.north_m_s, v.east_m_s)))
-
-    async def modes():
-        async for mode in vehicle.telemetry.subscribe_flight_mode():
-            if mode != log.mode():
-                log.modes.append((time.monotonic(), mode))
-
-    async def fence_status():
-        async for message in direct.subscribe_message("FENCE_STATUS"):
-            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
-
-    async def progress():
-        async for p in vehicle.mission_raw.subscribe_mission_progress():
-            log.progress.append((time.monotonic(), p.current, p.total))
-
-    watchers = (positions, speeds, modes, fence_status, progress)
-    return [asyncio.create_task(c()) for c in watchers]
 
 
 def _square():
@@ -240,7 +180,7 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
     async with open_vehicle(sitl.connection_url) as vehicle:
         log.texts = vehicle.texts
         direct = MavlinkDirectAsync(vehicle.system)
-        watchers = await _watch(log, vehicle, direct)
+        watchers = watch(log, vehicle, direct, "positions", "speeds", "modes", "fence", "progress")
         monitor_log = EventLog()
         log.events = monitor_log.events
         stop = asyncio.Event()
@@ -329,9 +269,7 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
             stop.set()
             if monitor_task is not None:
                 await asyncio.wait_for(asyncio.gather(monitor_task, return_exceptions=True), 5)
-            for task in watchers:
-                task.cancel()
-            await asyncio.gather(*watchers, return_exceptions=True)
+            await unwatch(watchers)
 
 
 def _check(sitl, log: FlightLog, results, auto: bool):

@@ -34,9 +34,7 @@ takes about 46 s wall, SITL start included.
 from __future__ import annotations
 
 import asyncio
-import json
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
@@ -50,7 +48,7 @@ from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import ask_fence_status, retry, until
+from tests.sitl_flight import FlightLog, ask_fence_status, retry, until, unwatch, watch
 
 pytestmark = pytest.mark.sitl
 
@@ -71,64 +69,6 @@ ARM_TIMEOUT = 60.0
 
 FRAME_GLOBAL = 0
 MISSION_TYPE_MISSION = 0
-
-
-@dataclass
-class FlightLog:
-    frame: LocalFrame
-    texts: object = ()
-    positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
-    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
-    fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
-    progress: list = field(default_factory=list)  # (t, current, total)
-    armed: list = field(default_factory=list)  # (t, bool), on change only
-
-    def mode(self):
-        return self.modes[-1][1] if self.modes else None
-
-    def is_armed(self):
-        return self.armed[-1][1] if self.armed else None
-
-    def summary(self) -> str:
-        pos = self.positions[-1] if self.positions else None
-        where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
-        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
-        fence = self.fence[-1][1] if self.fence else "none received"
-        progress = self.progress[-1][1:] if self.progress else "none"
-        said = "; ".join(text for _, text in list(self.texts)[-8:])
-        return (
-            f"last position {where}; modes {modes}; mission progress {progress}; "
-            f"last FENCE_STATUS {fence}; vehicle said: {said}"
-        )
-
-
-async def _watch(log: FlightLog, vehicle, direct):
-    frame = log.frame
-
-    async def positions():
-        async for p in vehicle.telemetry.subscribe_position():
-            x, y = frame.to_local(p.longitude_deg, p.latitude_deg)
-            log.positions.append((time.monotonic(), float(x), float(y), p.relative_altitude_m))
-
-    async def modes():
-        async for mode in vehicle.telemetry.subscribe_flight_mode():
-            if mode != log.mode():
-                log.modes.append((time.monotonic(), mode))
-
-    async def armed():
-        async for is_armed in vehicle.telemetry.subscribe_armed():
-            if is_armed != log.is_armed():
-                log.armed.append((time.monotonic(), is_armed))
-
-    async def fence_status():
-        async for message in direct.subscribe_message("FENCE_STATUS"):
-            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
-
-    async def progress():
-        async for p in vehicle.mission_raw.subscribe_mission_progress():
-            log.progress.append((time.monotonic(), p.current, p.total))
-
-    return [asyncio.create_task(c()) for c in (positions, modes, armed, fence_status, progress)]
 
 
 def _square_local():
@@ -232,7 +172,7 @@ async def _fly_the_route(sitl, log: FlightLog):
         log.texts = vehicle.texts
         action = ActionAsync(vehicle.system)
         direct = MavlinkDirectAsync(vehicle.system)
-        watchers = await _watch(log, vehicle, direct)
+        watchers = watch(log, vehicle, direct, "positions", "modes", "armed", "fence", "progress")
         try:
             # -- the fence and its parameters, the mission, each read back
             report = await upload_fence(vehicle, _fence_items(frame))
@@ -277,9 +217,7 @@ async def _fly_the_route(sitl, log: FlightLog):
             )
             t_landed = await until("landed and disarmed", lambda: not log.is_armed(), 40, log)
         finally:
-            for task in watchers:
-                task.cancel()
-            await asyncio.gather(*watchers, return_exceptions=True)
+            await unwatch(watchers)
 
     flown = [p for p in log.positions if t_start <= p[0] <= t_landed]
     xy = np.array([p[1:3] for p in flown])

@@ -299,7 +299,8 @@ class Engine:
 
     # -- decisions ------------------------------------------------------------------
     def _pilot(self, s):
-        if s.mode is None or self.last is None or s.mode == self.last.mode:
+        # the first mode known (telemetry streams start in any order) is not a change
+        if s.mode is None or self.last is None or self.last.mode in (None, s.mode):
             return []
         if self.expect_mode_change and s.t - self.action_t <= COMMAND_SETTLE_S:
             self.expect_mode_change = False
