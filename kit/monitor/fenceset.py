@@ -133,17 +133,18 @@ class FenceSet:
     def _ahead(self, p, x, y, ux, uy, lookahead_m, skip):
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
         ray = shapely.LineString([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
-        best = None
-        cand = (
-            [int(ko_idx[j]) for j in ko_tree.query(ray, predicate="intersects")] if ko_tree else []
-        )
-        cand += [
+        cand = ko_idx[ko_tree.query(ray, predicate="intersects")] if ko_tree else ko_idx[:0]
+        timed = [
             k for k in self._timed_keep_out if self.active[k] and ray.intersects(self.local[k])
         ]
-        for k in cand:
-            if k in skip:
-                continue
-            along = float(shapely.distance(p, shapely.intersection(ray, self.local[k])))
-            if best is None or along < best[1]:
-                best = (k, along)
-        return best
+        if timed:
+            cand = np.concatenate([cand, np.asarray(timed, dtype=cand.dtype)])
+        if skip:
+            cand = cand[~np.isin(cand, skip)]
+        if not cand.size:
+            return None
+        # one vectorised intersection and distance over every candidate
+        along = shapely.distance(p, shapely.intersection(ray, self.local[cand]))
+        along = np.where(np.isnan(along), np.inf, along)  # an empty intersection: not ahead
+        j = int(np.argmin(along))
+        return (int(cand[j]), float(along[j])) if np.isfinite(along[j]) else None
