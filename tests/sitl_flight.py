@@ -189,3 +189,24 @@ def speedup_options(speedup: float, **kw):
     o.stale_s /= speedup
     o.max_speed_mps *= speedup
     return o
+
+
+async def fence_and_telemetry(vehicle, direct, log, items, poll=0.05):
+    """The common start of a fenced SITL flight: upload the exclusion ``items`` and the
+    ``copter-rtl`` parameters (each read back by the kit), stream positions and velocities at
+    10 Hz and FENCE_STATUS at 2 Hz, and wait for the first of each; the vehicle must not be in
+    breach on the ground at home."""
+    from kit.vehicle.fence_transfer import upload_fence
+    from kit.vehicle.params import PROFILES, apply_params
+
+    report = await upload_fence(vehicle, items)
+    assert report.verified and report.items == len(items)
+    params = await apply_params(vehicle, PROFILES["copter-rtl"])
+    assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
+
+    await vehicle.telemetry.set_rate_position(10.0)
+    await vehicle.telemetry.set_rate_velocity_ned(10.0)
+    await ask_fence_status(direct, 2.0)
+    await until("a FENCE_STATUS", lambda: log.fence, 15, log, poll)
+    await until("a position", lambda: log.positions, 15, log, poll)
+    assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"

@@ -33,11 +33,9 @@ import time
 import pytest
 
 from kit.frame import LocalFrame
-from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
-from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import FlightLog, ask_fence_status, retry, until, unwatch, watch
+from tests.sitl_flight import FlightLog, fence_and_telemetry, retry, until, unwatch, watch
 
 pytestmark = pytest.mark.sitl
 
@@ -91,17 +89,7 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
         watchers = watch(log, vehicle, direct, "positions", "speeds", "modes", "fence")
         try:
             # -- the fence and its parameters, each read back by the kit
-            report = await upload_fence(vehicle, _exclusion_square(frame))
-            assert report.verified and report.items == 4
-            params = await apply_params(vehicle, PROFILES["copter-rtl"])
-            assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
-
-            await vehicle.telemetry.set_rate_position(10.0)
-            await vehicle.telemetry.set_rate_velocity_ned(10.0)
-            await ask_fence_status(direct, 2.0)
-            await until("a FENCE_STATUS", lambda: log.fence, 15, log)
-            await until("a position", lambda: log.positions, 15, log)
-            assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
+            await fence_and_telemetry(vehicle, direct, log, _exclusion_square(frame))
 
             # -- arm and take off in GUIDED (MAVSDK shows GUIDED as OFFBOARD)
             await action.set_takeoff_altitude(ALTITUDE)

@@ -45,13 +45,11 @@ from kit.frame import LocalFrame
 from kit.monitor.fenceset import FenceSet
 from kit.monitor.runner import EventLog, Monitor
 from kit.readers.fences import FenceRecord
-from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
-from kit.vehicle.params import PROFILES, apply_params
 from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
 from tests.sitl_flight import (
     FlightLog,
-    ask_fence_status,
+    fence_and_telemetry,
     retry,
     speedup_options,
     until,
@@ -160,17 +158,7 @@ class _Flight:
             stop = asyncio.Event()
             monitor_task = None
             try:
-                report = await upload_fence(vehicle, _exclusion_items(frame))
-                assert report.verified and report.items == 4
-                params = await apply_params(vehicle, PROFILES["copter-rtl"])
-                assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
-
-                await vehicle.telemetry.set_rate_position(10.0)
-                await vehicle.telemetry.set_rate_velocity_ned(10.0)
-                await ask_fence_status(direct, 2.0)
-                await _until("a FENCE_STATUS", lambda: log.fence, 15, log)
-                await _until("a position", lambda: log.positions, 15, log)
-                assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
+                await fence_and_telemetry(vehicle, direct, log, _exclusion_items(frame), poll=0.02)
 
                 monitor = Monitor(
                     vehicle,
