@@ -168,6 +168,7 @@ def signing_key(args):
 
 def unsigned_hint(args, exc) -> str:
     """A hint after a transfer over an unsigned link timed out: the vehicle may be signing."""
-    if getattr(args, "signing_key", None) or getattr(exc, "result", None) != "TIMEOUT":
+    signed = getattr(args, "key", None) or getattr(args, "signing_key", None)
+    if signed or getattr(exc, "result", None) != "TIMEOUT":
         return ""
     return " (if the vehicle has MAVLink signing on, give --signing-key)"
