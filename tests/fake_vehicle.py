@@ -282,10 +282,12 @@ class FakeVehicle:
         self.dropped = 0  # messages that did not decode, or were not signed with the key
         self.signing_setups: list[bytes] = []  # keys received in SETUP_SIGNING
         self._set_key(signing_key)
-        self._rng_in = random.Random(self.faults.seed * 2 + 1)
-        self._rng_out = random.Random(self.faults.seed * 2)
-        self._n_in = 0
-        self._n_out = 0
+        # per direction: mission messages numbered so far, and the seeded random loss
+        self._numbered = {"in": 0, "out": 0}
+        self._rng = {
+            "in": random.Random(self.faults.seed * 2 + 1),
+            "out": random.Random(self.faults.seed * 2),
+        }
         self._heard = False
         self._t0 = time.monotonic()
         self._transport = None
@@ -350,6 +352,17 @@ class FakeVehicle:
     def _note(self, what, name, detail):
         self.log.append((round(self._now(), 4), what, name, detail))
 
+    def _number(self, direction):
+        """Number the next mission message going ``direction`` ("in" or "out"): (its number,
+        whether the scripted faults lose it). The seeded generator is drawn from whenever
+        random loss is on, dropped or not, so each seed gives one loss sequence."""
+        n = self._numbered[direction]
+        self._numbered[direction] += 1
+        drop = self.faults.drop_in if direction == "in" else self.faults.drop_out
+        loss = self.faults.loss_in if direction == "in" else self.faults.loss_out
+        lost_at_random = bool(loss) and self._rng[direction].random() < loss
+        return n, n in drop or lost_at_random
+
     def _send(self, msg, detail=""):
         """Encode and send one message, through the scripted faults."""
         if self._transport is None or self.disconnected:
@@ -359,11 +372,7 @@ class FakeVehicle:
         name = msg.get_type()
         delay = 0.0
         if name in MISSION_MESSAGES:
-            n = self._n_out
-            self._n_out += 1
-            lost = n in self.faults.drop_out
-            if self.faults.loss_out and self._rng_out.random() < self.faults.loss_out:
-                lost = True
+            n, lost = self._number("out")
             if lost:
                 self._note("lost-out", name, detail)
                 return
@@ -396,11 +405,7 @@ class FakeVehicle:
             if target not in (None, 0, SYSTEM_ID):
                 continue
             if name in MISSION_MESSAGES:
-                n = self._n_in
-                self._n_in += 1
-                lost = n in self.faults.drop_in
-                if self.faults.loss_in and self._rng_in.random() < self.faults.loss_in:
-                    lost = True
+                _, lost = self._number("in")
                 if lost:
                     self._note("lost-in", name, _detail(msg))
                     continue

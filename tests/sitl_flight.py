@@ -9,11 +9,20 @@ import time
 from dataclasses import dataclass, field
 
 import pytest
+import shapely
 
 from kit.frame import LocalFrame
 
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 FENCE_STATUS_ID = 162
+
+# The exclusion square every fenced flight uses, metres east (x) / north (y) of home, and the
+# altitude they fly at.
+HALF_WIDTH = 50.0
+NEAR_EDGE = 150.0
+FAR_EDGE = 250.0
+ALTITUDE = 20.0  # m above home
+ARM_TIMEOUT = 60.0  # "Need Position Estimate" and friends: keep retrying this long
 
 
 @dataclass
@@ -210,3 +219,49 @@ async def fence_and_telemetry(vehicle, direct, log, items, poll=0.05):
     await until("a FENCE_STATUS", lambda: log.fence, 15, log, poll)
     await until("a position", lambda: log.positions, 15, log, poll)
     assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
+
+
+def square_local():
+    """The exclusion square in the local frame (metres)."""
+    return shapely.box(-HALF_WIDTH, NEAR_EDGE, HALF_WIDTH, FAR_EDGE)
+
+
+def exclusion_items(frame: LocalFrame):
+    """The square as an onboard exclusion polygon (4 items, 1e-7 degrees)."""
+    from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+
+    xs, ys = shapely.get_coordinates(square_local().exterior)[:-1].T
+    lon, lat = frame.to_wgs84(xs, ys)
+    return [
+        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
+        for a, b in zip(lon, lat)
+    ]
+
+
+async def take_off(action, log, altitude=ALTITUDE, poll=0.05):
+    """Arm (retrying while ArduPilot refuses), take off in GUIDED and climb to 90 % of
+    ``altitude``; returns (takeoff command time, climbed time)."""
+    from mavsdk.plugins.telemetry import FlightMode
+
+    await action.set_takeoff_altitude(altitude)
+    await retry("arming", action.arm, ARM_TIMEOUT)
+    t_takeoff = time.monotonic()
+    await retry("takeoff", action.takeoff, 15)
+    t_up = await until(
+        "climb to 90% of the takeoff altitude",
+        lambda: log.positions[-1][3] >= 0.9 * altitude,
+        60,
+        log,
+        poll,
+    )
+    assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"  # GUIDED
+    return t_takeoff, t_up
+
+
+async def within(coro, timeout, log):
+    """``await coro``, failing the test with what the vehicle reported if it takes over
+    ``timeout`` wall seconds."""
+    try:
+        return await asyncio.wait_for(coro, timeout)
+    except asyncio.TimeoutError:
+        pytest.fail(f"the flight took over {timeout:g} s | {log.summary()}")

@@ -27,52 +27,44 @@ fence breached", "Manual recovery started", later "Fence breach cleared"; farthe
 
 from __future__ import annotations
 
-import asyncio
 import time
 
 import pytest
 
 from kit.frame import LocalFrame
 from kit.vehicle.link import open_vehicle
-from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import FlightLog, fence_and_telemetry, retry, until, unwatch, watch
+from tests.sitl_flight import (
+    ALTITUDE,
+    FAR_EDGE,
+    NEAR_EDGE,
+    FlightLog,
+    exclusion_items,
+    fence_and_telemetry,
+    take_off,
+    until,
+    unwatch,
+    watch,
+    within,
+)
 
 pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
 
 # the exclusion square, in metres east (x) / north (y) of home
-HALF_WIDTH = 50.0
-NEAR_EDGE = 150.0
-FAR_EDGE = 250.0
 TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
-ALTITUDE = 20.0  # m above home
 SPEED = 10.0  # m/s: WPNAV_SPEED's default, also asked for with DO_CHANGE_SPEED
 
 WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
-ARM_TIMEOUT = 60.0  # "Need Position Estimate" and friends: keep retrying this long
 MODE_SWITCH_MAX = 3.0  # wall seconds between the breach report and RTL (measured: ~0)
 
 FENCE_BREACH_BOUNDARY = 3
 
 
-def _exclusion_square(frame: LocalFrame):
-    xs = [-HALF_WIDTH, HALF_WIDTH, HALF_WIDTH, -HALF_WIDTH]
-    ys = [NEAR_EDGE, NEAR_EDGE, FAR_EDGE, FAR_EDGE]
-    lon, lat = frame.to_wgs84(xs, ys)
-    return [
-        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
-        for a, b in zip(lon, lat)
-    ]
-
-
 @pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
 async def test_uploaded_exclusion_is_enforced_with_rtl(sitl):
     log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
-    try:
-        await asyncio.wait_for(_fly_into_the_fence(sitl, log), WALL_TIMEOUT)
-    except asyncio.TimeoutError:
-        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+    await within(_fly_into_the_fence(sitl, log), WALL_TIMEOUT, log)
 
 
 async def _fly_into_the_fence(sitl, log: FlightLog):
@@ -89,20 +81,10 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
         watchers = watch(log, vehicle, direct, "positions", "speeds", "modes", "fence")
         try:
             # -- the fence and its parameters, each read back by the kit
-            await fence_and_telemetry(vehicle, direct, log, _exclusion_square(frame))
+            await fence_and_telemetry(vehicle, direct, log, exclusion_items(frame))
 
             # -- arm and take off in GUIDED (MAVSDK shows GUIDED as OFFBOARD)
-            await action.set_takeoff_altitude(ALTITUDE)
-            await retry("arming", action.arm, ARM_TIMEOUT)
-            t_takeoff = time.monotonic()
-            await retry("takeoff", action.takeoff, 15)
-            t_up = await until(
-                "climb to 90% of the takeoff altitude",
-                lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
-                60,
-                log,
-            )
-            assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"
+            t_takeoff, t_up = await take_off(action, log)
             assert not log.first_breach(), "breach before the vehicle was sent anywhere"
 
             # -- across the square: a target beyond it, 400 m north, at 10 m/s

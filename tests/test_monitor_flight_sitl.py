@@ -39,22 +39,26 @@ import statistics
 import time
 
 import pytest
-import shapely
 
 from kit.frame import LocalFrame
 from kit.monitor.fenceset import FenceSet
 from kit.monitor.runner import EventLog, Monitor
 from kit.readers.fences import FenceRecord
 from kit.vehicle.link import open_vehicle
-from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
 from tests.sitl_flight import (
+    ALTITUDE,
+    HALF_WIDTH,
+    NEAR_EDGE,
     FlightLog,
+    exclusion_items,
     fence_and_telemetry,
-    retry,
     speedup_options,
+    square_local,
+    take_off,
     until,
     unwatch,
     watch,
+    within,
 )
 
 _until = functools.partial(until, poll=0.02)  # finer timing for the lead measurements
@@ -62,16 +66,11 @@ pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
 
-HALF_WIDTH = 50.0  # the exclusion square, metres east (x) / north (y) of home
-NEAR_EDGE = 150.0
-FAR_EDGE = 250.0
 WARNING_BUFFER = 30.0  # the monitor's warning layer around the square
 TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
-ALTITUDE = 20.0
 SPEED = 10.0
 
 WALL_TIMEOUT = 120.0
-ARM_TIMEOUT = 60.0
 MIN_LEAD_S = 3.0  # flight seconds before ArduPilot's own breach (the requirement)
 STOPPED_MPS = 0.3
 WATCH_AFTER_STOP = 6.0  # wall seconds (30 s of flight at speedup 5) of no breach after stopping
@@ -79,22 +78,8 @@ WATCH_AFTER_STOP = 6.0  # wall seconds (30 s of flight at speedup 5) of no breac
 COPTER_MODES = {4: "GUIDED", 5: "LOITER", 6: "RTL", 17: "BRAKE"}  # ArduCopter custom_mode
 
 
-def _square():
-    return shapely.box(-HALF_WIDTH, NEAR_EDGE, HALF_WIDTH, FAR_EDGE)
-
-
-def _exclusion_items(frame: LocalFrame):
-    xs = [-HALF_WIDTH, HALF_WIDTH, HALF_WIDTH, -HALF_WIDTH]
-    ys = [NEAR_EDGE, NEAR_EDGE, FAR_EDGE, FAR_EDGE]
-    lon, lat = frame.to_wgs84(xs, ys)
-    return [
-        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
-        for a, b in zip(lon, lat)
-    ]
-
-
 def _monitor_fences(frame: LocalFrame) -> FenceSet:
-    square = _square()
+    square = square_local()
     return FenceSet(
         [
             FenceRecord("test/square", "keep_out", frame.geom_to_wgs84(square)),
@@ -143,7 +128,6 @@ class _Flight:
 
     async def run(self, body):
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-        from mavsdk.plugins.telemetry import FlightMode
 
         log, frame = self.log, self.frame
         async with open_vehicle(self.sitl.connection_url) as vehicle:
@@ -158,7 +142,7 @@ class _Flight:
             stop = asyncio.Event()
             monitor_task = None
             try:
-                await fence_and_telemetry(vehicle, direct, log, _exclusion_items(frame), poll=0.02)
+                await fence_and_telemetry(vehicle, direct, log, exclusion_items(frame), poll=0.02)
 
                 monitor = Monitor(
                     vehicle,
@@ -170,16 +154,7 @@ class _Flight:
                 monitor_task = asyncio.create_task(monitor.run(stop))
 
                 action = vehicle.action
-                await action.set_takeoff_altitude(ALTITUDE)
-                await retry("arming", action.arm, ARM_TIMEOUT)
-                await retry("takeoff", action.takeoff, 15)
-                await _until(
-                    "climb to 90% of the takeoff altitude",
-                    lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
-                    60,
-                    log,
-                )
-                assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"
+                await take_off(action, log, poll=0.02)
                 assert not log.first_breach(), "breach before the vehicle was sent anywhere"
                 assert not [e for e in log.events if e["event"] == "level"], log.summary()
 
@@ -216,10 +191,7 @@ def _ardupilot_breach_time(log: FlightLog, since: float):
 
 async def _fly(sitl, enforce, body):
     flight = _Flight(sitl, enforce)
-    try:
-        await asyncio.wait_for(flight.run(body), WALL_TIMEOUT)
-    except asyncio.TimeoutError:
-        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {flight.log.summary()}")
+    await within(flight.run(body), WALL_TIMEOUT, flight.log)
     return flight
 
 

@@ -60,28 +60,31 @@ from kit.monitor.runner import EventLog, Monitor
 from kit.readers.fences import FenceRecord
 from kit.route.mission import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
 from kit.vehicle.link import open_vehicle
-from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
 from tests.sitl_flight import (
+    ALTITUDE,
+    ARM_TIMEOUT,
+    HALF_WIDTH,
+    NEAR_EDGE,
     FlightLog,
+    exclusion_items,
     fence_and_telemetry,
     retry,
     speedup_options,
+    square_local,
+    take_off,
     until,
     unwatch,
     watch,
+    within,
 )
 
 pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
 
-HALF_WIDTH = 50.0  # the exclusion square, metres east (x) / north (y) of home
-NEAR_EDGE = 150.0
-FAR_EDGE = 250.0
 TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
 AUTO_NEXT_M = 50.0  # AUTO: the mission item after the one beyond the square, further north
 NEXT_NORTH = TARGET_NORTH + AUTO_NEXT_M
-ALTITUDE = 20.0
 SPEED = 10.0
 CLEARANCE = 20.0
 TOLERANCE = 1.5  # metres the flown track may come closer than the clearance (see above)
@@ -89,20 +92,6 @@ AT_GOAL_M = 5.0
 STOPPED_MPS = 0.3
 
 WALL_TIMEOUT = 150.0
-ARM_TIMEOUT = 60.0
-
-
-def _square():
-    return shapely.box(-HALF_WIDTH, NEAR_EDGE, HALF_WIDTH, FAR_EDGE)
-
-
-def _exclusion_items(frame: LocalFrame):
-    xs, ys = np.asarray(_square().exterior.coords)[:-1].T
-    lon, lat = frame.to_wgs84(xs, ys)
-    return [
-        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
-        for a, b in zip(lon, lat)
-    ]
 
 
 def _events(log, kind):
@@ -149,10 +138,7 @@ async def test_monitor_reroutes_around_the_keep_out_without_a_breach(sitl):
     """GUIDED: the goal is the vehicle's own GUIDED target; it ends there, hovering."""
     log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
     results = {}
-    try:
-        await asyncio.wait_for(_fly(sitl, log, results, auto=False), WALL_TIMEOUT)
-    except asyncio.TimeoutError:
-        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+    await within(_fly(sitl, log, results, auto=False), WALL_TIMEOUT, log)
     _check(sitl, log, results, auto=False)
 
 
@@ -163,10 +149,7 @@ async def test_monitor_reroutes_an_auto_mission_and_resumes_it(sitl):
     pilot's."""
     log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
     results = {}
-    try:
-        await asyncio.wait_for(_fly(sitl, log, results, auto=True), WALL_TIMEOUT)
-    except asyncio.TimeoutError:
-        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+    await within(_fly(sitl, log, results, auto=True), WALL_TIMEOUT, log)
     _check(sitl, log, results, auto=True)
 
 
@@ -184,10 +167,10 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
         stop = asyncio.Event()
         monitor_task = None
         try:
-            await fence_and_telemetry(vehicle, direct, log, _exclusion_items(frame))
+            await fence_and_telemetry(vehicle, direct, log, exclusion_items(frame))
 
             fences = FenceSet(
-                [FenceRecord("test/square", "keep_out", frame.geom_to_wgs84(_square()))]
+                [FenceRecord("test/square", "keep_out", frame.geom_to_wgs84(square_local()))]
             )
             options = speedup_options(
                 sitl.speedup, enforce=True, imminent_action="reroute", reroute_clearance_m=CLEARANCE
@@ -204,16 +187,7 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
                 await vehicle.mission_raw.start_mission()
                 await until("AUTO", lambda: log.mode() == FlightMode.MISSION, 5, log)
             else:
-                await action.set_takeoff_altitude(ALTITUDE)
-                await retry("arming", action.arm, ARM_TIMEOUT)
-                await retry("takeoff", action.takeoff, 15)
-                await until(
-                    "climb to 90% of the takeoff altitude",
-                    lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
-                    60,
-                    log,
-                )
-                assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"
+                await take_off(action, log)
                 lon, lat = frame.to_wgs84(0.0, TARGET_NORTH)
                 await action.set_current_speed(SPEED)
                 await action.goto_location(float(lat), float(lon), sitl.home.alt + ALTITUDE, 0.0)
@@ -264,7 +238,7 @@ def _check(sitl, log: FlightLog, results, auto: bool):
     from mavsdk.plugins.telemetry import FlightMode
 
     frame = log.frame
-    square = _square()
+    square = square_local()
     events = list(log.events)
     brief = ", ".join(
         f"{e['event']} {e.get('level') or e.get('action') or ''}@{e['time']:.2f}" for e in events

@@ -33,7 +33,6 @@ takes about 46 s wall, SITL start included.
 
 from __future__ import annotations
 
-import asyncio
 import time
 
 import numpy as np
@@ -47,45 +46,38 @@ from kit.route.mission import NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, NAV_WAYPOINT
 from kit.vehicle.fence_transfer import upload_fence
 from kit.vehicle.link import open_vehicle
 from kit.vehicle.params import PROFILES, apply_params
-from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
-from tests.sitl_flight import FlightLog, ask_fence_status, retry, until, unwatch, watch
+from tests.sitl_flight import (
+    ALTITUDE,
+    ARM_TIMEOUT,
+    FlightLog,
+    ask_fence_status,
+    exclusion_items,
+    retry,
+    square_local,
+    until,
+    unwatch,
+    watch,
+    within,
+)
 
 pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
 
 # the keep-out square, in metres east (x) / north (y) of home
-HALF_WIDTH = 50.0
-NEAR_EDGE = 150.0
-FAR_EDGE = 250.0
 GOAL_NORTH = 400.0  # the far side
 FAR_SIDE = 350.0  # "reached the far side": north of this
 CLEARANCE = 20.0
-ALTITUDE = 20.0
 TRACKING = 5.0  # metres the copter may stray from the planned legs towards the square
 
 WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
-ARM_TIMEOUT = 60.0
 
 FRAME_GLOBAL = 0
 MISSION_TYPE_MISSION = 0
 
 
-def _square_local():
-    return shapely.box(-HALF_WIDTH, NEAR_EDGE, HALF_WIDTH, FAR_EDGE)
-
-
 def _keep_out(frame: LocalFrame) -> FenceRecord:
-    return FenceRecord("square", "keep_out", frame.geom_to_wgs84(_square_local()))
-
-
-def _fence_items(frame: LocalFrame):
-    xs, ys = np.asarray(_square_local().exterior.coords)[:-1].T
-    lon, lat = frame.to_wgs84(xs, ys)
-    return [
-        FenceItem(POLYGON_EXCLUSION, 4.0, round(float(a), 7), round(float(b), 7))
-        for a, b in zip(lon, lat)
-    ]
+    return FenceRecord("square", "keep_out", frame.geom_to_wgs84(square_local()))
 
 
 def _e7(deg) -> int:
@@ -138,10 +130,7 @@ def to_mission_raw(items, home):
 @pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
 async def test_routed_mission_flies_around_the_keep_out_without_a_breach(sitl):
     log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
-    try:
-        await asyncio.wait_for(_fly_the_route(sitl, log), WALL_TIMEOUT)
-    except asyncio.TimeoutError:
-        pytest.fail(f"the flight took over {WALL_TIMEOUT:g} s | {log.summary()}")
+    await within(_fly_the_route(sitl, log), WALL_TIMEOUT, log)
 
 
 async def _fly_the_route(sitl, log: FlightLog):
@@ -151,7 +140,7 @@ async def _fly_the_route(sitl, log: FlightLog):
 
     home = sitl.home
     frame = log.frame
-    square = _square_local()
+    square = square_local()
 
     # -- the plan: home to 400 m north around the square, there and back, then RTL
     start = (home.lon, home.lat)
@@ -175,7 +164,7 @@ async def _fly_the_route(sitl, log: FlightLog):
         watchers = watch(log, vehicle, direct, "positions", "modes", "armed", "fence", "progress")
         try:
             # -- the fence and its parameters, the mission, each read back
-            report = await upload_fence(vehicle, _fence_items(frame))
+            report = await upload_fence(vehicle, exclusion_items(frame))
             assert report.verified and report.items == 4
             params = await apply_params(vehicle, PROFILES["copter-rtl"])
             assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
