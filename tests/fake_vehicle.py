@@ -660,23 +660,27 @@ class FakeVehicle:
         self.fence = list(items)
         self.fence_writes += 1
 
-    def _on_mission_request_list(self, msg):
+    def _may_download(self, msg) -> bool:
+        """A fence download request this vehicle answers: MAVLink 2, fence type, and no
+        upload under way (which ArduPilot answers with MISSION_ACK(DENIED))."""
         if self._other_type(msg) or not self._mavlink2(msg):
+            return False
+        if self.upload is not None:
+            self._ack(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_DENIED)
+            return False
+        return True
+
+    def _on_mission_request_list(self, msg):
+        if not self._may_download(msg):
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
-        if self.upload is not None:
-            self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
-            return
         count = len(self.fence) if self.faults.claim_count is None else self.faults.claim_count
         self._send(mav.MAVLink_mission_count_message(sysid, compid, count, FENCE), count)
 
     def _on_mission_request_int(self, msg):
-        if self._other_type(msg) or not self._mavlink2(msg):
+        if not self._may_download(msg):
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
-        if self.upload is not None:
-            self._ack(sysid, compid, mav.MAV_MISSION_DENIED)
-            return
         if msg.seq > len(self.fence):
             self._ack(sysid, compid, mav.MAV_MISSION_INVALID_SEQUENCE)
             return

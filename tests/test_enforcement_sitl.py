@@ -51,7 +51,7 @@ pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
 
-# the exclusion square, in metres east (x) / north (y) of home
+# metres north of home (the square: tests/sitl_flight.py)
 TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
 SPEED = 10.0  # m/s: WPNAV_SPEED's default, also asked for with DO_CHANGE_SPEED
 
