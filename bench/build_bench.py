@@ -8,14 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-
-from kit.alpha import alpha_shape, alpha_shape_points, outer_polygons
-from kit.build import BuildOptions, build_fences
-from kit.compare import compare_methods
-from kit.fences import required_region
-from kit.readers import read_database
-from kit.rules import load_rules
-from kit.sites import group_sites
+from alphafence.build.compare import compare_methods
+from alphafence.build.fences import required_region
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.build.sites import group_sites
+from alphafence.formats.database import read_database
+from alphafence.formats.rules import load_rules
+from alphafence.geo.alpha import alpha_shape, alpha_shape_points, outer_polygons
 
 FIXED_ALPHA_M = 60.0
 

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import time
 
-from kit.build import BuildOptions, build_fences
-from kit.compile import PROFILES, compile_fences, storage_bytes
-from kit.readers import read_database
-from kit.readers.fences import FenceRecord
-from kit.rules import load_rules
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.database import read_database
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.formats.rules import load_rules
+from alphafence.mavlink.storage import PROFILES, storage_bytes
+from alphafence.onboard.compile import compile_fences
 
 AIRPORT = "way/23541031"
 

@@ -7,13 +7,12 @@ import time
 
 import numpy as np
 import shapely
-
-from kit.build import BuildOptions, build_fences
-from kit.frame import LocalFrame
-from kit.monitor.fenceset import FenceSet
-from kit.readers import read_database
-from kit.readers.fences import FenceRecord
-from kit.rules import load_rules
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.database import read_database
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.formats.rules import load_rules
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.fenceset import FenceSet
 
 
 def _p99_us(fn, positions):

@@ -10,21 +10,21 @@ from __future__ import annotations
 import asyncio
 import time
 
-from kit.sitl.find import find_sitl_binary
+from alphafence.sitl.find import find_sitl_binary
 
 SECONDS = 20.0
 
 
 async def _measure(osm):
-    from kit.build import BuildOptions, build_fences
-    from kit.monitor.engine import MonitorOptions
-    from kit.monitor.fenceset import FenceSet
-    from kit.monitor.runner import EventLog, Monitor
-    from kit.readers import read_database
-    from kit.readers.fences import FenceRecord
-    from kit.rules import load_rules
-    from kit.sitl.launcher import launch_sitl
-    from kit.vehicle.link import open_vehicle
+    from alphafence.build.pipeline import BuildOptions, build_fences
+    from alphafence.formats.database import read_database
+    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.formats.rules import load_rules
+    from alphafence.monitor.engine import MonitorOptions
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.monitor.runner import EventLog, Monitor
+    from alphafence.sitl.launcher import launch_sitl
+    from alphafence.vehicle.link import open_vehicle
 
     rules = load_rules()
     result = build_fences(read_database([osm], rules).features, rules, BuildOptions())

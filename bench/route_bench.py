@@ -15,14 +15,13 @@ import time
 
 import numpy as np
 import shapely
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.database import read_database
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.formats.rules import load_rules
+from alphafence.route import EPS_CLEAR, FenceRoadmap, NoRoute
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
-
-from kit.build import BuildOptions, build_fences
-from kit.readers import read_database
-from kit.readers.fences import FenceRecord
-from kit.route import EPS_CLEAR, FenceRoadmap, NoRoute
-from kit.rules import load_rules
 
 CLEARANCE = 20.0
 PAIRS = 100

@@ -8,7 +8,7 @@ Setup. ArduPilot copter SITL at ``malta_airport`` (300 m north of the airport bo
 messages are forwarded to our link; see tests/test_monitor_adsb_sitl.py): 3 aircraft spawned
 around the vehicle (300 m spread) at the vehicle's cruise altitude, climbing about 3 m/s, so
 conflicts open and clear all the time. The fences are all of Malta's, built from the OSM file as
-bench/monitor_cpu_bench.py does. The real :class:`kit.monitor.runner.Monitor` runs the whole
+bench/monitor_cpu_bench.py does. The real :class:`alphafence.monitor.runner.Monitor` runs the whole
 time on the bench's MAVSDK connection, with an :class:`EventLog` appending to a temporary file
 (as ``alphafence monitor --log`` does), at ``rate_hz`` 10, alert only (no enforce). Its options
 are the speedup-scaled ones of the SITL tests (tests/sitl_flight.py ``speedup_options``): the
@@ -62,14 +62,14 @@ import tempfile
 import time
 from collections import Counter
 
-from kit.sitl.find import find_sitl_binary
+from alphafence.sitl.find import find_sitl_binary
 
 SPEEDUP = 10
 HOME = "malta_airport"
 ALTITUDE = 30.0  # m above home
 SPEED = 10.0  # m/s (the vehicle's)
 RATE_HZ = 10.0  # the monitor's telemetry rate (vehicle time: 100 Hz wall at speedup 10)
-HOME_ALT_AMSL = 80.0  # malta_airport, kit/data/sitl/homes.toml
+HOME_ALT_AMSL = 80.0  # malta_airport, kit/alphafence/data/sitl/homes.toml
 ADSB_PARAMS = {
     "SIM_ADSB_COUNT": 3,  # simulated aircraft (>= 0 also makes SERIAL1 the simulated receiver)
     "SIM_ADSB_RADIUS": 300,  # m, spawn spread and respawn distance from the vehicle
@@ -108,7 +108,7 @@ def _rss_mb() -> float:
 
 def _options(speedup: float):
     """MonitorOptions scaled for SITL at ``speedup`` (as tests/sitl_flight.speedup_options)."""
-    from kit.monitor.engine import MonitorOptions
+    from alphafence.monitor.engine import MonitorOptions
 
     o = MonitorOptions(enforce=False)
     o.hold_s /= speedup
@@ -167,7 +167,7 @@ class _Stats:
 
 
 def _soak_monitor_class():
-    from kit.monitor.runner import Monitor
+    from alphafence.monitor.runner import Monitor
 
     class SoakMonitor(Monitor):
         """The real Monitor, with every position it receives counted and every engine step
@@ -229,7 +229,7 @@ class _Soak:
         self.rss = []  # (wall s since start, MB)
         self.rss_warm = None
         self.boot_ms = []  # (monotonic, SYSTEM_TIME time_boot_ms)
-        from kit.frame import LocalFrame
+        from alphafence.geo.frame import LocalFrame
 
         self.frame = LocalFrame(sitl.home.lon, sitl.home.lat)
 
@@ -258,9 +258,8 @@ class _Soak:
 
     # -- the run ---------------------------------------------------------------------
     async def run(self):
+        from alphafence.monitor.runner import EventLog
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-
-        from kit.monitor.runner import EventLog
 
         loop = asyncio.get_running_loop()
         loop.set_exception_handler(self._on_loop_error)
@@ -458,13 +457,13 @@ class _Soak:
 
 
 async def _soak(osm, minutes, console):
-    from kit.build import BuildOptions, build_fences
-    from kit.monitor.fenceset import FenceSet
-    from kit.readers import read_database
-    from kit.readers.fences import FenceRecord
-    from kit.rules import load_rules
-    from kit.sitl.launcher import launch_sitl
-    from kit.vehicle.link import open_vehicle
+    from alphafence.build.pipeline import BuildOptions, build_fences
+    from alphafence.formats.database import read_database
+    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.formats.rules import load_rules
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.sitl.launcher import launch_sitl
+    from alphafence.vehicle.link import open_vehicle
 
     rules = load_rules()
     result = build_fences(read_database([osm], rules).features, rules, BuildOptions())

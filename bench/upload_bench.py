@@ -12,10 +12,9 @@ import statistics
 import time
 
 import numpy as np
-
-from kit.frame import LocalFrame
-from kit.sitl.find import find_sitl_binary
-from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
+from alphafence.sitl.find import find_sitl_binary
 
 
 def full_polygon(n=69, lon0=-0.545, lat0=51.433, radius=300.0):
@@ -28,9 +27,9 @@ def full_polygon(n=69, lon0=-0.545, lat0=51.433, radius=300.0):
 
 
 async def _measure(repeat):
-    from kit.sitl.launcher import launch_sitl
-    from kit.vehicle.fence_transfer import upload_fence
-    from kit.vehicle.link import open_vehicle
+    from alphafence.sitl.launcher import launch_sitl
+    from alphafence.vehicle.fence_transfer import upload_fence
+    from alphafence.vehicle.link import open_vehicle
 
     items = full_polygon()
     async with launch_sitl(home="egham", speedup=1) as sitl:

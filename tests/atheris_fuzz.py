@@ -24,13 +24,14 @@ from pathlib import Path
 
 import atheris
 
-with atheris.instrument_imports(include=["kit"]):
-    from kit.errors import InputError
-    from kit.readers import read_database
-    from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
-    from kit.readers.fences import read_fences
-    from kit.rules import load_rules
-    from kit.vehicle.bridge import VehicleLink
+with atheris.instrument_imports(include=["alphafence"]):
+    from alphafence.errors import InputError
+    from alphafence.formats.database import read_database
+    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.formats.qgc_plan import read_plan_fence
+    from alphafence.formats.qgc_wpl import read_waypoints_fence
+    from alphafence.formats.rules import load_rules
+    from alphafence.vehicle.bridge import VehicleLink
 
 RULES = load_rules()
 KEY = bytes(range(32))
@@ -74,7 +75,7 @@ TARGETS = {
 
 
 def seeds(target: str) -> list[bytes]:
-    data = resources.files("kit") / "data"
+    data = resources.files("alphafence") / "data"
     if target in ("geojson", "fences", "ed269"):
         return [(data / "demo-scene.geojson").read_bytes()[:4096]]
     if target == "rules":

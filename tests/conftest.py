@@ -35,14 +35,14 @@ def monaco():
 
 @pytest.fixture(scope="session")
 def rules():
-    from kit.rules import load_rules
+    from alphafence.formats.rules import load_rules
 
     return load_rules()
 
 
 @pytest.fixture(scope="session")
 def malta_db(malta, rules):
-    from kit.readers import read_database
+    from alphafence.formats.database import read_database
 
     return read_database([malta], rules)
 

@@ -23,7 +23,7 @@ AC_PolyFence_loader (mission type FENCE only):
 * STATUSTEXTs trail the MISSION_ACK by a few milliseconds, as ArduPilot's queued texts do.
 
 Capacity: 70 items and 560 bytes (a Copter): header 4 bytes, a polygon 2 + 8 per vertex, a
-circle 13, the return point 9, end marker 1 (kit/compile.py's ``storage_bytes`` layout).
+circle 13, the return point 9, end marker 1 (alphafence.mavlink.storage's ``storage_bytes`` layout).
 
 Faults (``Faults``) are scripted and deterministic: the numbered or seeded-random loss of
 mission-protocol messages (only MISSION_* messages are numbered and subject to loss, so that
@@ -128,7 +128,7 @@ class StoredItem:
 
 
 def storage_bytes(items) -> int:
-    """Bytes of fence storage the items need (the layout of kit/compile.py's storage_bytes)."""
+    """Bytes of fence storage the items need (the layout of alphafence.mavlink.storage's storage_bytes)."""
     total = 4 + 1  # header, end marker
     i = 0
     while i < len(items):

@@ -7,7 +7,7 @@
 
       @pytest.mark.parametrize("sitl", [{"home": "malta_airport", "speedup": 1}], indirect=True)
 
-  Any keyword of ``kit.sitl.launcher.SitlInstance`` works, plus ``ready_timeout``.
+  Any keyword of ``alphafence.sitl.launcher.SitlInstance`` works, plus ``ready_timeout``.
 - ``sitl_factory``: ``await sitl_factory(**options)`` launches more instances (ready unless
   ``ready_timeout=None``); all are stopped after the test.
 
@@ -18,8 +18,7 @@ instance's temporary working directory (its ``sitl.log``) for a post-mortem.
 import os
 
 import pytest
-
-from kit.sitl.find import NOT_FOUND_HELP, find_sitl_binary
+from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
 
 DEFAULTS = {"home": "egham", "ready_timeout": 60.0}
 
@@ -41,7 +40,7 @@ def sitl_binary():
 
 @pytest.fixture
 async def sitl_factory(sitl_binary):
-    from kit.sitl.launcher import SitlInstance
+    from alphafence.sitl.launcher import SitlInstance
 
     started = []
 

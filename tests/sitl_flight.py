@@ -10,8 +10,7 @@ from dataclasses import dataclass, field
 
 import pytest
 import shapely
-
-from kit.frame import LocalFrame
+from alphafence.geo.frame import LocalFrame
 
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 FENCE_STATUS_ID = 162
@@ -190,7 +189,7 @@ def speedup_options(speedup: float, **kw):
     (telemetry arrival times) while speeds and the braking model are the vehicle's, so the
     wall-clock ones are scaled. Unscaled, at speedup 5, 10 m/s is 50 m/s per wall second,
     within arrival jitter of ``max_speed_mps``, and ``backoff_s`` lasts 75 s of flight."""
-    from kit.monitor.engine import MonitorOptions
+    from alphafence.monitor.engine import MonitorOptions
 
     o = MonitorOptions(**kw)
     o.hold_s /= speedup
@@ -205,8 +204,8 @@ async def fence_and_telemetry(vehicle, direct, log, items, poll=0.05):
     ``copter-rtl`` parameters (each read back by the kit), stream positions and velocities at
     10 Hz and FENCE_STATUS at 2 Hz, and wait for the first of each; the vehicle must not be in
     breach on the ground at home."""
-    from kit.vehicle.fence_transfer import upload_fence
-    from kit.vehicle.params import PROFILES, apply_params
+    from alphafence.vehicle.fence_transfer import upload_fence
+    from alphafence.vehicle.params import PROFILES, apply_params
 
     report = await upload_fence(vehicle, items)
     assert report.verified and report.items == len(items)
@@ -228,7 +227,7 @@ def square_local():
 
 def exclusion_items(frame: LocalFrame):
     """The square as an onboard exclusion polygon (4 items, 1e-7 degrees)."""
-    from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+    from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
 
     xs, ys = shapely.get_coordinates(square_local().exterior)[:-1].T
     lon, lat = frame.to_wgs84(xs, ys)

@@ -4,10 +4,9 @@ import math
 
 import numpy as np
 import shapely
+from alphafence.geo.alpha import alpha_shape
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from kit.alpha import alpha_shape
 
 
 def squares(centres, size=10.0):
@@ -66,7 +65,7 @@ def test_auto_alpha_is_the_smallest_radius_giving_one_piece(centres):
 
 def test_plain_alpha_shape_matches_the_alphashape_package():
     alphashape = __import__("pytest").importorskip("alphashape")
-    from kit.alpha import alpha_shape_points
+    from alphafence.geo.alpha import alpha_shape_points
 
     rng = np.random.default_rng(7)
     pts = np.concatenate([rng.uniform(0, 100, (150, 2)), rng.uniform(200, 260, (80, 2))])

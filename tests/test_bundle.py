@@ -3,11 +3,10 @@
 import json
 
 import pytest
-
-from kit.bundle import generate_key, sign, signature_path, verify
-from kit.cli import main
-from kit.cli.demo import scene_path
-from kit.errors import InputError
+from alphafence.build.bundle import generate_key, sign, signature_path, verify
+from alphafence.cli import main
+from alphafence.cli.demo import scene_path
+from alphafence.errors import InputError
 
 
 @pytest.fixture

@@ -7,12 +7,11 @@ import sys
 
 import pytest
 import shapely
-
-from kit.cli import main
-from kit.cli.demo import scene_path
-from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
-from kit.writers.mavlink_items import POLYGON_EXCLUSION
-from kit.writers.plan import group_polygons
+from alphafence.cli import main
+from alphafence.cli.demo import scene_path
+from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
+from alphafence.formats.qgc_wpl import read_waypoints_fence
+from alphafence.mavlink.items import POLYGON_EXCLUSION
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

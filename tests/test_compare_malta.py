@@ -1,10 +1,9 @@
 """The paper's evaluation on real OpenStreetMap data (Malta 2018)."""
 
 import pytest
-
-from kit.build import BuildOptions, build_fences
-from kit.compare import compare_methods
-from kit.fences import contains_with_margin
+from alphafence.build.compare import compare_methods
+from alphafence.build.fences import contains_with_margin
+from alphafence.build.pipeline import BuildOptions, build_fences
 
 
 @pytest.fixture(scope="module")

@@ -7,21 +7,21 @@ import math
 import numpy as np
 import pytest
 import shapely
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-
-from kit.compile import PROFILES, Profile, compile_fences, storage_bytes
-from kit.errors import InputError
-from kit.frame import LocalFrame
-from kit.readers.fences import FenceRecord, read_fences
-from kit.writers.mavlink_items import (
+from alphafence.errors import InputError
+from alphafence.formats.fence_geojson import FenceRecord, read_fences
+from alphafence.formats.qgc_plan import group_polygons
+from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     CIRCLE_INCLUSION,
     POLYGON_EXCLUSION,
     POLYGON_INCLUSION,
     RETURN_POINT,
 )
-from kit.writers.plan import group_polygons
+from alphafence.mavlink.storage import PROFILES, Profile, storage_bytes
+from alphafence.onboard.compile import compile_fences
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from .helpers import VerifyFrame
 
@@ -180,9 +180,10 @@ def test_far_fences_are_left_out_and_tiny_budget_merges():
 
 
 def test_compile_cli_on_the_demo(tmp_path):
-    from kit.cli import main
-    from kit.cli.demo import scene_path
-    from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
+    from alphafence.cli import main
+    from alphafence.cli.demo import scene_path
+    from alphafence.formats.qgc_plan import read_plan_fence
+    from alphafence.formats.qgc_wpl import read_waypoints_fence
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
@@ -218,7 +219,7 @@ def test_compile_cli_on_the_demo(tmp_path):
 
 
 def test_compile_rejects_a_plan_without_positions(tmp_path):
-    from kit.compile import operating_area_from_plan
+    from alphafence.onboard.compile import operating_area_from_plan
 
     p = tmp_path / "empty.plan"
     p.write_text('{"fileType": "Plan", "mission": {"items": []}}')
@@ -227,8 +228,8 @@ def test_compile_rejects_a_plan_without_positions(tmp_path):
 
 
 def test_upload_dry_run_and_missing_area(tmp_path, capsys):
-    from kit.cli import main
-    from kit.cli.demo import scene_path
+    from alphafence.cli import main
+    from alphafence.cli.demo import scene_path
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0
@@ -254,9 +255,9 @@ def test_upload_dry_run_and_missing_area(tmp_path, capsys):
 def test_operating_area_from_a_mission(tmp_path):
     from pathlib import Path
 
-    from kit.cli import main
-    from kit.cli.demo import scene_path
-    from kit.compile import operating_area_from_plan
+    from alphafence.cli import main
+    from alphafence.cli.demo import scene_path
+    from alphafence.onboard.compile import operating_area_from_plan
 
     mission = Path(__file__).resolve().parents[1] / "missions" / "demo-route.plan"
     area, first = operating_area_from_plan(mission)

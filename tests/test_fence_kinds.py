@@ -3,10 +3,9 @@
 import json
 
 import shapely
-
-from kit.build import BuildOptions, build_fences
-from kit.fences import contains_with_margin
-from kit.readers import read_database
+from alphafence.build.fences import contains_with_margin
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.database import read_database
 
 AREA = {
     "type": "FeatureCollection",
@@ -76,7 +75,8 @@ def test_keep_in_fence_lies_inside_the_area_minus_its_margin(write_json, rules):
 
 
 def test_ed269_applicability_reaches_the_fence_geojson(tmp_path):
-    from kit.cli import main
+    from alphafence.cli import main
+
     from tests.test_readers import ED269
 
     src = tmp_path / "zones.json"

@@ -18,19 +18,19 @@ import time
 from types import SimpleNamespace
 
 import pytest
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.formats.qgc_plan import group_polygons
+from alphafence.mavlink.items import POLYGON_EXCLUSION
+from alphafence.monitor.engine import Engine, MonitorOptions, Sample
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.runner import parse_adsb, parse_global_position
+from alphafence.vehicle.bridge import VehicleLink, signature_matches
+from alphafence.vehicle.fence_transfer import FenceTransferError, download_fence, from_raw
+from alphafence.vehicle.link import open_vehicle
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from kit.monitor.engine import Engine, MonitorOptions, Sample
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.runner import parse_adsb, parse_global_position
-from kit.readers.fences import FenceRecord
-from kit.vehicle.bridge import VehicleLink, signature_matches
-from kit.vehicle.fence_transfer import FenceTransferError, download_fence, from_raw
-from kit.vehicle.link import open_vehicle
-from kit.writers.mavlink_items import POLYGON_EXCLUSION
-from kit.writers.plan import group_polygons
 from tests.fake_vehicle import FakeVehicle, Faults
 from tests.test_upload_faults import NEW
 
@@ -77,7 +77,7 @@ async def test_hostile_download_is_a_clean_error(faults, says):
 
 
 async def test_cli_download_writes_nothing_from_a_hostile_vehicle(tmp_path, capsys):
-    from kit.cli import main
+    from alphafence.cli import main
 
     out = tmp_path / "onboard.plan"
     faults = Faults(item_fields={2: {"param1": 0.0}})  # would loop forever grouping polygons
@@ -216,8 +216,7 @@ def test_traffic_parsers_return_a_clean_report_or_none(fields, system_id):
 
 def _engine():
     import shapely
-
-    from kit.frame import LocalFrame
+    from alphafence.geo.frame import LocalFrame
 
     frame = LocalFrame(14.5, 35.9)
     square = shapely.box(14.50, 35.90, 14.51, 35.91)

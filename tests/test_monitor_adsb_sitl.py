@@ -32,17 +32,16 @@ import time
 
 import pytest
 import shapely
-
-from kit.frame import LocalFrame
-from kit.monitor.engine import MonitorOptions, alert_text
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.runner import EventLog, Monitor
-from kit.readers.fences import FenceRecord
-from kit.vehicle.link import open_vehicle
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.engine import MonitorOptions, alert_text
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.vehicle.link import open_vehicle
 
 pytestmark = pytest.mark.sitl
 
-HOME_ALT_AMSL = 20.0  # egham, kit/data/sitl/homes.toml
+HOME_ALT_AMSL = 20.0  # egham, kit/alphafence/data/sitl/homes.toml
 ADSB_PARAMS = {
     "SIM_ADSB_COUNT": 3,  # simulated aircraft (>= 0 also makes SERIAL1 the simulated receiver)
     "SIM_ADSB_RADIUS": 100,  # m, spawn spread and respawn distance from the vehicle

@@ -4,18 +4,17 @@ import math
 
 import pytest
 import shapely
-
-from kit.frame import LocalFrame
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.predict import (
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.predict import (
     Braking,
     closest_approach,
     dynamic_radius,
     stopping_distance,
     time_to_breach,
 )
-from kit.monitor.state import Level, StateMachine, assess
-from kit.readers.fences import FenceRecord
+from alphafence.monitor.state import Level, StateMachine, assess
 
 FRAME = LocalFrame(-0.55, 51.43)
 

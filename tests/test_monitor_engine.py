@@ -5,11 +5,10 @@ import math
 
 import pytest
 import shapely
-
-from kit.frame import LocalFrame
-from kit.monitor.engine import Engine, MonitorOptions, Sample, alert_text
-from kit.monitor.fenceset import FenceSet
-from kit.readers.fences import FenceRecord
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.engine import Engine, MonitorOptions, Sample, alert_text
+from alphafence.monitor.fenceset import FenceSet
 
 FRAME = LocalFrame(-0.55, 51.43)
 

@@ -9,10 +9,12 @@ import json
 import time
 from pathlib import Path
 
-from kit.cli import main
-from kit.monitor.runner import EventLog
+from alphafence.cli import main
+from alphafence.monitor.runner import EventLog
 
-DEMO_SCENE = Path(__file__).resolve().parents[1] / "kit" / "data" / "demo-scene.geojson"
+DEMO_SCENE = (
+    Path(__file__).resolve().parents[1] / "kit" / "alphafence" / "data" / "demo-scene.geojson"
+)
 
 
 async def test_events_are_appended_as_json_lines(tmp_path):
@@ -104,11 +106,10 @@ async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
     from types import SimpleNamespace
 
     import shapely
-
-    from kit.monitor.engine import MonitorOptions
-    from kit.monitor.fenceset import FenceSet
-    from kit.monitor.runner import Monitor
-    from kit.readers.fences import FenceRecord
+    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.monitor.engine import MonitorOptions
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.monitor.runner import Monitor
 
     fences = FenceSet([FenceRecord("sq", "keep_out", shapely.box(14.50, 35.90, 14.51, 35.91))])
     vehicle = SimpleNamespace(telemetry=_Telemetry(), system=None)

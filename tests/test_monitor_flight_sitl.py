@@ -39,12 +39,12 @@ import statistics
 import time
 
 import pytest
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.vehicle.link import open_vehicle
 
-from kit.frame import LocalFrame
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.runner import EventLog, Monitor
-from kit.readers.fences import FenceRecord
-from kit.vehicle.link import open_vehicle
 from tests.sitl_flight import (
     ALTITUDE,
     HALF_WIDTH,
@@ -333,7 +333,7 @@ def _replay_matches(flight, live_events):
     import dataclasses
     import os
 
-    from kit.monitor.engine import Engine
+    from alphafence.monitor.engine import Engine
 
     assert len(flight.trace) >= 50, len(flight.trace)
     engine = Engine(_monitor_fences(flight.frame), speedup_options(flight.sitl.speedup))

@@ -13,14 +13,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import shapely
-
-from kit.cli import main
-from kit.errors import InputError
-from kit.frame import LocalFrame
-from kit.monitor.engine import Engine, MonitorOptions, Sample
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.predict import Braking, stopping_distance
-from kit.monitor.reroute import (
+from alphafence.cli import main
+from alphafence.errors import InputError
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.engine import Engine, MonitorOptions, Sample
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.predict import Braking, stopping_distance
+from alphafence.monitor.reroute import (
     Rerouter,
     goal_beyond_xy,
     leg_timeout_s,
@@ -29,9 +29,8 @@ from kit.monitor.reroute import (
     planning_lead_m,
     waypoints,
 )
-from kit.monitor.runner import EventLog, Monitor
-from kit.readers.fences import FenceRecord
-from kit.route.roadmap import NoRoute
+from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.route.roadmap import NoRoute
 
 FRAME = LocalFrame(-0.55, 51.43)
 SQUARE = shapely.box(-50, 200, 50, 300)

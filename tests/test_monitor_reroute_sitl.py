@@ -53,13 +53,21 @@ import time
 import numpy as np
 import pytest
 import shapely
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_LAND as NAV_LAND,
+)
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_TAKEOFF as NAV_TAKEOFF,
+)
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_WAYPOINT as NAV_WAYPOINT,
+)
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.vehicle.link import open_vehicle
 
-from kit.frame import LocalFrame
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.runner import EventLog, Monitor
-from kit.readers.fences import FenceRecord
-from kit.route.mission import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
-from kit.vehicle.link import open_vehicle
 from tests.sitl_flight import (
     ALTITUDE,
     ARM_TIMEOUT,

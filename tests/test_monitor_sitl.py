@@ -5,12 +5,11 @@ import json
 
 import pytest
 import shapely
-
-from kit.frame import LocalFrame
-from kit.monitor.engine import MonitorOptions
-from kit.monitor.fenceset import FenceSet
-from kit.monitor.runner import run_monitor
-from kit.readers.fences import FenceRecord
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.engine import MonitorOptions
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.runner import run_monitor
 
 pytestmark = pytest.mark.sitl
 EGHAM = (-0.55, 51.43)

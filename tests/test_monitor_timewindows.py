@@ -4,11 +4,10 @@ from datetime import datetime, timezone
 
 import pytest
 import shapely
-
-from kit.frame import LocalFrame
-from kit.monitor.applicability import is_active, timed
-from kit.monitor.fenceset import FenceSet
-from kit.readers.fences import FenceRecord
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.applicability import is_active, timed
+from alphafence.monitor.fenceset import FenceSet
 
 UTC = timezone.utc
 WEEKDAYS_9_TO_17 = [

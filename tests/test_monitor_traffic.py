@@ -1,8 +1,7 @@
 """Dynamic fences around other aircraft: CPA-based conflicts, growing radius, stale reports."""
 
 import pytest
-
-from kit.monitor.traffic import Aircraft, Traffic, TrafficOptions
+from alphafence.monitor.traffic import Aircraft, Traffic, TrafficOptions
 
 
 def test_head_on_traffic_is_a_conflict_with_its_time():
@@ -45,12 +44,11 @@ def test_engine_turns_adsb_reports_into_conflict_events():
     import json
 
     import shapely
-
-    from kit.frame import LocalFrame
-    from kit.monitor.engine import Engine, Sample, alert_text
-    from kit.monitor.fenceset import FenceSet
-    from kit.monitor.runner import parse_adsb
-    from kit.readers.fences import FenceRecord
+    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.geo.frame import LocalFrame
+    from alphafence.monitor.engine import Engine, Sample, alert_text
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.monitor.runner import parse_adsb
 
     frame = LocalFrame(-0.55, 51.43)
     far = frame.geom_to_wgs84(shapely.box(5000, 5000, 5100, 5100))
@@ -87,7 +85,7 @@ def test_engine_turns_adsb_reports_into_conflict_events():
 def test_other_mavlink_systems_become_traffic():
     import json
 
-    from kit.monitor.runner import parse_global_position
+    from alphafence.monitor.runner import parse_global_position
 
     r = parse_global_position(
         7,

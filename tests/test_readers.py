@@ -5,11 +5,10 @@ import shutil
 
 import pytest
 import shapely
-
-from kit.errors import InputError
-from kit.frame import LocalFrame
-from kit.readers import read_database
-from kit.readers.geojson import parse_hstore, tags_of
+from alphafence.errors import InputError
+from alphafence.formats.database import read_database
+from alphafence.formats.geojson import parse_hstore, tags_of
+from alphafence.geo.frame import LocalFrame
 
 
 def test_malta_has_its_known_restricted_places(malta_db):
@@ -374,7 +373,7 @@ def test_self_intersecting_polygon_is_reported_and_repaired(write_json, rules):
     }
     db = read_database([write_json("bowtie.geojson", bowtie)], rules)
     assert db.repaired == ["way/8"]
-    from kit.build import build_fences
+    from alphafence.build.pipeline import build_fences
 
     result = build_fences(db.features, rules)
     site = result.sites[0]
@@ -382,7 +381,7 @@ def test_self_intersecting_polygon_is_reported_and_repaired(write_json, rules):
 
 
 def test_demo_scene_ships_with_the_package(rules):
-    from kit.cli.demo import scene_path
+    from alphafence.cli.demo import scene_path
 
     assert shutil.os.path.isfile(scene_path())
     db = read_database([scene_path()], rules)

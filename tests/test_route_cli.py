@@ -5,11 +5,10 @@ import json
 import numpy as np
 import pytest
 import shapely
-
-from kit.cli import main
-from kit.frame import LocalFrame
-from kit.readers.fences import read_fences
-from kit.route.mission import read_mission
+from alphafence.cli import main
+from alphafence.formats.fence_geojson import read_fences
+from alphafence.formats.mission import read_mission
+from alphafence.geo.frame import LocalFrame
 
 LON0, LAT0 = 14.45, 35.88
 FRAME = LocalFrame(LON0, LAT0)

@@ -38,14 +38,23 @@ import time
 import numpy as np
 import pytest
 import shapely
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.formats.qgc_plan import mission_items
+from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_RETURN_TO_LAUNCH as NAV_RETURN_TO_LAUNCH,
+)
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_TAKEOFF as NAV_TAKEOFF,
+)
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_WAYPOINT as NAV_WAYPOINT,
+)
+from alphafence.route import FenceRoadmap
+from alphafence.vehicle.fence_transfer import upload_fence
+from alphafence.vehicle.link import open_vehicle
+from alphafence.vehicle.params import PROFILES, apply_params
 
-from kit.frame import LocalFrame
-from kit.readers.fences import FenceRecord
-from kit.route import FenceRoadmap, mission_items
-from kit.route.mission import NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, NAV_WAYPOINT
-from kit.vehicle.fence_transfer import upload_fence
-from kit.vehicle.link import open_vehicle
-from kit.vehicle.params import PROFILES, apply_params
 from tests.sitl_flight import (
     ALTITUDE,
     ARM_TIMEOUT,

@@ -1,7 +1,6 @@
 import pytest
-
-from kit.errors import InputError
-from kit.rules import load_rules
+from alphafence.errors import InputError
+from alphafence.formats.rules import load_rules
 
 
 def test_default_rules_cover_the_issue_categories(rules):

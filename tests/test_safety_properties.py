@@ -10,17 +10,16 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from alphafence.build.fences import METHODS
+from alphafence.build.outputs import render
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.geojson import read_geojson_doc
+from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
+from alphafence.formats.qgc_wpl import read_waypoints_fence
+from alphafence.formats.rules import parse_rules
+from alphafence.geo.frame import LocalFrame
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
-
-from kit.build import BuildOptions, build_fences
-from kit.fences import METHODS
-from kit.frame import LocalFrame
-from kit.outputs import render
-from kit.readers.fencefiles import read_plan_fence, read_waypoints_fence
-from kit.readers.geojson import read_geojson_doc
-from kit.rules import parse_rules
-from kit.writers.plan import group_polygons
 
 from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
 
@@ -190,7 +189,7 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(
     # 2. every output format
     with tempfile.TemporaryDirectory() as tmp:
         paths = [str(Path(tmp) / n) for n in ("f.geojson", "f.plan", "f.waypoints")]
-        from kit.writers.atomic import write_all
+        from alphafence.formats.atomic import write_all
 
         write_all(render(result.fences, {}, *paths))
         text = Path(paths[0]).read_text()

@@ -1,4 +1,4 @@
-"""MAVLink 2 signing: key files, the signed link (kit.vehicle.bridge) and SETUP_SIGNING, against
+"""MAVLink 2 signing: key files, the signed link (alphafence.vehicle.bridge) and SETUP_SIGNING, against
 the scripted ArduPilot peer (tests/fake_vehicle.py) acting as ArduPilot's channel 1: with a key
 it signs what it sends and drops whatever is not signed with it.
 
@@ -11,26 +11,26 @@ import os
 import stat
 
 import pytest
-from pymavlink.dialects.v20 import ardupilotmega as mav
-
-from kit.cli import main
-from kit.errors import InputError
-from kit.vehicle.bridge import (
+from alphafence.cli import main
+from alphafence.errors import InputError
+from alphafence.vehicle.bridge import (
     BridgeError,
     VehicleLink,
     is_signed,
     parse_url,
     signature_matches,
 )
-from kit.vehicle.fence_transfer import FenceTransferError, upload_fence
-from kit.vehicle.link import LinkError, open_vehicle
-from kit.vehicle.signing import (
+from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
+from alphafence.vehicle.link import LinkError, open_vehicle
+from alphafence.vehicle.signing import (
     SigningSetupError,
     install_key,
     load_key,
     signing_timestamp,
     write_new_key,
 )
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
 from tests.fake_vehicle import FakeVehicle
 from tests.test_upload_faults import NEW, PREVIOUS
 

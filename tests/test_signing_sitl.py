@@ -25,15 +25,14 @@ import sys
 from importlib import resources
 
 import pytest
-
-from kit.readers.fencefiles import read_plan_fence
-from kit.writers import plan
-from kit.writers.mavlink_items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, FenceItem
+from alphafence.formats import qgc_plan as plan
+from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.mavlink.items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, FenceItem
 
 pytestmark = pytest.mark.sitl
 
 EGHAM = (-0.5520, 51.4300)  # lon, lat near the egham home
-DEMO_SCENE = resources.files("kit") / "data" / "demo-scene.geojson"
+DEMO_SCENE = resources.files("alphafence") / "data" / "demo-scene.geojson"
 
 
 def _fence(n_vertices, radius):
@@ -54,7 +53,7 @@ def _spawn(args):
     return asyncio.create_subprocess_exec(
         sys.executable,
         "-m",
-        "kit",
+        "alphafence",
         *map(str, args),
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,

@@ -1,7 +1,7 @@
 import os
 import stat
 
-from kit.sitl.find import NOT_FOUND_HELP, find_sitl_binary
+from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
 
 
 def _exe(path):

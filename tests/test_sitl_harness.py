@@ -13,10 +13,9 @@ import time
 from pathlib import Path
 
 import pytest
-
-from kit.cli import main
-from kit.errors import InputError
-from kit.sitl.launcher import (
+from alphafence.cli import main
+from alphafence.errors import InputError
+from alphafence.sitl.launcher import (
     COPTER_DEFAULTS,
     RCIN_BASE_PORT,
     Home,
@@ -103,8 +102,10 @@ def test_kit_parm_file_is_short_and_well_formed():
 
 def test_repo_sitl_directory_is_the_package_data():
     for name in ("homes.toml", "alphafence-test.parm"):
-        assert (ROOT / "sitl" / name).read_bytes() == (ROOT / "kit/data/sitl" / name).read_bytes()
-    assert "kit/data/sitl" in (ROOT / "sitl/README.md").read_text()
+        assert (ROOT / "sitl" / name).read_bytes() == (
+            ROOT / "kit/alphafence/data/sitl" / name
+        ).read_bytes()
+    assert "kit/alphafence/data/sitl" in (ROOT / "sitl/README.md").read_text()
     assert '"data/sitl/*"' in (ROOT / "pyproject.toml").read_text()
 
 
@@ -417,7 +418,7 @@ def test_cli_runs_sitl_until_interrupted(sitl_binary):
     import subprocess
 
     proc = subprocess.Popen(
-        [sys.executable, "-m", "kit", "sitl", "--home", "egham", "--speedup", "10"],
+        [sys.executable, "-m", "alphafence", "sitl", "--home", "egham", "--speedup", "10"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -5,16 +5,21 @@ import math
 import numpy as np
 import pytest
 import shapely
-
-from kit.build import BuildOptions, build_fences
-from kit.compile import PROFILES, compile_fences, storage_bytes
-from kit.frame import LocalFrame
-from kit.readers.fences import FenceRecord
-from kit.vehicle.fence_transfer import FenceTransferError, download_fence, same_items, upload_fence
-from kit.vehicle.link import open_vehicle
-from kit.vehicle.params import PROFILES as PARAMS
-from kit.vehicle.params import apply_params
-from kit.writers.mavlink_items import POLYGON_EXCLUSION, FenceItem
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
+from alphafence.mavlink.storage import PROFILES, storage_bytes
+from alphafence.onboard.compile import compile_fences
+from alphafence.vehicle.fence_transfer import (
+    FenceTransferError,
+    download_fence,
+    same_items,
+    upload_fence,
+)
+from alphafence.vehicle.link import open_vehicle
+from alphafence.vehicle.params import PROFILES as PARAMS
+from alphafence.vehicle.params import apply_params
 
 pytestmark = pytest.mark.sitl
 MALTA_AIRPORT = {"home": "malta_airport", "speedup": 5}
@@ -74,9 +79,9 @@ async def test_fence_parameters_applied(sitl):
 async def test_cli_upload_then_download(sitl, tmp_path):
     import asyncio
 
-    from kit.cli import main
-    from kit.cli.demo import scene_path
-    from kit.readers.fencefiles import read_plan_fence
+    from alphafence.cli import main
+    from alphafence.cli.demo import scene_path
+    from alphafence.formats.qgc_plan import read_plan_fence
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0

@@ -1,0 +1,3 @@
+from alphafence.cli import main
+
+raise SystemExit(main())

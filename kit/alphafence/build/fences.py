@@ -1,0 +1,264 @@
+"""Fences around sites: alpha shape, convex polygon, circle, exact; warning layers.
+
+All geometry here is metric (the site's LocalFrame). Every keep-out or warning fence is
+checked to cover the site's restricted area buffered by its margin; a fence that fails the
+check (which would be a bug or a numerical edge) is repaired by uniting it with the required
+region, and reported.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+
+from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
+from alphafence.geo.outward import simplify_polygon
+from alphafence.build.sites import circle_steps
+
+METHODS = ("alpha", "polygon", "circle", "exact")
+PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
+QUAD_SEGS = 6
+CIRCLE_SEGMENTS = 64
+
+
+@dataclass
+class FenceOptions:
+    method: str = "alpha"
+    alpha_radius: float | None = None  # metres; None = automatic per site
+    max_vertices: int = 32
+    tolerance_m: float = 1.0
+    warn_distance_m: float = 30.0
+    margin_m: float | None = None  # overrides every rule's margin (0 = the paper's setting)
+
+
+@dataclass
+class Fence:
+    site_id: str
+    name: str | None
+    category: str
+    kind: str  # keep_out | keep_in | warning
+    method: str
+    margin_m: float
+    alt_min_m: float | None
+    alt_max_m: float | None
+    sources: list
+    frame: object
+    local: object  # metric Polygon / MultiPolygon
+    circle: tuple | None = None  # (x, y, radius) metric, for circle fences
+    alpha_m: float | None = None
+    repaired: bool = False
+    properties: dict = field(default_factory=dict)
+
+    @property
+    def geometry(self):
+        """The fence in WGS84 (lon, lat)."""
+        g = getattr(self, "_wgs84", None)
+        if g is None:
+            g = self.frame.geom_to_wgs84(self.local)
+            self._wgs84 = g
+        return g
+
+    @property
+    def vertices(self) -> int:
+        if self.circle is not None:
+            return 1
+        rings = shapely.get_exterior_ring(shapely.get_parts(self.local))
+        return int(np.sum(shapely.get_num_points(rings) - 1))
+
+    @property
+    def area_m2(self) -> float:
+        if self.circle is not None:
+            return math.pi * self.circle[2] ** 2
+        return float(self.local.area)
+
+    @property
+    def circle_wgs84(self):
+        """(lon, lat, radius_m) of a circle fence, else None."""
+        if self.circle is None:
+            return None
+        lon, lat = self.frame.to_wgs84(self.circle[0], self.circle[1])
+        return float(lon), float(lat), float(self.circle[2])
+
+
+def required_region(geometry, margin_m):
+    """A polygon that contains ``geometry`` buffered by ``margin_m`` (plus PAD_M)."""
+    d = (margin_m + PAD_M) * circle_steps(QUAD_SEGS)
+    return shapely.buffer(geometry, d, quad_segs=QUAD_SEGS)
+
+
+def circle_polygon(x, y, r):
+    """A polygon that contains the circle (circumscribed)."""
+    ang = np.linspace(0, 2 * math.pi, CIRCLE_SEGMENTS, endpoint=False) + math.pi / CIRCLE_SEGMENTS
+    r_out = r / math.cos(math.pi / CIRCLE_SEGMENTS)
+    return shapely.Polygon(np.column_stack([x + r_out * np.cos(ang), y + r_out * np.sin(ang)]))
+
+
+def enclosing_circle(region):
+    """(x, y, r): a circle containing every vertex of ``region`` (so the whole polygon)."""
+    center = shapely.centroid(shapely.minimum_bounding_circle(region))
+    pts = shapely.get_coordinates(region)
+    cx, cy = center.x, center.y
+    r = float(np.max(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy)))
+    return cx, cy, r * (1 + 1e-9) + 1e-6
+
+
+def _simplify_parts(geom, opts, outward=True):
+    polys = outer_polygons(geom)
+    out = [simplify_polygon(p, opts.max_vertices, opts.tolerance_m, outward) for p in polys]
+    if len(out) == 1:
+        return out[0]
+    return fill_holes(shapely.union_all(out))
+
+
+def outer_fence(region, opts):
+    """Geometry (and circle, alpha) of an enclosing fence of ``region`` by opts.method."""
+    method = opts.method
+    if method == "alpha":
+        shape, alpha = alpha_shape(region, opts.alpha_radius)
+        return _simplify_parts(shape, opts), None, alpha
+    if method == "polygon":
+        return _simplify_parts(shapely.convex_hull(region), opts), None, None
+    if method == "circle":
+        c = enclosing_circle(region)
+        return circle_polygon(*c), c, None
+    if method == "exact":
+        return fill_holes(region), None, None
+    raise ValueError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
+
+
+def covers_required(fence_geom, circle, geometry, margin_m) -> bool:
+    """Does the fence contain the restricted geometry buffered by its margin?
+
+    Checked exactly, without approximating the buffer: the geometry lies inside the fence
+    and at least ``margin_m`` from the fence's boundary (for a circle: every vertex of the
+    geometry lies within radius - margin of the centre).
+    """
+    return contains_with_margin(fence_geom, circle, geometry, margin_m)
+
+
+def contains_with_margin(fence_geom, circle, geometry, margin_m, slack=0.0) -> bool:
+    if circle is not None:
+        pts = shapely.get_coordinates(geometry)
+        d = np.hypot(pts[:, 0] - circle[0], pts[:, 1] - circle[1])
+        return bool(np.all(d + margin_m <= circle[2] + slack))
+    if not shapely.covers(fence_geom, geometry):
+        return False
+    if margin_m <= 0:
+        return True
+    return bool(shapely.distance(geometry, shapely.boundary(fence_geom)) >= margin_m - slack)
+
+
+def site_properties(site) -> dict:
+    """What a fence carries from its features beyond geometry: ED-269 restriction,
+    reasons, vertical references and applicability (time windows)."""
+    props = {}
+    for f in site.features:
+        for key in ("restriction", "reason", "applicability", "lower_reference", "upper_reference"):
+            value = f.properties.get(key)
+            if value not in (None, [], "") and key not in props:
+                props[key] = value
+    return props
+
+
+def site_fences(site, opts: FenceOptions):
+    """The fences of one site: its main fence, plus a warning layer for keep-out sites."""
+    base = dict(
+        site_id=site.site_id,
+        name=site.name,
+        category=site.category,
+        alt_min_m=site.alt_min_m,
+        alt_max_m=site.alt_max_m,
+        sources=site.sources,
+        frame=site.frame,
+        properties=site_properties(site),
+    )
+    geometry = site.geometry
+    margin = site.margin_m if opts.margin_m is None else opts.margin_m
+    if site.kind == "keep_in":
+        return [_keep_in(site, geometry, margin, opts, base)]
+    region = required_region(geometry, margin)
+    local, circle, alpha = outer_fence(region, opts)
+    repaired = False
+    if not covers_required(local, circle, geometry, margin):
+        local, circle, repaired = fill_holes(shapely.union(local, region)), None, True
+    main = Fence(
+        kind=site.kind,
+        method=opts.method,
+        margin_m=margin,
+        local=local,
+        circle=circle,
+        alpha_m=alpha,
+        repaired=repaired,
+        **base,
+    )
+    fences = [main]
+    if site.kind == "keep_out" and opts.warn_distance_m > 0:
+        fences.append(_warning_layer(main, geometry, opts, base))
+    return fences
+
+
+def _warning_layer(main, geometry, opts, base):
+    margin = main.margin_m + opts.warn_distance_m
+    if main.circle is not None:
+        x, y, r = main.circle
+        c = (x, y, r + opts.warn_distance_m)
+        local = circle_polygon(*c)
+    else:
+        c = None
+        if opts.method == "exact":
+            grown = shapely.buffer(
+                main.local, opts.warn_distance_m * circle_steps(QUAD_SEGS), quad_segs=QUAD_SEGS
+            )
+            local = grown
+        else:
+            # mitred corners contain the round offset and add no arc vertices
+            grown = shapely.buffer(
+                main.local, opts.warn_distance_m, join_style="mitre", mitre_limit=4.0
+            )
+            local = _simplify_parts(grown, opts)
+    repaired = False
+    if not covers_required(local, c, geometry, margin):
+        local, c, repaired = (
+            fill_holes(shapely.union(local, required_region(geometry, margin))),
+            None,
+            True,
+        )
+    return Fence(
+        kind="warning",
+        method=main.method,
+        margin_m=margin,
+        local=local,
+        circle=c,
+        alpha_m=main.alpha_m,
+        repaired=repaired,
+        **base,
+    )
+
+
+def _keep_in(site, geometry, margin, opts, base):
+    """A keep-in fence lies inside the area shrunk by the margin (inward simplification)."""
+    d = (margin + PAD_M) * circle_steps(QUAD_SEGS)
+    inner = shapely.buffer(geometry, -d, quad_segs=QUAD_SEGS)
+    circle = None
+    if inner.is_empty:
+        raise ValueError(f"keep-in site {site.site_id} vanishes inside its {margin} m margin")
+    polys = outer_polygons(inner)
+    if len(polys) > 1:  # a keep-in fence is one area: keep the largest part
+        polys = polys[[int(np.argmax(shapely.area(polys)))]]
+    poly = shapely.Polygon(polys[0].exterior)
+    if opts.method == "circle":
+        mic = shapely.maximum_inscribed_circle(polys[0])
+        cx, cy = shapely.get_coordinates(mic)[0]
+        r = float(mic.length) - PAD_M
+        circle = (cx, cy, r)
+        local = shapely.Point(cx, cy).buffer(r, quad_segs=16)
+    elif opts.method == "exact":
+        local = poly
+    else:
+        local = simplify_polygon(poly, opts.max_vertices, opts.tolerance_m, outward=False)
+    return Fence(
+        kind="keep_in", method=opts.method, margin_m=margin, local=local, circle=circle, **base
+    )

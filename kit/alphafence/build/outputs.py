@@ -1,0 +1,44 @@
+"""Render a build's outputs (GeoJSON, .plan, .waypoints) as text, for an all-or-nothing write."""
+
+from __future__ import annotations
+
+from alphafence import __version__
+from alphafence.formats import fence_geojson as geojson
+from alphafence.formats import qgc_plan as plan
+from alphafence.formats import qgc_wpl as waypoints
+from alphafence.mavlink.items import fence_items
+
+OSM_ATTRIBUTION = "Contains data © OpenStreetMap contributors, ODbL 1.0"
+
+
+def build_meta(db, rules, options) -> dict:
+    meta = {
+        "tool": f"alphafence {__version__}",
+        "inputs": db.files,
+        "rules": rules.source,
+        "method": options.method,
+        "join_m": options.join_m,
+        "warn_distance_m": options.warn_distance_m,
+        "max_vertices": options.max_vertices,
+    }
+    if options.alpha_radius is not None:
+        meta["alpha_radius_m"] = options.alpha_radius
+    if options.margin_m is not None:
+        meta["margin_override_m"] = options.margin_m
+    if db.bbox:
+        meta["bbox"] = list(db.bbox)
+    if any(".osm" in f or f.endswith(".pbf") for f in db.files):
+        meta["attribution"] = OSM_ATTRIBUTION
+    return meta
+
+
+def render(fences, meta, geojson_path=None, plan_path=None, waypoints_path=None) -> dict:
+    out = {}
+    if geojson_path:
+        out[geojson_path] = geojson.dumps(geojson.fences_geojson(fences, meta))
+    items = fence_items(fences) if (plan_path or waypoints_path) else []
+    if plan_path:
+        out[plan_path] = plan.dumps(plan.plan_document(items))
+    if waypoints_path:
+        out[waypoints_path] = waypoints.waypoints_text(items)
+    return out

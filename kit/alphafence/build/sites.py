@@ -1,0 +1,174 @@
+"""Group restricted features into sites.
+
+Features of one category and kind that overlap or lie within ``join_m`` metres of each
+other form one site: a hospital campus of many buildings is one site and gets one fence.
+Points and lines stand for places of unknown extent and are widened (rules' point radius
+and line width) before grouping. Geometry is grouped in local metric frames: first
+conservative regions from degree envelopes, then exact distances in metres per region.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from scipy.sparse import coo_array
+from scipy.sparse.csgraph import connected_components
+
+from alphafence.formats.features import make_valid_polygonal
+from alphafence.geo.frame import LocalFrame
+
+M_PER_DEG_LAT = 110_574.0
+M_PER_DEG_LON = 111_320.0
+SMALL_REGION_M = 20_000.0  # a region this size shares one frame: distortion < 1 mm
+
+
+@dataclass
+class Site:
+    site_id: str
+    name: str | None
+    category: str
+    kind: str
+    margin_m: float
+    alt_min_m: float | None
+    alt_max_m: float | None
+    frame: LocalFrame
+    parts: np.ndarray  # restricted geometry per feature, metric (frame)
+    sources: list
+    features: list = field(repr=False, default_factory=list)
+
+    @property
+    def geometry(self):
+        """The restricted area (metric): the union of the parts."""
+        g = getattr(self, "_geometry", None)
+        if g is None:
+            g = self.parts[0] if len(self.parts) == 1 else shapely.union_all(self.parts)
+            self._geometry = g
+        return g
+
+
+def _components(n, a, b):
+    graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def _widths(features, rules):
+    w = np.zeros(len(features))
+    for i, f in enumerate(features):
+        gt = f.geomtype
+        if gt == "point":
+            w[i] = rules.point_radius_m
+        elif gt == "line":
+            w[i] = rules.line_width_m / 2.0
+    return w
+
+
+def _regions(geoms, widths, join_m):
+    """Conservative clusters: degree envelopes grown by the join distance and widths."""
+    bounds = shapely.bounds(geoms)
+    lat = np.clip(np.maximum(np.abs(bounds[:, 1]), np.abs(bounds[:, 3])), 0, 89.9)
+    grow_m = join_m + 2 * widths + 1.0
+    dlat = grow_m / M_PER_DEG_LAT
+    dlon = grow_m / (M_PER_DEG_LON * np.cos(np.radians(lat)))
+    boxes = shapely.box(
+        bounds[:, 0] - dlon, bounds[:, 1] - dlat, bounds[:, 2] + dlon, bounds[:, 3] + dlat
+    )
+    tree = shapely.STRtree(boxes)
+    a, b = tree.query(boxes, predicate="intersects")
+    return _components(len(geoms), a, b)
+
+
+def group_sites(features, rules, join_m=25.0):
+    """Sites (list of Site) from restricted features."""
+    by_class = defaultdict(list)
+    for f in features:
+        by_class[(f.category, f.kind, f.rule.margin_m)].append(f)
+    sites = []
+    for (category, kind, margin), feats in sorted(by_class.items(), key=lambda kv: kv[0][:2]):
+        geoms = np.array([f.geometry for f in feats], dtype=object)
+        widths = _widths(feats, rules)
+        regions = _regions(geoms, widths, join_m)
+        for r in np.unique(regions):
+            idx = np.flatnonzero(regions == r)
+            sites.extend(
+                _region_sites(
+                    category, kind, margin, [feats[i] for i in idx], geoms[idx], widths[idx], join_m
+                )
+            )
+    sites.sort(key=lambda s: (s.category, s.site_id))
+    return sites
+
+
+def _region_sites(category, kind, margin, feats, geoms, widths, join_m):
+    frame = LocalFrame.around(geoms)
+    local = make_valid_polygonal(frame.geom_to_local(geoms))
+    # points and lines become discs and strips; polygons stay as they are
+    widened = _widen(local, widths)
+    if len(widened) == 1:
+        labels = np.zeros(1, int)
+    else:
+        tree = shapely.STRtree(widened)
+        a, b = tree.query(widened, predicate="dwithin", distance=join_m)
+        labels = _components(len(widened), a, b)
+    extent = _extent_m(local)
+    out = []
+    for lab in np.unique(labels):
+        idx = np.flatnonzero(labels == lab)
+        members = [feats[i] for i in idx]
+        parts = widened[idx]
+        site_frame = frame
+        if extent > SMALL_REGION_M:
+            site_frame = LocalFrame.around(geoms[idx])
+            loc = make_valid_polygonal(site_frame.geom_to_local(geoms[idx]))
+            w = widths[idx]
+            parts = _widen(loc, w)
+        out.append(_make_site(category, kind, margin, site_frame, members, parts))
+    return out
+
+
+def _widen(local, widths):
+    """Points become discs and lines strips (polygons that contain the true round shapes);
+    polygons stay as they are."""
+    grown = shapely.buffer(local, widths * circle_steps(8), quad_segs=8)
+    return np.where(widths > 0, grown, local)
+
+
+def _extent_m(local):
+    b = shapely.total_bounds(local)
+    return float(max(abs(b[0]), abs(b[1]), abs(b[2]), abs(b[3])))
+
+
+def _make_site(category, kind, margin, frame, members, parts):
+    areas = shapely.area(parts)
+    order = np.argsort(-areas, kind="stable")
+    largest = members[int(order[0])]
+    name = next((members[i].name for i in order if members[i].name), None)
+    alt_min = [f.alt_min_m for f in members]
+    alt_max = [f.alt_max_m for f in members]
+    return Site(
+        site_id=f"{category}/{largest.source}",
+        name=name,
+        category=category,
+        kind=kind,
+        margin_m=margin,
+        alt_min_m=None if any(a is None for a in alt_min) else min(alt_min),
+        alt_max_m=None if any(a is None for a in alt_max) else max(alt_max),
+        frame=frame,
+        parts=parts,
+        sources=sorted({f.source for f in members}),
+        features=members,
+    )
+
+
+def circle_steps(quad_segs: int) -> float:
+    """Factor by which a buffer drawn with ``quad_segs`` segments per quarter circle must be
+    grown so that its chords lie outside the true round buffer.
+
+    GEOS rounds the number of fillet segments to the nearest integer, so one chord may span
+    up to 1.5 times the nominal angle (pi / 2 / quad_segs); its midpoint then lies at
+    cos(half that angle) of the radius.
+    """
+    return 1.0 / math.cos(1.5 * math.pi / (4 * quad_segs))

@@ -1,0 +1,163 @@
+"""alphafence build: read a geofence database, group sites, write fences."""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+
+import numpy as np
+from rich.table import Table
+
+from alphafence.build.fences import METHODS
+from alphafence.build.outputs import build_meta, render
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.cli.common import add_database_options, callback, err_console, out_console, progress
+from alphafence.errors import InputError
+from alphafence.formats.atomic import write_all
+from alphafence.formats.database import read_database
+from alphafence.formats.rules import load_rules
+from alphafence.mavlink.items import MAX_POLYGON_VERTICES, fence_items
+from alphafence.mavlink.storage import PROFILES
+
+COPTER_ITEMS = PROFILES["copter"].items
+
+
+def register(sub):
+    p = sub.add_parser(
+        "build",
+        help="build fences from a geofence database",
+        description="Build alpha-shape (or polygon, circle, exact) fences around restricted sites.",
+    )
+    add_database_options(p)
+    p.add_argument(
+        "-o", "--output", required=True, metavar="FENCES.geojson", help="GeoJSON output (lon, lat)"
+    )
+    p.add_argument(
+        "--plan", metavar="FILE.plan", help="also write a QGroundControl plan (geoFence)"
+    )
+    p.add_argument(
+        "--waypoints", metavar="FILE.waypoints", help="also write an ArduPilot fence waypoint file"
+    )
+    p.add_argument("--figure", metavar="MAP.png", help="also draw the fences on a map")
+    p.add_argument(
+        "--method", choices=METHODS, default="alpha", help="fence method (default alpha)"
+    )
+    p.add_argument(
+        "--alpha-radius",
+        type=float,
+        metavar="M",
+        help="force one alpha radius (metres) for every site",
+    )
+    p.add_argument(
+        "--warn-distance",
+        type=float,
+        default=30.0,
+        metavar="M",
+        help="warning layer this far beyond each keep-out fence (default 30; 0 = none)",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    p.set_defaults(func=run)
+
+
+def options_from(args, **over) -> BuildOptions:
+    for name, value in (("--join", args.join), ("--max-vertices", args.max_vertices)):
+        if value is None or value < (4 if name == "--max-vertices" else 0):
+            raise InputError(name, f"invalid value {value}")
+    opts = BuildOptions(
+        method=getattr(args, "method", "alpha"),
+        alpha_radius=getattr(args, "alpha_radius", None),
+        max_vertices=args.max_vertices,
+        warn_distance_m=getattr(args, "warn_distance", 30.0),
+        margin_m=args.margin,
+        join_m=args.join,
+    )
+    for k, v in over.items():
+        setattr(opts, k, v)
+    if opts.alpha_radius is not None and not opts.alpha_radius > 0:
+        raise InputError("--alpha-radius", "must be a positive number of metres")
+    if opts.margin_m is not None and opts.margin_m < 0:
+        raise InputError("--margin", "must be >= 0")
+    if opts.warn_distance_m < 0:
+        raise InputError("--warn-distance", "must be >= 0")
+    return opts
+
+
+def run(args) -> int:
+    rules = load_rules(args.rules)
+    opts = options_from(args)
+    with progress(not args.quiet) as prog:
+        if prog is not None:
+            t = prog.add_task("reading " + ", ".join(args.databases), total=None)
+        db = read_database(args.databases, rules, args.bbox)
+        if prog is not None:
+            prog.remove_task(t)
+        result = build_fences(db.features, rules, opts, progress=callback(prog, "fencing sites"))
+    meta = build_meta(db, rules, opts)
+    outputs = render(result.fences, meta, args.output, args.plan, args.waypoints)
+    write_all(outputs)
+    written = list(outputs)
+    if args.figure:
+        from alphafence.plots.fences import fence_map
+
+        fence_map(
+            result.fences,
+            result.sites,
+            args.figure,
+            title=f"AlphaFence: {opts.method} fences",
+            note=meta.get("attribution"),
+        )
+        written.append(args.figure)
+    if not args.quiet:
+        summary(db, result, opts, written)
+    return 0
+
+
+def summary(db, result, opts, written):
+    fences = result.fences
+    table = Table(
+        title=f"{len(result.sites)} sites from {len(db.features)} restricted features "
+        f"({opts.method} fences, {sum(result.seconds.values()):.2f} s)"
+    )
+    for col in ("category", "kind", "sites", "fences", "vertices (median / max)", "area km²"):
+        table.add_column(col, justify="right" if col not in ("category", "kind") else "left")
+    groups = defaultdict(list)
+    for f in fences:
+        groups[(f.category, f.kind)].append(f)
+    site_count = Counter((s.category, s.kind) for s in result.sites)
+    for (cat, kind), fs in sorted(groups.items()):
+        v = [f.vertices for f in fs]
+        table.add_row(
+            cat,
+            kind,
+            str(site_count.get((cat, kind), "")),
+            str(len(fs)),
+            f"{np.median(v):.0f} / {max(v)}",
+            f"{sum(f.area_m2 for f in fs) / 1e6:.3f}",
+        )
+    out_console.print(table)
+    notes = []
+    if db.repaired:
+        shown = ", ".join(db.repaired[:5]) + (" ..." if len(db.repaired) > 5 else "")
+        notes.append(f"repaired {len(db.repaired)} invalid (self-intersecting) polygon(s): {shown}")
+    for reason, n in db.skipped.items():
+        notes.append(f"skipped {n} feature(s): {reason}")
+    fixed = [f.site_id for f in fences if f.repaired]
+    if fixed:
+        notes.append(
+            f"{len(fixed)} fence(s) re-united with their site after a containment check: {', '.join(fixed[:5])}"
+        )
+    items = fence_items(fences)
+    big = [
+        f.site_id
+        for f in fences
+        if f.kind != "warning" and f.circle is None and f.vertices > MAX_POLYGON_VERTICES
+    ]
+    if big:
+        notes.append(f"{len(big)} polygon(s) exceed ArduPilot's 255 vertices: {', '.join(big[:3])}")
+    if len(items) > COPTER_ITEMS:
+        notes.append(
+            f"{len(items)} fence items: more than a Copter holds ({COPTER_ITEMS}); "
+            "compile an onboard subset for the operating area before uploading"
+        )
+    for n in notes:
+        err_console.print(f"[yellow]note:[/] {n}")
+    out_console.print("wrote " + ", ".join(written))

@@ -1,0 +1,57 @@
+"""alphafence download: read the vehicle's fence into a .plan (and a waypoint file)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from alphafence.cli.common import (
+    add_signing_option,
+    err_console,
+    out_console,
+    signing_key,
+    unsigned_hint,
+)
+from alphafence.formats import qgc_plan as plan
+from alphafence.formats import qgc_wpl as waypoints
+from alphafence.formats.atomic import write_all
+
+
+def register(sub):
+    p = sub.add_parser(
+        "download",
+        help="read the fence a vehicle holds",
+        description="Download the vehicle's fence items into a QGroundControl plan.",
+    )
+    p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.plan")
+    p.add_argument(
+        "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
+    )
+    p.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    add_signing_option(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    args.key = signing_key(args)
+    return asyncio.run(_download(args))
+
+
+async def _download(args) -> int:
+    from alphafence.vehicle.fence_transfer import FenceTransferError, download_fence
+    from alphafence.vehicle.link import LinkError, open_vehicle
+
+    try:
+        async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
+            items = await download_fence(vehicle)
+    except (FenceTransferError, LinkError) as exc:
+        err_console.print(
+            f"alphafence download: error: {exc}{unsigned_hint(args, exc)}", soft_wrap=True
+        )
+        return 3
+    out = {args.output: plan.dumps(plan.plan_document(items))}
+    if args.waypoints:
+        out[args.waypoints] = waypoints.waypoints_text(items)
+    write_all(out)
+    out_console.print(f"downloaded {len(items)} fence items -> {', '.join(out)}")
+    return 0

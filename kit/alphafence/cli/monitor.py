@@ -1,0 +1,150 @@
+"""alphafence monitor: watch telemetry against every fence, predict breaches, alert, act."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+
+from alphafence.cli.common import (
+    add_signing_option,
+    add_trust_options,
+    check_trust,
+    err_console,
+    out_console,
+    signing_key,
+)
+from alphafence.errors import InputError
+from alphafence.monitor.engine import ACTIONS, MonitorOptions
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.predict import Braking
+
+
+def register(sub):
+    p = sub.add_parser(
+        "monitor",
+        help="watch a flight against the fences (companion computer)",
+        description="Check every position against the full-resolution fences, predict breaches, "
+        "alert the ground station and, with --enforce, brake/RTL/land.",
+    )
+    p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
+    p.add_argument("--fences", required=True, metavar="FENCES.geojson")
+    p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
+    p.add_argument(
+        "--horizon",
+        type=float,
+        default=15.0,
+        metavar="S",
+        help="look-ahead in seconds (default 15)",
+    )
+    p.add_argument(
+        "--imminent-action",
+        choices=ACTIONS,
+        default="brake",
+        help="with --enforce: brake (default), rtl, land, none, or reroute (fly around the "
+        "fence with the route planner; brake if no route exists)",
+    )
+    p.add_argument(
+        "--reroute-clearance",
+        type=float,
+        default=20.0,
+        metavar="M",
+        help="distance a re-route keeps from every keep-out fence (default 20)",
+    )
+    p.add_argument("--breach-action", choices=ACTIONS, default="rtl")
+    p.add_argument(
+        "--decel",
+        type=float,
+        default=2.5,
+        metavar="M/S2",
+        help="braking deceleration (default 2.5)",
+    )
+    p.add_argument(
+        "--reaction", type=float, default=1.5, metavar="S", help="reaction time (default 1.5)"
+    )
+    p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
+    p.add_argument(
+        "--mavlink-traffic",
+        action="store_true",
+        help="also treat other MAVLink systems on the link as traffic (ADS-B always is)",
+    )
+    for flag, what in (
+        ("--on-glitch", "a GPS glitch"),
+        ("--on-stale", "telemetry older than 1 s"),
+        ("--on-link-lost", "no telemetry for 5 s"),
+    ):
+        p.add_argument(
+            flag, choices=ACTIONS, default="none", help=f"action (with --enforce) on {what}"
+        )
+    p.add_argument(
+        "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
+    )
+    add_trust_options(p)
+    add_signing_option(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    if args.horizon <= 0 or args.decel <= 0 or args.reaction < 0:
+        raise InputError("monitor", "--horizon and --decel must be positive, --reaction >= 0")
+    check_trust(args, args.fences)
+    fences = FenceSet.from_geojson(args.fences)
+    options = MonitorOptions(
+        horizon_s=args.horizon,
+        enforce=args.enforce,
+        imminent_action=args.imminent_action,
+        breach_action=args.breach_action,
+        on_glitch=args.on_glitch,
+        on_stale=args.on_stale,
+        on_link_lost=args.on_link_lost,
+        mavlink_traffic=args.mavlink_traffic,
+        braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
+        reroute_clearance_m=args.reroute_clearance,
+    )
+    args.key = signing_key(args)
+    if args.log:
+        from alphafence.monitor.runner import check_log_path
+
+        check_log_path(args.log)
+    return asyncio.run(_run(args, fences, options))
+
+
+async def _run(args, fences, options) -> int:
+    from alphafence.monitor.runner import run_monitor
+    from alphafence.vehicle.link import LinkError
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    mode = "enforcing" if options.enforce else "alerting only"
+    out_console.print(f"monitoring {len(fences.records)} fences ({mode}); Ctrl-C to stop")
+    try:
+        monitor = await run_monitor(
+            args.connect,
+            fences,
+            options,
+            args.log,
+            stop,
+            echo=_echo,
+            timeout=args.timeout,
+            signing_key=args.key,
+        )
+    except LinkError as exc:
+        err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)
+        return 3
+    out_console.print(f"stopped after {monitor.engine.checks} checks")
+    return 0
+
+
+def _echo(event):
+    if event["event"] == "level":
+        out_console.print(
+            f"{event['time']:.1f} {event['previous']} -> {event['level']} {event.get('fence') or ''} "
+            f"({event['reason']}, {event.get('distance_m')} m)"
+        )
+    elif event["event"] != "telemetry_resumed":
+        out_console.print(
+            f"{event['time']:.1f} {event['event']} "
+            f"{event.get('action') or event.get('reason') or event.get('error') or ''}",
+            soft_wrap=True,
+        )

@@ -1,0 +1,106 @@
+"""alphafence route: a mission from A to B that keeps a clearance from every keep-out fence."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from alphafence.cli.common import out_console
+from alphafence.errors import InputError
+from alphafence.formats import qgc_plan as plan
+from alphafence.formats.atomic import write_all
+from alphafence.formats.fence_geojson import read_fences
+
+
+def register(sub):
+    p = sub.add_parser(
+        "route",
+        help="plan a mission around the keep-out fences",
+        description="Route from --from to --to on a Voronoi roadmap clear of every keep-out "
+        "fence by --clearance (warning layers cost more than open air), smooth it by line of "
+        "sight, and write a QGroundControl mission: takeoff, waypoints, RTL. "
+        "Exit code 1 when no route exists (one line says what blocks it), 2 on bad input.",
+    )
+    p.add_argument("fences", metavar="FENCES", help="fences from 'alphafence build' (GeoJSON)")
+    p.add_argument("--from", dest="start", required=True, metavar="LAT,LON", help="start")
+    p.add_argument("--to", dest="goal", required=True, metavar="LAT,LON", help="goal")
+    p.add_argument(
+        "--alt", type=float, default=30.0, metavar="M", help="altitude above home (default 30)"
+    )
+    p.add_argument(
+        "--clearance",
+        type=float,
+        default=20.0,
+        metavar="M",
+        help="least distance from any keep-out fence (default 20)",
+    )
+    p.add_argument(
+        "--one-way",
+        action="store_true",
+        help="end with RTL at the goal (RTL flies straight home, across any fence); "
+        "by default the mission flies the route back before RTL",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="MISSION.plan", help="QGC plan")
+    p.add_argument("--waypoints", metavar="FILE", help="also write a QGC WPL 110 mission file")
+    p.add_argument("--figure", metavar="PNG", help="draw fences, roadmap and route")
+    p.set_defaults(func=run)
+
+
+def parse_latlon(option, text):
+    """'LAT,LON' -> (lon, lat)."""
+    from alphafence.geo.coords import valid_lonlat
+
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(option, f"expected LAT,LON, got {text!r}") from None
+    if not valid_lonlat(lon, lat):
+        raise InputError(option, f"coordinate (lat {lat}, lon {lon}) out of range")
+    return lon, lat
+
+
+def run(args) -> int:
+    from alphafence.formats.qgc_plan import mission_items
+    from alphafence.formats.qgc_wpl import mission_waypoints_text
+    from alphafence.route import FenceRoadmap, NoRoute
+
+    start = parse_latlon("--from", args.start)
+    goal = parse_latlon("--to", args.goal)
+    if not (math.isfinite(args.clearance) and args.clearance >= 0):
+        raise InputError("--clearance", f"must be a non-negative number, not {args.clearance}")
+    if not (math.isfinite(args.alt) and args.alt > 0):
+        raise InputError("--alt", f"must be a positive number of metres, not {args.alt}")
+    records = read_fences(args.fences)
+    if not any(r.kind == "keep_out" for r in records):
+        out_console.print("[yellow]note:[/] no keep-out fences: the route is a straight line")
+    rm = FenceRoadmap(records, clearance=args.clearance, extra_lonlat=[start, goal])
+    try:
+        route, lonlat = rm.route(start, goal)
+    except NoRoute as exc:
+        print(f"alphafence route: error: {args.fences}: no route: {exc}", file=sys.stderr)
+        return 1
+    items = mission_items(lonlat, args.alt, fly_back=not args.one_way)
+    out = {args.output: plan.dumps(plan.plan_document([], start, items))}
+    if args.waypoints:
+        out[args.waypoints] = mission_waypoints_text(items, start)
+    write_all(out)
+    if args.one_way:
+        out_console.print(
+            "[yellow]note:[/] --one-way: the final RTL flies straight home; "
+            "check it with 'alphafence check-mission'"
+        )
+    if args.figure:
+        from alphafence.plots.route import route_figure
+
+        route_figure(rm.roadmap, route, args.figure)
+    straight = float(sum((rm.to_local(goal) - rm.to_local(start)) ** 2) ** 0.5)
+    out_console.print(
+        f"route {route.length_m:.0f} m ({route.length_m / max(straight, 1e-9):.3f}x straight "
+        f"line), {len(route.xy) - 1} legs, min clearance {route.min_clearance_m:.1f} m "
+        f"(asked {args.clearance:g} m)"
+        + (f", {route.warning_m:.0f} m inside warning layers" if route.warning_m > 0 else "")
+    )
+    out_console.print(
+        "wrote " + ", ".join(str(p) for p in [*out, *([args.figure] if args.figure else [])])
+    )
+    return 0

@@ -1,0 +1,85 @@
+"""alphafence signing: MAVLink 2 signing keys, and installing one on a vehicle (SETUP_SIGNING,
+as MAVProxy's ``signing`` module does)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from alphafence.cli.common import add_signing_option, err_console, out_console, signing_key
+from alphafence.errors import InputError
+
+
+def register(sub):
+    p = sub.add_parser(
+        "signing",
+        help="MAVLink 2 signing: make a key, install it on a vehicle, or switch signing off",
+        description="Once a vehicle holds a key it signs what it sends and ignores unsigned "
+        "commands on its telemetry links; upload, download and monitor then need --signing-key.",
+    )
+    verbs = p.add_subparsers(dest="signing_verb", required=True, metavar="ACTION")
+    k = verbs.add_parser("keygen", help="write a new random key file (mode 0600)")
+    k.add_argument("key", metavar="KEY_FILE")
+    s = verbs.add_parser(
+        "setup",
+        help="install KEY_FILE's key on the vehicle",
+        description="Sends SETUP_SIGNING (the key in clear: do it over USB or loopback, never "
+        "a radio) and confirms that the vehicle then signs with it. ArduPilot refuses while "
+        "armed.",
+    )
+    s.add_argument("--connect", required=True, metavar="URL")
+    s.add_argument("--key", required=True, metavar="KEY_FILE", help="the key to install")
+    add_signing_option(s)
+    s.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    r = verbs.add_parser("remove", help="switch signing off on the vehicle (needs its current key)")
+    r.add_argument("--connect", required=True, metavar="URL")
+    add_signing_option(r)
+    r.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from alphafence.vehicle.signing import key_id, load_key, write_new_key
+
+    if args.signing_verb == "keygen":
+        key = write_new_key(args.key)
+        out_console.print(f"wrote {args.key} (key {key_id(key)}; keep it secret)")
+        return 0
+    current = signing_key(args)
+    if args.signing_verb == "setup":
+        new = load_key(args.key)
+    else:
+        if current is None:
+            raise InputError("--signing-key", "removing signing needs the vehicle's current key")
+        new = None
+    _warn_if_remote(args.connect)
+    return asyncio.run(_install(args, new, current))
+
+
+async def _install(args, new, current) -> int:
+    from alphafence.vehicle.signing import SigningSetupError, install_key, key_id
+
+    try:
+        system = await install_key(args.connect, new, current, args.timeout)
+    except SigningSetupError as exc:
+        err_console.print(f"alphafence signing: error: {exc}", soft_wrap=True)
+        return 3
+    if new is None:
+        out_console.print(f"vehicle {system}: signing switched off (it sends unsigned messages)")
+    else:
+        out_console.print(f"vehicle {system}: now signs with key {key_id(new)} (confirmed)")
+    return 0
+
+
+def _warn_if_remote(url: str) -> None:
+    from alphafence.vehicle.bridge import BridgeError, parse_url
+
+    try:
+        _, host, _ = parse_url(url)
+    except BridgeError:
+        return  # install_key reports it
+    if host not in ("127.0.0.1", "localhost", "::1", "0.0.0.0"):
+        err_console.print(
+            f"[yellow]warning:[/] SETUP_SIGNING carries the key in clear to {host}: anyone "
+            "listening on that link learns it (use USB or loopback)",
+            soft_wrap=True,
+        )

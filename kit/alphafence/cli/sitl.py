@@ -1,0 +1,122 @@
+"""alphafence sitl: find a user-built ArduPilot SITL binary, or run one by hand."""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+
+from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
+
+
+def register(sub):
+    p = sub.add_parser(
+        "sitl",
+        help="ArduPilot SITL helpers",
+        description=(
+            "Find a user-built ArduPilot SITL binary (--find, the default), list the named "
+            "homes, or run one copter SITL by hand (--home) until Ctrl-C, MAVLink on loopback."
+        ),
+    )
+    p.add_argument(
+        "--find", action="store_true", help="print the arducopter binary found, or how to get one"
+    )
+    p.add_argument("--list-homes", action="store_true", help="list the named home locations")
+    p.add_argument(
+        "--home",
+        metavar="NAME",
+        help="run SITL at this named home (see --list-homes) or at lat,lon,alt,heading",
+    )
+    p.add_argument("--speedup", type=float, default=1.0, help="simulation speedup (default 1)")
+    p.add_argument(
+        "--instance", type=int, metavar="I", help="SITL instance number (default: a free one)"
+    )
+    p.add_argument(
+        "--port", type=int, help="loopback UDP port SITL sends MAVLink to (default: a free one)"
+    )
+    p.add_argument(
+        "--param-file",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="an extra defaults file loaded after the kit's (repeatable)",
+    )
+    p.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="print the connection URLs at once instead of after the position estimate",
+    )
+    p.add_argument("--ready-timeout", type=float, default=120.0, metavar="S", help="default 120 s")
+    p.add_argument(
+        "--keep-dir", action="store_true", help="keep SITL's temporary working directory"
+    )
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    if args.list_homes:
+        return list_homes()
+    if args.home is None:
+        found = find_sitl_binary()
+        if found is None:
+            print(NOT_FOUND_HELP, file=sys.stderr)
+            return 1
+        print(found)
+        return 0
+    from alphafence.sitl.launcher import SitlError, SitlInstance
+
+    sitl = SitlInstance(  # resolves the home first: a bad name is an InputError
+        args.home,
+        speedup=args.speedup,
+        instance=args.instance,
+        port=args.port,
+        params=args.param_file,
+        keep_dir=args.keep_dir,
+    )
+    if find_sitl_binary() is None:
+        print(NOT_FOUND_HELP, file=sys.stderr)
+        return 1
+    try:
+        return asyncio.run(serve(sitl, wait=not args.no_wait, timeout=args.ready_timeout))
+    except SitlError as exc:
+        print(f"alphafence sitl: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("alphafence sitl: stopped", file=sys.stderr)
+        return 0
+
+
+def list_homes() -> int:
+    from alphafence.sitl.launcher import load_homes
+
+    for name, home in load_homes().items():
+        print(f"{name:16} {home.arg():34} {home.description}")
+    return 0
+
+
+async def serve(sitl, *, wait: bool, timeout: float) -> int:
+    from alphafence.sitl.launcher import copter_defaults
+
+    def say(text):
+        print(text, flush=True)
+
+    async with sitl:
+        say(f"SITL {sitl.binary}  pid {sitl.pid}  instance {sitl.instance}")
+        say(f"home {sitl.home.name} {sitl.home.arg()}  speedup {sitl.speedup:g}")
+        say(f"working directory {sitl.workdir}  (log {sitl.log_path})")
+        if copter_defaults(sitl.binary) is None:
+            say(
+                "note: no ArduPilot tree found beside the binary, so ArduPilot's copter defaults "
+                "are not loaded and arming will fail (accelerometer calibration)"
+            )
+        if wait:
+            say("waiting for a position estimate ...")
+            state = await sitl.wait_ready(timeout)
+            lat, lon, alt = state.position
+            say(f"ready: position {lat:.7f},{lon:.7f} alt {alt:.1f} m")
+        say(f"MAVSDK:             {sitl.connection_url}")
+        say(f"pymavlink/MAVProxy: {sitl.pymavlink_url}   (one client at a time)")
+        say("Ctrl-C stops SITL")
+        code = await sitl.process.wait()
+        say(f"SITL exited with code {code}")
+        print(sitl.log_tail(), file=sys.stderr)
+        return 1

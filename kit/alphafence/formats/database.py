@@ -1,0 +1,48 @@
+"""Read a geofence database: OSM (.osm.pbf, .osm), GeoJSON, ED-269 JSON."""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+from alphafence.errors import InputError
+from alphafence.formats.ed269 import looks_like_ed269, read_ed269_doc
+from alphafence.formats.features import Database, select_bbox
+from alphafence.formats.geojson import read_geojson_doc
+from alphafence.formats.jsonfile import read_json
+
+OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
+
+
+def read_file(path, rules, repaired, skipped):
+    name = str(path).lower()
+    if name.endswith(OSM_SUFFIXES):
+        from alphafence.formats.osm import read_osm  # pyosmium, only when OSM is read
+
+        return read_osm(path, rules, repaired, skipped)
+    if name.endswith((".geojson", ".json")):
+        doc = read_json(path)
+        if looks_like_ed269(doc):
+            return read_ed269_doc(path, doc, rules, repaired, skipped)
+        return read_geojson_doc(path, doc, rules, repaired, skipped)
+    raise InputError(
+        path, "unknown database format (expected .osm.pbf, .osm, .geojson or ED-269 .json)"
+    )
+
+
+def read_database(paths, rules, bbox=None) -> Database:
+    """Read every restricted feature (by ``rules``) from the given files.
+
+    Raises InputError with a one-line message on bad input or an empty selection.
+    """
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    repaired, skipped, features = [], Counter(), []
+    for path in paths:
+        features.extend(read_file(path, rules, repaired, skipped))
+    selected = select_bbox(features, bbox)
+    if not selected:
+        where = ", ".join(str(p) for p in paths)
+        why = f" inside --bbox {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
+        raise InputError(where, f"no restricted features{why} (rules: {rules.source})")
+    return Database(selected, [str(p) for p in paths], repaired, skipped, bbox)

@@ -1,0 +1,130 @@
+"""Restricted features as read from a geofence database (WGS84, lon/lat)."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+
+from alphafence.errors import InputError
+from alphafence.geo.coords import check_lonlat_array
+
+GEOMTYPES = {
+    "Point": "point",
+    "MultiPoint": "point",
+    "LineString": "line",
+    "MultiLineString": "line",
+    "LinearRing": "line",
+    "Polygon": "area",
+    "MultiPolygon": "area",
+}
+
+
+@dataclass
+class Feature:
+    geometry: object  # shapely geometry, WGS84 lon/lat
+    tags: dict
+    source: str  # "way/123", "relation/9", "node/5", "feature/3", ED-269 identifier
+    origin: str  # the file it came from
+    rule: object  # alphafence.formats.rules.Rule
+    alt_min_m: float | None = None
+    alt_max_m: float | None = None
+    properties: dict = field(default_factory=dict)  # e.g. ED-269 restriction, applicability
+
+    @property
+    def name(self) -> str | None:
+        return self.tags.get("name")
+
+    @property
+    def geomtype(self) -> str:
+        return GEOMTYPES.get(self.geometry.geom_type, "area")
+
+    @property
+    def category(self) -> str:
+        return self.rule.category
+
+    @property
+    def kind(self) -> str:
+        return self.rule.kind
+
+
+@dataclass
+class Database:
+    features: list
+    files: list
+    repaired: list = field(default_factory=list)  # sources of invalid polygons that were repaired
+    skipped: Counter = field(default_factory=Counter)  # reason -> count
+    bbox: tuple | None = None
+
+
+def geomtype_of(geom) -> str | None:
+    return GEOMTYPES.get(geom.geom_type)
+
+
+def check_coordinates(path, geoms, label):
+    """Raise a one-line InputError for the first geometry with a coordinate out of range.
+
+    ``label(i)`` names feature i for the message.
+    """
+    geoms = np.asarray(geoms, dtype=object)
+    if geoms.size == 0:
+        return
+    coords, index = shapely.get_coordinates(geoms, return_index=True)
+    bad = check_lonlat_array(coords)
+    if bad is not None:
+        lon, lat = coords[bad]
+        raise InputError(
+            path,
+            f"coordinate ({lon}, {lat}) out of range (lon -180..180, lat -90..90)",
+            label(int(index[bad])),
+        )
+    empty = np.flatnonzero(shapely.is_empty(geoms))
+    if empty.size:
+        raise InputError(path, "empty geometry", label(int(empty[0])))
+
+
+def flag_invalid(geoms, sources, repaired):
+    """Record invalid (e.g. self-intersecting) polygons. They are repaired later, in the
+    site's metric frame: repairing in degrees would misread shapes across the antimeridian."""
+    geoms = np.asarray(geoms, dtype=object)
+    if geoms.size:
+        for i in np.flatnonzero(~shapely.is_valid(geoms)):
+            repaired.append(sources[i])
+    return geoms
+
+
+def make_valid_polygonal(geoms):
+    """Valid geometries (vectorised). Repair may leave a collection of polygons plus the
+    lines or points a degenerate ring collapsed to; all of it stays restricted."""
+    geoms = np.asarray(geoms, dtype=object).copy()
+    invalid = np.flatnonzero(~shapely.is_valid(geoms))
+    if invalid.size:
+        geoms[invalid] = shapely.make_valid(geoms[invalid])
+    return geoms
+
+
+def select_bbox(features, bbox):
+    """Features whose extent meets (minlon, minlat, maxlon, maxlat)."""
+    if bbox is None or not features:
+        return features
+    box = shapely.box(*bbox)
+    geoms = np.array([f.geometry for f in features], dtype=object)
+    keep = shapely.intersects(shapely.envelope(geoms), box)
+    return [f for f, k in zip(features, keep) if k]
+
+
+def parse_bbox(text: str):
+    try:
+        parts = [float(p) for p in text.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) != 4:
+        raise InputError("--bbox", f"expected minlon,minlat,maxlon,maxlat, got {text!r}")
+    minlon, minlat, maxlon, maxlat = parts
+    if check_lonlat_array([[minlon, minlat], [maxlon, maxlat]]) is not None:
+        raise InputError("--bbox", f"coordinates out of range in {text!r}")
+    if minlon >= maxlon or minlat >= maxlat:
+        raise InputError("--bbox", f"min must be below max in {text!r}")
+    return (minlon, minlat, maxlon, maxlat)

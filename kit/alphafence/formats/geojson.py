@@ -1,0 +1,123 @@
+"""GeoJSON FeatureCollections (lon, lat), including the shape QGIS exports from OSM.
+
+QGIS/GDAL exports carry one column per tag with nulls for absent tags, ids in
+``osm_id`` / ``osm_way_id`` (and sometimes ``osm_type``), and the remaining tags as an
+hstore string in ``other_tags`` (``"key"=>"value","k2"=>"v2"``).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import shapely
+from shapely.errors import GeometryTypeError, ShapelyError
+
+from alphafence.errors import InputError
+from alphafence.formats.features import Feature, check_coordinates, flag_invalid, geomtype_of
+
+_HSTORE = re.compile(r'"((?:[^"\\]|\\.)*)"\s*=>\s*(?:"((?:[^"\\]|\\.)*)"|NULL)')
+_ID_KEYS = ("osm_id", "osm_way_id", "osm_type", "fid", "id", "@id")
+
+
+def parse_hstore(text: str) -> dict:
+    out = {}
+    for m in _HSTORE.finditer(text):
+        if m.group(2) is not None:
+            out[m.group(1).replace('\\"', '"')] = m.group(2).replace('\\"', '"')
+    return out
+
+
+def tags_of(props: dict) -> dict:
+    """Tag columns with nulls dropped; other_tags expanded; values as strings."""
+    tags = {}
+    for key, value in props.items():
+        if value is None or key in _ID_KEYS or key == "other_tags":
+            continue
+        if isinstance(value, bool):
+            value = "yes" if value else "no"
+        elif isinstance(value, (dict, list)):
+            continue
+        tags[key] = str(value)
+    other = props.get("other_tags")
+    if isinstance(other, str):
+        for k, v in parse_hstore(other).items():
+            tags.setdefault(k, v)
+    return tags
+
+
+def source_of(feature: dict, props: dict, gtype: str, index: int) -> str:
+    osm_type = props.get("osm_type")
+    if props.get("osm_way_id") not in (None, ""):
+        return f"way/{props['osm_way_id']}"
+    if props.get("osm_id") not in (None, ""):
+        if isinstance(osm_type, str) and osm_type:
+            return f"{osm_type.lower()}/{props['osm_id']}"
+        # GDAL's OSM driver: points are nodes, lines ways, multipolygons relations
+        kind = {"point": "node", "line": "way", "area": "relation"}.get(gtype, "feature")
+        return f"{kind}/{props['osm_id']}"
+    for key in ("@id", "id"):
+        if isinstance(props.get(key), str) and "/" in props[key]:
+            return props[key]
+    if feature.get("id") not in (None, ""):
+        fid = feature["id"]
+        return fid if isinstance(fid, str) and "/" in fid else f"feature/{fid}"
+    return f"feature/{index}"
+
+
+def read_geojson_doc(path, doc, rules, repaired, skipped):
+    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
+        raise InputError(path, "not a GeoJSON FeatureCollection")
+    raw = doc.get("features")
+    if not isinstance(raw, list):
+        raise InputError(path, "FeatureCollection has no 'features' list")
+    geoms, tags_list, sources, rule_list = [], [], [], []
+    for i, feat in enumerate(raw):
+        label = f"feature {i}"
+        if not isinstance(feat, dict) or feat.get("type") != "Feature":
+            raise InputError(path, "not a GeoJSON Feature", label)
+        props = feat.get("properties") or {}
+        if not isinstance(props, dict):
+            raise InputError(path, "properties must be an object", label)
+        gj = feat.get("geometry")
+        if gj is None:
+            skipped["feature without geometry"] += 1
+            continue
+        if not isinstance(gj, dict) or not isinstance(gj.get("type"), str):
+            raise InputError(path, "geometry must be an object with a type", label)
+        try:
+            geom = shapely.geometry.shape(gj)
+        except GeometryTypeError:
+            raise InputError(path, f"unknown geometry type {gj.get('type')!r}", label) from None
+        except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
+            raise InputError(path, f"malformed {gj.get('type')} geometry ({exc})", label) from None
+        if geom.geom_type == "GeometryCollection":
+            parts = shapely.get_parts(geom)
+            parts = parts[[geomtype_of(g) is not None for g in parts]] if len(parts) else parts
+            if not len(parts):
+                skipped["empty geometry collection"] += 1
+                continue
+            dims = shapely.get_dimensions(parts)
+            geom = shapely.union_all(parts[dims == dims.max()])
+        gtype = geomtype_of(geom)
+        if gtype is None:
+            raise InputError(path, f"unsupported geometry type {geom.geom_type!r}", label)
+        tags = tags_of(props)
+        rule = rules.match(tags.get, gtype)
+        if rule is None:
+            continue
+        source = source_of(feat, props, gtype, i)
+        geoms.append(geom)
+        tags_list.append(tags)
+        sources.append(source)
+        rule_list.append(rule)
+    if not geoms:
+        return []
+    geoms = np.array(geoms, dtype=object)
+    check_coordinates(path, geoms, lambda i: f"{sources[i]}")
+    geoms = flag_invalid(geoms, sources, repaired)
+    return [
+        Feature(g, t, s, str(path), r, r.alt_min_m, r.alt_max_m)
+        for g, t, s, r in zip(geoms, tags_list, sources, rule_list)
+        if not g.is_empty
+    ]

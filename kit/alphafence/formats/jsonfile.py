@@ -1,0 +1,43 @@
+"""JSON files, read whole with a size limit and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import os
+
+from alphafence.errors import InputError
+
+MAX_JSON_MB_DEFAULT = 512  # JSON is parsed whole: refuse what would not fit, before reading it
+
+
+def max_json_bytes() -> int:
+    return int(float(os.environ.get("ALPHAFENCE_MAX_JSON_MB", MAX_JSON_MB_DEFAULT)) * 1024 * 1024)
+
+
+def read_json(path):
+    try:
+        size = os.path.getsize(path)
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror})") from None
+    limit = max_json_bytes()
+    if size > limit:
+        raise InputError(
+            path,
+            f"{size / 2**20:.0f} MB of JSON is more than the {limit / 2**20:.0f} MB limit "
+            "(set ALPHAFENCE_MAX_JSON_MB to allow more, or use .osm.pbf, which is streamed)",
+        )
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            path, f"malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror})") from None

@@ -1,0 +1,207 @@
+"""QGroundControl .plan files (JSON, lat, lon order): the version-2 geoFence section written
+and read as fence items, and missions written from a route.
+
+Missions are read as positions by ``formats.mission``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from alphafence.errors import InputError
+from alphafence.formats.jsonfile import read_json
+from alphafence.geo.coords import checked_position, latlon
+from alphafence.mavlink import ids
+from alphafence.mavlink.items import (
+    CIRCLE_EXCLUSION,
+    CIRCLE_INCLUSION,
+    POLYGON_EXCLUSION,
+    POLYGON_INCLUSION,
+    FenceItem,
+)
+
+
+def group_polygons(items):
+    """Split a flat item list into polygons ``(command, [(lon, lat), ...])`` and circle items.
+
+    Returns
+    -------
+    polygons : list of tuple
+    circles : list of FenceItem
+    """
+    polygons, circles, i = [], [], 0
+    while i < len(items):
+        it = items[i]
+        if it.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
+            n = int(it.param1)
+            polygons.append((it.command, [(p.lon, p.lat) for p in items[i : i + n]]))
+            i += n
+        else:
+            if it.command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION):
+                circles.append(it)
+            i += 1
+    return polygons, circles
+
+
+def plan_document(items, home_lonlat=None, mission_items=None, breach_return=None) -> dict:
+    """A QGroundControl plan holding the fence ``items`` (and, optionally, a mission).
+
+    Parameters
+    ----------
+    items : sequence of FenceItem
+        The fence, as uploaded (polygons as consecutive vertices).
+    home_lonlat : tuple, optional
+        The planned home; by default the mean of the fence's positions.
+    mission_items : list of dict, optional
+        QGC SimpleItems (``mission_items``).
+    breach_return : tuple, optional
+        ``(lon, lat)`` of the fence's breach return point.
+    """
+    polygons, circles = group_polygons(items)
+    if home_lonlat is None:
+        pts = [p for _, poly in polygons for p in poly] + [(c.lon, c.lat) for c in circles]
+        home_lonlat = tuple(np.mean(np.asarray(pts), axis=0)) if pts else (0.0, 0.0)
+    home = latlon([home_lonlat])[0]
+    fence = {}
+    if breach_return is not None:
+        lat, lon = latlon([breach_return])[0]
+        fence["breachReturn"] = [lat, lon, 0]
+    return {
+        "fileType": "Plan",
+        "version": 1,
+        "groundStation": "AlphaFence",
+        "geoFence": {
+            "version": 2,
+            "polygons": [
+                {"inclusion": cmd == POLYGON_INCLUSION, "polygon": latlon(poly), "version": 1}
+                for cmd, poly in polygons
+            ],
+            "circles": [
+                {
+                    "circle": {
+                        "center": latlon([(c.lon, c.lat)])[0],
+                        "radius": round(float(c.param1), 3),
+                    },
+                    "inclusion": c.command == CIRCLE_INCLUSION,
+                    "version": 1,
+                }
+                for c in circles
+            ],
+            **fence,
+        },
+        "mission": {
+            "version": 2,
+            "firmwareType": ids.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            "vehicleType": ids.MAV_TYPE_QUADROTOR,
+            "cruiseSpeed": 10,
+            "hoverSpeed": 5,
+            "globalPlanAltitudeMode": 1,
+            "plannedHomePosition": [home[0], home[1], 0],
+            "items": list(mission_items or []),
+        },
+        "rallyPoints": {"version": 2, "points": []},
+    }
+
+
+def dumps(doc) -> str:
+    """The plan as indented JSON text."""
+    return json.dumps(doc, indent=2) + "\n"
+
+
+def _latlon_pair(path, where, pair):
+    if not (
+        isinstance(pair, list)
+        and len(pair) >= 2
+        and all(isinstance(v, (int, float)) for v in pair[:2])
+    ):
+        raise InputError(path, f"expected [lat, lon], got {pair!r}", where)
+    return checked_position(path, where, float(pair[0]), float(pair[1]))
+
+
+def read_plan_fence(path):
+    """The geoFence of a QGroundControl plan as FenceItems (polygons, then circles).
+
+    Raises a one-line InputError naming the polygon or circle that is malformed.
+    """
+    doc = read_json(path)
+    fence = doc.get("geoFence") if isinstance(doc, dict) else None
+    if not isinstance(fence, dict):
+        raise InputError(path, "no geoFence section (not a QGroundControl plan?)")
+    items = []
+    for k, poly in enumerate(fence.get("polygons", [])):
+        where = f"geoFence polygon {k}"
+        pts = poly.get("polygon") if isinstance(poly, dict) else None
+        if not isinstance(pts, list) or len(pts) < 3:
+            raise InputError(path, "a polygon needs at least 3 vertices", where)
+        cmd = POLYGON_INCLUSION if poly.get("inclusion") else POLYGON_EXCLUSION
+        for pair in pts:
+            lon, lat = _latlon_pair(path, where, pair)
+            items.append(FenceItem(cmd, float(len(pts)), lon, lat))
+    for k, circ in enumerate(fence.get("circles", [])):
+        where = f"geoFence circle {k}"
+        c = circ.get("circle") if isinstance(circ, dict) else None
+        if not isinstance(c, dict):
+            raise InputError(path, "circle entry without 'circle'", where)
+        lon, lat = _latlon_pair(path, where, c.get("center"))
+        r = c.get("radius")
+        if not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0:
+            raise InputError(path, f"radius must be a positive number, not {r!r}", where)
+        items.append(
+            FenceItem(
+                CIRCLE_INCLUSION if circ.get("inclusion") else CIRCLE_EXCLUSION, float(r), lon, lat
+            )
+        )
+    return items
+
+
+# -- missions ---------------------------------------------------------------------------
+def _simple(seq, command, frame, lonlat, alt):
+    if lonlat is None:
+        params = [0, 0, 0, 0, 0, 0, 0]
+    else:
+        lat, lon = latlon([lonlat])[0]
+        params = [0, 0, 0, None, round(lat, 7), round(lon, 7), float(alt)]
+    item = {
+        "autoContinue": True,
+        "command": command,
+        "doJumpId": seq,
+        "frame": frame,
+        "params": params,
+        "type": "SimpleItem",
+    }
+    if lonlat is not None:
+        item.update({"AMSLAltAboveTerrain": None, "Altitude": float(alt), "AltitudeMode": 1})
+    return item
+
+
+def mission_items(path_lonlat, alt, fly_back=True):
+    """QGC SimpleItems flying a path: takeoff at the first position, a waypoint at every later
+    one, RTL.
+
+    Positions use frame 3 (altitude relative to home); RTL has no position (frame 2, as
+    QGroundControl writes it). RTL flies straight home, so with ``fly_back`` the mission first
+    flies the path back to its start and RTL only lands there.
+
+    Parameters
+    ----------
+    path_lonlat : array_like, shape (n, 2)
+        The path, (lon, lat).
+    alt : float
+        Altitude above home, metres.
+    fly_back : bool
+        Fly the path back before RTL.
+    """
+    pts = np.asarray(path_lonlat, float).reshape(-1, 2)
+    if fly_back and len(pts) > 1:
+        pts = np.concatenate([pts, pts[-2::-1]])
+    rel = ids.MAV_FRAME_GLOBAL_RELATIVE_ALT
+    items = [_simple(1, ids.MAV_CMD_NAV_TAKEOFF, rel, pts[0], alt)]
+    for p in pts[1:]:
+        items.append(_simple(len(items) + 1, ids.MAV_CMD_NAV_WAYPOINT, rel, p, alt))
+    items.append(
+        _simple(len(items) + 1, ids.MAV_CMD_NAV_RETURN_TO_LAUNCH, ids.MAV_FRAME_MISSION, None, 0)
+    )
+    return items

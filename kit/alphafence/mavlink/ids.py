@@ -1,0 +1,109 @@
+"""Every MAVLink number the kit uses, named once.
+
+The values are MAVLink's ``common`` and ``ardupilotmega`` dialect definitions; a test
+(``tests/test_mavlink_ids.py``) checks each one against pymavlink's generated dialect, so a
+typo here cannot reach a vehicle. Import the names from here; never type the numbers again.
+
+Examples
+--------
+>>> from alphafence.mavlink import ids
+>>> ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+5002
+"""
+
+from __future__ import annotations
+
+# -- MAV_CMD: mission items (NAV) -------------------------------------------------------
+MAV_CMD_NAV_WAYPOINT = 16
+MAV_CMD_NAV_LOITER_UNLIM = 17
+MAV_CMD_NAV_LOITER_TURNS = 18
+MAV_CMD_NAV_LOITER_TIME = 19
+MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_NAV_LOITER_TO_ALT = 31
+MAV_CMD_NAV_SPLINE_WAYPOINT = 82
+MAV_CMD_NAV_VTOL_TAKEOFF = 84
+MAV_CMD_NAV_VTOL_LAND = 85
+
+# -- MAV_CMD: fence items (mission type FENCE) ------------------------------------------
+MAV_CMD_NAV_FENCE_RETURN_POINT = 5000
+MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION = 5001
+MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION = 5002
+MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION = 5003
+MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION = 5004
+
+# -- MAV_CMD: commands (COMMAND_LONG) ---------------------------------------------------
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+
+# -- MAV_FRAME --------------------------------------------------------------------------
+MAV_FRAME_GLOBAL = 0
+MAV_FRAME_MISSION = 2
+MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
+
+# -- MAV_MISSION_TYPE -------------------------------------------------------------------
+MAV_MISSION_TYPE_MISSION = 0
+MAV_MISSION_TYPE_FENCE = 1
+
+# -- MAV_AUTOPILOT / MAV_TYPE (as QGroundControl plans name the firmware and vehicle) ----
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_TYPE_QUADROTOR = 2
+
+# -- message ids --------------------------------------------------------------------------
+MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT = 87
+MAVLINK_MSG_ID_HOME_POSITION = 242
+
+# -- groups -----------------------------------------------------------------------------
+FENCE_COMMANDS = frozenset(
+    {
+        MAV_CMD_NAV_FENCE_RETURN_POINT,
+        MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+        MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+        MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+        MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
+    }
+)
+"""Every fence item command (5000-5004)."""
+
+NAV_POSITION_COMMANDS = frozenset(
+    {
+        MAV_CMD_NAV_WAYPOINT,
+        MAV_CMD_NAV_LOITER_UNLIM,
+        MAV_CMD_NAV_LOITER_TURNS,
+        MAV_CMD_NAV_LOITER_TIME,
+        MAV_CMD_NAV_LAND,
+        MAV_CMD_NAV_TAKEOFF,
+        MAV_CMD_NAV_LOITER_TO_ALT,
+        MAV_CMD_NAV_SPLINE_WAYPOINT,
+        MAV_CMD_NAV_VTOL_TAKEOFF,
+        MAV_CMD_NAV_VTOL_LAND,
+    }
+)
+"""NAV commands whose params 5-7 are a position the vehicle flies to."""
+
+NAV_COMMAND_NAMES = {
+    MAV_CMD_NAV_WAYPOINT: "waypoint",
+    MAV_CMD_NAV_LOITER_UNLIM: "loiter",
+    MAV_CMD_NAV_LOITER_TURNS: "loiter turns",
+    MAV_CMD_NAV_LOITER_TIME: "loiter time",
+    MAV_CMD_NAV_RETURN_TO_LAUNCH: "RTL",
+    MAV_CMD_NAV_LAND: "land",
+    MAV_CMD_NAV_TAKEOFF: "takeoff",
+    MAV_CMD_NAV_LOITER_TO_ALT: "loiter to alt",
+    MAV_CMD_NAV_SPLINE_WAYPOINT: "spline waypoint",
+    MAV_CMD_NAV_VTOL_TAKEOFF: "VTOL takeoff",
+    MAV_CMD_NAV_VTOL_LAND: "VTOL land",
+}
+"""Short operator-facing names of the NAV commands, for messages."""
+
+
+def command_name(command) -> str:
+    """A NAV command's short name, or ``"command N"`` for any other.
+
+    Examples
+    --------
+    >>> command_name(22), command_name(183)
+    ('takeoff', 'command 183')
+    """
+    return NAV_COMMAND_NAMES.get(command, f"command {command}")

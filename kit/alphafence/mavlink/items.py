@@ -1,0 +1,56 @@
+"""Fences as ArduPilot fence items (MAV_CMD_NAV_FENCE_*), the one model behind the .plan
+and waypoint writers (and, later, the uploader)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from alphafence.mavlink import ids
+
+# short names for the fence item commands (the numbers live in mavlink.ids)
+POLYGON_INCLUSION = ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+POLYGON_EXCLUSION = ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+CIRCLE_INCLUSION = ids.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION
+CIRCLE_EXCLUSION = ids.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+RETURN_POINT = ids.MAV_CMD_NAV_FENCE_RETURN_POINT
+MAX_POLYGON_VERTICES = 255  # ArduPilot's limit for one polygon (a uint8 count)
+
+
+@dataclass(frozen=True)
+class FenceItem:
+    command: int
+    param1: float  # vertex count (polygons) or radius in metres (circles)
+    lon: float
+    lat: float
+
+
+def polygon_lonlat(poly) -> np.ndarray:
+    """Exterior vertices (lon, lat), without the closing repeat, counter-clockwise."""
+    ring = poly.exterior
+    if not ring.is_ccw:
+        ring = shapely.LinearRing(list(ring.coords)[::-1])
+    return np.asarray(ring.coords)[:-1, :2]
+
+
+def fence_items(fences):
+    """Items for the fences a vehicle can hold: keep-out as exclusions, keep-in as
+    inclusions. Warning layers have no onboard equivalent and are left to the companion."""
+    items = []
+    for f in fences:
+        if f.kind not in ("keep_out", "keep_in"):
+            continue
+        inclusion = f.kind == "keep_in"
+        if f.circle is not None:
+            lon, lat, r = f.circle_wgs84
+            items.append(
+                FenceItem(CIRCLE_INCLUSION if inclusion else CIRCLE_EXCLUSION, r, lon, lat)
+            )
+            continue
+        cmd = POLYGON_INCLUSION if inclusion else POLYGON_EXCLUSION
+        for part in shapely.get_parts(f.geometry):
+            pts = polygon_lonlat(part)
+            items.extend(FenceItem(cmd, float(len(pts)), lon, lat) for lon, lat in pts)
+    return items

@@ -1,0 +1,247 @@
+"""In-flight re-routing around keep-out fences (``--imminent-action reroute``).
+
+A :class:`Rerouter` holds the route planner's roadmap (``alphafence.route.FenceRoadmap``) over the
+monitor's fences. It is built once when the monitor starts (``await Rerouter.build(...)``: on
+a large fence set that takes about a second, so it runs in a worker thread) and every query
+is independent, so the runner plans in a worker thread too and never blocks the event loop.
+
+The pieces the runner needs are pure functions of positions, velocities and fences, tested
+without MAVSDK:
+
+* :func:`goal_beyond_xy` - with no known target, the goal is the first point along the current
+  track, beyond the fence ahead, that is clear of every keep-out by the clearance;
+* :meth:`Rerouter.plan` - the route from where the vehicle can stop to the goal, as the list of
+  waypoints to fly (:func:`waypoints`: ``(lat, lon)`` rounded to 1e-7 degrees);
+* :func:`mission_goal` and :func:`parse_position_target` - the vehicle's own goal: the AUTO
+  mission item it is flying to, or its GUIDED target (POSITION_TARGET_GLOBAL_INT);
+* :func:`leg_timeout_s` - how long one leg may take before the re-route is given up.
+
+The planner treats every keep-out fence as a wall from the ground up, whatever its altitude
+limits or time windows: a re-route never relies on flying over a zone or on its hours.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from alphafence.monitor.predict import Braking
+from alphafence.route.roadmap import NoRoute
+
+GOAL_SEARCH_M = 5000.0  # how far along the track to look for the far side of a fence
+GOAL_PAD_M = 1.0  # the goal lies this much beyond the clearance (the vehicle hovers there)
+LEAD_STEP_M = 2.0
+LEG_MIN_SPEED_MPS = 2.0  # a leg taking longer than at this speed (plus slack) has failed
+LEG_SLACK_S = 20.0
+# mission item frames whose x, y are latitude, longitude (1e-7 degrees in MISSION_ITEM_INT)
+GLOBAL_FRAMES = {0, 3, 5, 6, 10, 11}
+NAV_COMMANDS_WITH_POSITION = {16, 17, 18, 19, 21, 22, 31, 82, 84, 85}
+TARGET_IGNORE_X, TARGET_IGNORE_Y = 1, 2  # POSITION_TARGET_TYPEMASK bits
+POSITION_TARGET_GLOBAL_INT_ID = 87
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+
+
+class RerouteFailed(Exception):
+    """A re-route that cannot be flown: ``str(err)`` is the one-line reason."""
+
+
+@dataclass
+class Plan:
+    """A re-route, ready to fly."""
+
+    waypoints: list  # [(lat, lon)], rounded to 1e-7 degrees, the goal last
+    goal: tuple  # (lon, lat)
+    start: tuple  # (lon, lat) where the planned route begins (see Rerouter.plan)
+    length_m: float  # from the vehicle through every waypoint
+    clearance_m: float  # exact least distance of those legs to any keep-out fence
+
+
+def waypoints(lonlat, skip_start: bool = True) -> list:
+    """A route's vertices ((n, 2) lon, lat) as the waypoints to fly: (lat, lon) rounded to
+    1e-7 degrees (about 1 cm, MAVLink's integer resolution), the start left out."""
+    pts = np.asarray(lonlat, float).reshape(-1, 2)
+    if skip_start:
+        pts = pts[1:]
+    return [(round(float(lat), 7), round(float(lon), 7)) for lon, lat in pts]
+
+
+def metres(a, b) -> float:
+    """Horizontal metres between two (lat, lon) a few kilometres apart at most."""
+    dlat = math.radians(b[0] - a[0])
+    dlon = math.radians(b[1] - a[1]) * math.cos(math.radians(0.5 * (a[0] + b[0])))
+    return 6_371_000.0 * math.hypot(dlat, dlon)
+
+
+def leg_timeout_s(length_m: float) -> float:
+    """Seconds one leg may take: its length at a crawl, plus slack for turning and stopping."""
+    return LEG_SLACK_S + max(0.0, float(length_m)) / LEG_MIN_SPEED_MPS
+
+
+def planning_lead_m(speed_mps: float, braking: Braking) -> float:
+    """How far along its track the vehicle gets before a new target takes effect: the
+    monitor's stopping distance (reaction plus braking) without the safety margin."""
+    v = max(0.0, float(speed_mps))
+    return v * braking.reaction_s + v * v / (2.0 * braking.decel_mps2)
+
+
+def parse_position_target(fields_json):
+    """POSITION_TARGET_GLOBAL_INT fields (MAVSDK mavlink_direct JSON) -> (lon, lat), or None
+    when the message carries no horizontal position."""
+    try:
+        f = json.loads(fields_json)
+        lat, lon = f["lat_int"] / 1e7, f["lon_int"] / 1e7
+        mask = int(f.get("type_mask", 0))
+    except (ValueError, KeyError, TypeError):
+        return None
+    if mask & TARGET_IGNORE_X and mask & TARGET_IGNORE_Y:
+        return None
+    if not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
+        return None
+    return (lon, lat)
+
+
+def mission_goal(items, current: int):
+    """The position (lon, lat) of mission item ``current`` (MAVSDK mission_raw items, seq as
+    ArduPilot numbers them, home at 0), or None if it has none (RTL, a DO command, a takeoff
+    or landing where the vehicle is)."""
+    item = next((it for it in items if int(it.seq) == int(current)), None)
+    if item is None or int(item.command) not in NAV_COMMANDS_WITH_POSITION:
+        return None
+    if int(item.frame) not in GLOBAL_FRAMES or (item.x == 0 and item.y == 0):
+        return None
+    lat, lon = item.x / 1e7, item.y / 1e7
+    if not (abs(lat) <= 90 and abs(lon) <= 180):
+        return None
+    return (lon, lat)
+
+
+def goal_beyond_xy(roadmap, start_xy, direction_xy, max_m=GOAL_SEARCH_M, pad_m=GOAL_PAD_M):
+    """The first point along the ray from ``start_xy`` in ``direction_xy`` (metres in the
+    roadmap's frame) that lies beyond a keep-out fence's clearance band and is clear of every
+    keep-out by the clearance (plus ``pad_m``); None if the ray meets no fence, or ends
+    inside one, within ``max_m``."""
+    p = np.asarray(start_xy, float).reshape(2)
+    d = np.asarray(direction_xy, float).reshape(2)
+    norm = float(np.hypot(*d))
+    if roadmap.tree is None or not math.isfinite(norm) or norm < 1e-9:
+        return None
+    u = d / norm
+    ray = shapely.LineString([p, p + u * max_m])
+    band = roadmap.ce + pad_m
+    near = roadmap.tree.query(ray, predicate="dwithin", distance=band)
+    if not np.size(near):
+        return None
+    blocked = shapely.union_all(shapely.buffer(roadmap.keep_out[near], band, quad_segs=16))
+    free = shapely.get_parts(shapely.difference(ray, blocked))
+    starts = sorted(ray.project(shapely.Point(g.coords[0])) for g in free if not g.is_empty)
+    for along in starts:
+        if along <= 1e-6:  # the stretch the vehicle is in now, before the fence
+            continue
+        # the band is a polygon inscribed in the true offset curve: step on until the exact
+        # distance test agrees
+        for extra in np.arange(0.0, 50.0, 0.5):
+            q = p + u * min(along + extra, max_m)
+            if roadmap.point_clear(q)[0]:
+                return q
+        return None
+    return None
+
+
+class Rerouter:
+    """The route planner over the monitor's fences, built once (see :meth:`build`)."""
+
+    def __init__(self, records, clearance: float = 20.0):
+        from alphafence.route.planner import FenceRoadmap, fence_label
+
+        records = list(records)
+        self.clearance = float(clearance)
+        self.planner = FenceRoadmap(records, clearance=self.clearance)
+        self.frame = self.planner.frame
+        self.roadmap = self.planner.roadmap
+        keep_in = [r for r in records if r.kind == "keep_in"]
+        self.keep_in = [self.frame.geom_to_local(r.geometry) for r in keep_in]
+        self.keep_in_names = [fence_label(r) for r in keep_in]
+
+    @classmethod
+    async def build(cls, records, clearance: float = 20.0) -> Rerouter:
+        """Build in a worker thread: the event loop (the monitor's checks) never waits."""
+        return await asyncio.to_thread(cls, records, clearance)
+
+    def to_xy(self, lon, lat) -> np.ndarray:
+        x, y = self.frame.to_local(lon, lat)
+        return np.array([float(x), float(y)])
+
+    def to_lonlat(self, xy) -> tuple:
+        lon, lat = self.frame.to_wgs84(float(xy[0]), float(xy[1]))
+        return (float(lon), float(lat))
+
+    def _velocity_xy(self, lon, lat, ve, vn) -> np.ndarray:
+        """East/north velocity as a direction in the frame (the frame's grid north is not
+        true north away from its origin)."""
+        p = self.to_xy(lon, lat)
+        dlat = vn / 6_371_000.0 * 180.0 / math.pi
+        dlon = ve / (6_371_000.0 * max(math.cos(math.radians(lat)), 1e-6)) * 180.0 / math.pi
+        return self.to_xy(lon + dlon, lat + dlat) - p
+
+    def goal_beyond(self, lon, lat, ve, vn, max_m=GOAL_SEARCH_M):
+        """(lon, lat) beyond the fence ahead along the track, or None."""
+        if math.hypot(ve, vn) < 0.5:
+            return None  # no track to follow
+        q = goal_beyond_xy(
+            self.roadmap, self.to_xy(lon, lat), self._velocity_xy(lon, lat, ve, vn), max_m
+        )
+        return None if q is None else self.to_lonlat(q)
+
+    def start_xy(self, xy, direction_xy, lead_m: float) -> np.ndarray:
+        """Where the planned route begins: ``lead_m`` along the track (where the vehicle will
+        be by the time it turns: it cannot turn on the spot), pulled back until that point and
+        the track to it are clear; the vehicle's position if no such point is."""
+        xy = np.asarray(xy, float).reshape(2)
+        d = np.asarray(direction_xy, float).reshape(2)
+        norm = float(np.hypot(*d))
+        if lead_m <= 0 or norm < 1e-9:
+            return xy
+        u = d / norm
+        for ahead in np.arange(float(lead_m), 0.0, -LEAD_STEP_M):
+            q = xy + u * ahead
+            if self.roadmap.point_clear(q)[0] and self.roadmap.clear(xy, q)[0]:
+                return q
+        return xy
+
+    def plan(self, lon, lat, ve, vn, goal_lonlat, lead_m: float = 0.0) -> Plan:
+        """The re-route from the vehicle at (lon, lat) moving at (ve, vn) m/s to ``goal_lonlat``.
+        Raises ``NoRoute`` with the planner's one-line reason."""
+        here = self.to_xy(lon, lat)
+        start = self.start_xy(here, self._velocity_xy(lon, lat, ve, vn), lead_m)
+        start_lonlat = (lon, lat) if np.allclose(start, here) else self.to_lonlat(start)
+        _, lonlat = self.planner.route(start_lonlat, goal_lonlat)
+        xy = np.column_stack(self.frame.to_local(lonlat[:, 0], lonlat[:, 1]))
+        # the vehicle flies from where it is to the first vertex past the planned start when
+        # that leg is clear, else through the planned start itself
+        first = 1 if len(xy) > 1 else 0
+        if first and not np.allclose(start, here) and not self.roadmap.clear(here, xy[1])[0]:
+            first = 0
+        flown = np.vstack([here, xy[first:]])
+        self._check_keep_in(here, flown)
+        legs = (flown[:-1], flown[1:])
+        length = float(np.hypot(*np.diff(flown, axis=0).T).sum())
+        clearance = float(self.roadmap.clearance_of(*legs).min()) if len(flown) > 1 else math.inf
+        return Plan(
+            waypoints=waypoints(lonlat[first:], skip_start=False),
+            goal=(float(goal_lonlat[0]), float(goal_lonlat[1])),
+            start=start_lonlat,
+            length_m=length,
+            clearance_m=clearance,
+        )
+
+    def _check_keep_in(self, here, flown):
+        p = shapely.Point(here)
+        path = shapely.LineString(flown) if len(flown) > 1 else p
+        for poly, name in zip(self.keep_in, self.keep_in_names):
+            if poly.covers(p) and not poly.covers(path):
+                raise NoRoute(f"the route around the keep-out leaves keep-in fence {name}")

@@ -1,0 +1,343 @@
+"""A MAVLink link to the vehicle with message signing, and a loopback bridge that gives MAVSDK
+a signed link.
+
+MAVSDK's Python API cannot sign messages, so a signed connection runs through
+:class:`SigningBridge`: MAVSDK talks unsigned MAVLink to the bridge on a loopback UDP port
+(``udpout://127.0.0.1:PORT``), and the bridge talks to the vehicle over the operator's URL.
+Each message from MAVSDK is decoded with pymavlink and packed again, signed with the key (its
+source system, component and sequence number kept); each message from the vehicle is forwarded
+as received only if its signature checks out with the key (and its timestamp moves forward,
+pymavlink's replay rule). Unsigned and wrongly signed messages from the vehicle are dropped and
+counted, so a failure can say which it was. RADIO_STATUS/RADIO, which a telemetry radio injects
+unsigned, pass as ArduPilot lets them pass.
+
+Everything runs on the asyncio loop (datagram endpoints, a stream for TCP): no thread, no
+blocking call. URLs as MAVSDK writes them: ``udpin://HOST:PORT`` (we listen; the vehicle
+sends to us), ``udpout://HOST:PORT`` (we send to the vehicle), ``tcpout://HOST:PORT``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from alphafence.vehicle.signing import signing_timestamp
+
+LOOPBACK = "127.0.0.1"
+_URL = re.compile(r"(udpin|udpout|tcpout)://(\[[^\]]+\]|[^:/]*):(\d{1,5})/?")
+UNSIGNED_OK = frozenset({mavlink.MAVLINK_MSG_ID_RADIO_STATUS, mavlink.MAVLINK_MSG_ID_RADIO})
+SIGNED_FLAG = mavlink.MAVLINK_IFLAG_SIGNED
+MAX_DATAGRAM = 65536
+
+
+class BridgeError(RuntimeError):
+    """The vehicle side of a signed link could not be opened or went away."""
+
+
+def parse_url(url: str) -> tuple[str, str, int]:
+    """(kind, host, port) of a MAVSDK-style URL the signed link supports."""
+    m = _URL.fullmatch(url.strip())
+    if m is None:
+        if url.startswith(("serial://", "tcpin://")):
+            raise BridgeError(
+                f"{url}: a signed link runs over udpin://, udpout:// or tcpout:// (for a serial "
+                "port, let mavlink-router or MAVProxy expose it on UDP)"
+            )
+        raise BridgeError(f"{url}: not a udpin://HOST:PORT, udpout://HOST:PORT or tcpout:// URL")
+    kind, host, port = m.group(1), m.group(2).strip("[]"), int(m.group(3))
+    if not 0 < port < 65536:
+        raise BridgeError(f"{url}: port {port} is out of range")
+    if kind == "udpin" and not host:
+        host = "0.0.0.0"
+    if kind != "udpin" and host in ("", "0.0.0.0"):
+        raise BridgeError(f"{url}: {kind} needs the vehicle's address")
+    return kind, host, port
+
+
+def is_signed(msgbuf: bytes) -> bool:
+    """Whether a raw MAVLink frame carries a signature (MAVLink 2, incompat flag 1)."""
+    return len(msgbuf) > 2 and msgbuf[0] == mavlink.PROTOCOL_MARKER_V2 and bool(msgbuf[2] & 1)
+
+
+def signature_matches(msgbuf: bytes, key: bytes) -> bool:
+    """Whether a signed frame was signed with ``key`` (the signature alone, no replay rule)."""
+    import hashlib
+
+    if not is_signed(msgbuf) or len(msgbuf) < 13 + 12:
+        return False
+    return hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6] == bytes(msgbuf[-6:])
+
+
+@dataclass
+class LinkStats:
+    received: int = 0  # messages accepted from the vehicle
+    sent: int = 0  # messages sent to the vehicle
+    unsigned: int = 0  # dropped: no signature (signing expected)
+    bad_signature: int = 0  # dropped: signed with another key, or a replayed timestamp
+    garbage: int = 0  # bytes that were not MAVLink, a bad CRC, or an unknown message id
+
+    def diagnosis(self, key_given: bool) -> str:
+        """Why the vehicle may have stayed silent, from what was dropped."""
+        if not key_given:
+            return ""
+        if self.received == 0 and self.bad_signature:
+            return (
+                f"the vehicle's messages are signed with another key ({self.bad_signature} "
+                "dropped): check --signing-key"
+            )
+        if self.received == 0 and self.unsigned:
+            return (
+                f"the vehicle does not sign its messages ({self.unsigned} unsigned, dropped): "
+                "install the key with `alphafence signing setup`, or leave out --signing-key"
+            )
+        if self.received == 0:
+            return "nothing at all came from the vehicle"
+        return ""
+
+
+class VehicleLink:
+    """A raw MAVLink 2 link to the vehicle (pymavlink codec on asyncio transports).
+
+    With ``key``, outgoing messages are signed and incoming ones must be (``verify=False``:
+    signed, not checked); without it, nothing is signed and nothing is checked.
+    ``on_message(msg)`` gets each accepted message."""
+
+    def __init__(
+        self,
+        url: str,
+        key: bytes | None = None,
+        on_message: Callable | None = None,
+        *,
+        verify: bool = True,
+        link_id: int = 0,
+        source: tuple[int, int] = (245, 190),  # a ground station, MAV_COMP_ID_MISSIONPLANNER
+    ):
+        self.url = url
+        self.kind, self.host, self.port = parse_url(url)
+        self.key = key
+        self.on_message = on_message or (lambda msg: None)
+        self.stats = LinkStats()
+        # one codec reads (and checks signatures), one writes (and signs)
+        self.reader = mavlink.MAVLink(None)
+        self.reader.robust_parsing = True
+        self.mav = mavlink.MAVLink(None, srcSystem=source[0], srcComponent=source[1])
+        if key is not None:
+            self.mav.signing.secret_key = bytes(key)
+            self.mav.signing.sign_outgoing = True
+            self.mav.signing.link_id = link_id & 0xFF
+            self.mav.signing.timestamp = signing_timestamp()
+            if verify:
+                self.reader.signing.secret_key = bytes(key)
+                self.reader.signing.timestamp = self.mav.signing.timestamp
+                self.reader.signing.allow_unsigned_callback = lambda _mav, msg_id: (
+                    msg_id in UNSIGNED_OK
+                )
+        self.remote: tuple | None = None  # where the vehicle is (UDP)
+        self.closed: str | None = None  # why the link ended
+        self._transport = None
+        self._writer = None
+        self._reader_task = None
+
+    # -- life cycle -----------------------------------------------------------------
+    async def open(self) -> VehicleLink:
+        loop = asyncio.get_running_loop()
+        try:
+            if self.kind == "udpin":
+                self._transport, _ = await loop.create_datagram_endpoint(
+                    lambda: _Datagrams(self._received), local_addr=(self.host, self.port)
+                )
+            elif self.kind == "udpout":
+                self.remote = (self.host, self.port)
+                self._transport, _ = await loop.create_datagram_endpoint(
+                    lambda: _Datagrams(self._received), remote_addr=self.remote
+                )
+            else:
+                reader, self._writer = await asyncio.wait_for(
+                    asyncio.open_connection(self.host, self.port), 10.0
+                )
+                self._reader_task = asyncio.create_task(self._read_stream(reader))
+        except (OSError, asyncio.TimeoutError) as exc:
+            raise BridgeError(f"{self.url}: cannot open the connection ({exc})") from None
+        return self
+
+    async def close(self) -> None:
+        if self._reader_task is not None:
+            self._reader_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self._reader_task
+        if self._writer is not None:
+            self._writer.close()
+            with contextlib.suppress(Exception):
+                await self._writer.wait_closed()
+        if self._transport is not None:
+            self._transport.close()
+            await asyncio.sleep(0)  # the socket is closed on the next turn of the loop
+        self._transport = self._writer = self._reader_task = None
+
+    async def __aenter__(self):
+        return await self.open()
+
+    async def __aexit__(self, *exc):
+        await self.close()
+
+    # -- sending --------------------------------------------------------------------
+    def send(self, msg, source: tuple[int, int] | None = None, seq: int | None = None) -> None:
+        """Pack ``msg`` (a pymavlink message, new or decoded), signed when there is a key, and
+        send it. ``source``/``seq`` keep the original sender's ids when forwarding."""
+        mav = self.mav
+        own = mav.srcSystem, mav.srcComponent
+        if source is not None:
+            mav.srcSystem, mav.srcComponent = source
+        if seq is not None:
+            mav.seq = seq
+        try:
+            buf = msg.pack(mav)
+        finally:
+            mav.srcSystem, mav.srcComponent = own
+        mav.seq = (mav.seq + 1) % 256
+        self._write(buf)
+
+    def _write(self, buf: bytes) -> None:
+        if self._writer is not None:
+            self._writer.write(buf)
+        elif self._transport is not None and self.remote is not None:
+            self._transport.sendto(buf, self.remote)
+        else:
+            return  # udpin before the vehicle has been heard: nowhere to send yet
+        self.stats.sent += 1
+
+    # -- receiving ------------------------------------------------------------------
+    async def _read_stream(self, reader):
+        try:
+            while True:
+                data = await reader.read(MAX_DATAGRAM)
+                if not data:
+                    self.closed = "the vehicle closed the connection"
+                    return
+                self._received(data, None)
+        except OSError as exc:
+            self.closed = f"the connection failed ({exc})"
+
+    def _received(self, data: bytes, addr) -> None:
+        try:
+            messages = self.reader.parse_buffer(data) or []
+        except Exception:  # pymavlink with robust parsing should not raise; never crash
+            self.stats.garbage += 1
+            return
+        for msg in messages:
+            if isinstance(msg, mavlink.MAVLink_bad_data):
+                self._count_bad(msg)
+                continue
+            if isinstance(msg, mavlink.MAVLink_unknown):
+                # an id this dialect does not know: pymavlink returns it without checking
+                # the signature, so it is dropped, never forwarded
+                self.stats.garbage += 1
+                continue
+            if self.key is not None:
+                self._follow_timestamp(msg)
+            if self.kind == "udpin" and addr is not None:
+                self.remote = addr  # learnt from accepted (verified, when signing) messages only
+            self.stats.received += 1
+            self.on_message(msg)
+
+    def _follow_timestamp(self, msg) -> None:
+        """Sign with timestamps no older than the vehicle's: it rejects a new stream more than
+        a minute behind its own clock (which runs ahead of ours in SITL at a speedup)."""
+        buf = msg.get_msgbuf()
+        if is_signed(buf) and len(buf) >= 25:
+            ts = int.from_bytes(bytes(buf[-12:-6]), "little")
+            if ts > self.mav.signing.timestamp:
+                self.mav.signing.timestamp = ts
+
+    def _count_bad(self, msg) -> None:
+        if "signature" in str(getattr(msg, "reason", "")):
+            if is_signed(bytes(msg.data)):
+                self.stats.bad_signature += 1
+            else:
+                self.stats.unsigned += 1
+        else:
+            self.stats.garbage += 1
+
+
+class _Datagrams(asyncio.DatagramProtocol):
+    def __init__(self, received):
+        self.received = received
+
+    def datagram_received(self, data, addr):
+        self.received(data, addr)
+
+    def error_received(self, exc):  # ICMP port unreachable while the peer is not up yet
+        pass
+
+
+class SigningBridge:
+    """``async with SigningBridge(url, key) as bridge:`` then point MAVSDK at
+    ``bridge.local_url``. ``bridge.link.stats`` counts what was accepted and dropped."""
+
+    def __init__(self, url: str, key: bytes, *, link_id: int = 0):
+        self.key = key
+        self.link = VehicleLink(url, key, self._from_vehicle, link_id=link_id)
+        self.local = mavlink.MAVLink(None)
+        self.local.robust_parsing = True
+        self._local_transport = None
+        self._local_port: int | None = None
+        self._mavsdk: tuple | None = None  # MAVSDK's address, learnt from its first datagram
+        self.from_mavsdk = 0
+        self.not_forwarded = 0  # messages MAVSDK sent that pymavlink's dialect does not know
+
+    @property
+    def local_url(self) -> str:
+        if self._local_port is None:
+            raise BridgeError("the signing bridge is not open")
+        return f"udpout://{LOOPBACK}:{self._local_port}"
+
+    async def open(self) -> SigningBridge:
+        await self.link.open()
+        loop = asyncio.get_running_loop()
+        try:
+            self._local_transport, _ = await loop.create_datagram_endpoint(
+                lambda: _Datagrams(self._from_mavsdk), local_addr=(LOOPBACK, 0)
+            )
+        except OSError:
+            await self.link.close()
+            raise
+        self._local_port = self._local_transport.get_extra_info("sockname")[1]
+        return self
+
+    async def close(self) -> None:
+        if self._local_transport is not None:
+            self._local_transport.close()
+            self._local_transport = None
+            await asyncio.sleep(0)
+        await self.link.close()
+
+    async def __aenter__(self):
+        return await self.open()
+
+    async def __aexit__(self, *exc):
+        await self.close()
+
+    def diagnosis(self) -> str:
+        return self.link.closed or self.link.stats.diagnosis(key_given=True)
+
+    def _from_vehicle(self, msg) -> None:
+        if self._local_transport is not None and self._mavsdk is not None:
+            self._local_transport.sendto(bytes(msg.get_msgbuf()), self._mavsdk)
+
+    def _from_mavsdk(self, data: bytes, addr) -> None:
+        self._mavsdk = addr
+        try:
+            messages = self.local.parse_buffer(data) or []
+        except Exception:
+            return
+        for msg in messages:
+            if isinstance(msg, mavlink.MAVLink_bad_data | mavlink.MAVLink_unknown):
+                self.not_forwarded += 1
+                continue
+            self.from_mavsdk += 1
+            self.link.send(msg, (msg.get_srcSystem(), msg.get_srcComponent()), msg.get_seq())

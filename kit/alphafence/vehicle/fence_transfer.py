@@ -1,0 +1,285 @@
+"""Upload fences with the MAVLink mission protocol (fence type), read them back, compare.
+
+Through MAVSDK's mission_raw plugin (raw MISSION_ITEM_INT items of mission type FENCE).
+Success is claimed only when the fence downloaded after the upload matches what was sent,
+item by item, to the 1e-7 degree. On failure the message says what the vehicle holds:
+ArduPilot keeps its previous fence when an upload fails, and the kit checks that too.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from dataclasses import dataclass
+
+from alphafence.geo.coords import from_e7, to_e7
+from alphafence.mavlink.items import (
+    CIRCLE_EXCLUSION,
+    CIRCLE_INCLUSION,
+    MAX_POLYGON_VERTICES,
+    POLYGON_EXCLUSION,
+    POLYGON_INCLUSION,
+    RETURN_POINT,
+    FenceItem,
+)
+
+MISSION_TYPE_FENCE = 1
+FRAME_GLOBAL = 0
+# ArduPilot abandons a stalled upload 8 s after the last item it received, and until then answers
+# a download with MISSION_ACK(DENIED), which MAVSDK's download ignores (it times out instead).
+# MAVSDK gives up on an upload after about 2.5 s of silence: the vehicle may need the rest of
+# those 8 s before it can say what it holds.
+VEHICLE_UPLOAD_TIMEOUT_S = 8.0
+
+# MAVSDK's MissionRawResult names -> plain words
+REASONS = {
+    "TOO_MANY_MISSION_ITEMS": "the vehicle has no room for that many fence items",
+    "TIMEOUT": "the vehicle stopped answering during the transfer",
+    "INVALID_ARGUMENT": "the vehicle rejected an item as invalid",
+    "UNSUPPORTED": "the vehicle does not support fence transfers",
+    "DENIED": "the vehicle denied the transfer",
+    # MAVSDK's name for MISSION_ACK(MAV_MISSION_ERROR), ArduPilot's answer to a fence it will
+    # not store (too many bytes, a bad polygon, ...), and for an ACK before the last item
+    "PROTOCOL_ERROR": "the vehicle refused the fence",
+    "INT_MESSAGES_NOT_SUPPORTED": "the vehicle does not speak MISSION_ITEM_INT",
+    "TRANSFER_CANCELLED": "the transfer was cancelled",
+    "BUSY": "the vehicle is busy with another transfer",
+    "NO_SYSTEM": "the vehicle is not connected",
+    # MAVSDK's name for a message it could not send (its ConnectionError)
+    "ERROR": "the link to the vehicle failed",
+    # ArduPilot answers an item it did not ask for (a repeated or late request) with
+    # MISSION_ACK(INVALID_SEQUENCE), and MAVSDK ends the upload there
+    "INVALID_SEQUENCE": "the transfer got out of step (a message was repeated or came late)",
+    "NO_MISSION_AVAILABLE": "there were no fence items to send",
+}
+
+
+class FenceTransferError(RuntimeError):
+    def __init__(self, message, vehicle_says=(), holds=None, result=None):
+        self.result = result  # MAVSDK's MissionRawResult name, when MAVSDK gave one
+        self.vehicle_says = [" ".join(str(t).split()) for t in vehicle_says]  # one line
+        self.holds = holds
+        parts = [message]
+        if self.vehicle_says:
+            parts.append("vehicle: " + "; ".join(self.vehicle_says))
+        if holds is not None:
+            parts.append(holds)
+        super().__init__(" | ".join(parts))
+
+
+@dataclass
+class UploadReport:
+    items: int
+    seconds: float
+    verified: bool
+
+
+def to_raw(items):
+    from mavsdk.plugins.mission_raw import MissionItem
+
+    return [
+        MissionItem(
+            seq=i,
+            frame=FRAME_GLOBAL,
+            command=it.command,
+            current=0,
+            autocontinue=1,
+            param1=float(it.param1),
+            param2=0.0,
+            param3=0.0,
+            param4=0.0,
+            x=to_e7(it.lat),
+            y=to_e7(it.lon),
+            z=0.0,
+            mission_type=MISSION_TYPE_FENCE,
+        )
+        for i, it in enumerate(items)
+    ]
+
+
+FENCE_COMMANDS = {
+    RETURN_POINT: "return point",
+    POLYGON_INCLUSION: "inclusion polygon vertex",
+    POLYGON_EXCLUSION: "exclusion polygon vertex",
+    CIRCLE_INCLUSION: "inclusion circle",
+    CIRCLE_EXCLUSION: "exclusion circle",
+}
+MAX_DOWNLOAD_ITEMS = 1000  # ArduPilot's fence storage holds well under this (SD: a few hundred)
+
+
+def from_raw(raw):
+    """The vehicle's items as FenceItems, after checking every one: what comes over the link
+    is input like any file (a faulty or hostile vehicle, a corrupted link), so an item out of
+    range, of another mission type, or a polygon whose vertex counts disagree is refused with
+    one line saying which item and what is wrong."""
+    if len(raw) > MAX_DOWNLOAD_ITEMS:
+        raise FenceTransferError(
+            f"the vehicle sent {len(raw)} fence items (over {MAX_DOWNLOAD_ITEMS})"
+        )
+    items = []
+    for i, r in enumerate(raw):
+        items.append(_checked_item(i, r))
+    _check_polygons(items)
+    return items
+
+
+def _bad(i, what):
+    return FenceTransferError(f"the vehicle sent an invalid fence: item {i}: {what}")
+
+
+def _checked_item(i, r):
+    try:
+        command, mission_type = int(r.command), int(r.mission_type)
+        x, y, param1 = int(r.x), int(r.y), float(r.param1)
+    except (TypeError, ValueError, OverflowError):
+        raise _bad(i, "a field is not a number") from None
+    if mission_type != MISSION_TYPE_FENCE:
+        raise _bad(i, f"mission type {mission_type}, not a fence item (1)")
+    if command not in FENCE_COMMANDS:
+        raise _bad(i, f"command {command} is not a fence item")
+    lat, lon = from_e7(x), from_e7(y)
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise _bad(i, f"position {lat:.7f}, {lon:.7f} is out of range")
+    if not math.isfinite(param1):
+        raise _bad(i, f"parameter 1 is {param1}")
+    if command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION) and not 0 < param1 <= 1e7:
+        raise _bad(i, f"circle radius {param1:g} m")
+    if command in (POLYGON_INCLUSION, POLYGON_EXCLUSION) and not (
+        param1 == int(param1) and 3 <= param1 <= MAX_POLYGON_VERTICES
+    ):
+        raise _bad(i, f"polygon vertex count {param1:g} (3 to {MAX_POLYGON_VERTICES})")
+    return FenceItem(command, param1, lon, lat)
+
+
+def _check_polygons(items):
+    """Each polygon is ``n`` consecutive vertices of one command, each saying ``n``."""
+    i = 0
+    while i < len(items):
+        it = items[i]
+        if it.command not in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
+            i += 1
+            continue
+        n = int(it.param1)
+        group = items[i : i + n]
+        if len(group) < n or any((g.command, g.param1) != (it.command, it.param1) for g in group):
+            raise _bad(i, f"a polygon of {n} vertices does not have {n} matching items")
+        i += n
+
+
+def same_items(sent, got) -> list:
+    """Differences between two item lists (empty when they match to 1e-7 degrees)."""
+    diffs = []
+    if len(sent) != len(got):
+        diffs.append(f"{len(sent)} items sent, {len(got)} read back")
+    for i, (a, b) in enumerate(zip(sent, got)):
+        if (
+            a.command != b.command
+            or abs(a.param1 - b.param1) > 1e-3 * max(1.0, abs(a.param1))
+            or to_e7(a.lat) != to_e7(b.lat)
+            or to_e7(a.lon) != to_e7(b.lon)
+        ):
+            diffs.append(f"item {i}: sent {a}, read {b}")
+    return diffs
+
+
+def _result_name(exc) -> str:
+    result = getattr(exc, "result", None)
+    return str(getattr(result, "name", result))
+
+
+def _reason(exc) -> str:
+    name = _result_name(exc)
+    return REASONS.get(name, f"transfer failed ({name})")
+
+
+async def download_fence(vehicle):
+    from mavsdk.plugins.mission_raw import MissionRawError
+
+    try:
+        raw = await vehicle.mission_raw.download_geofence()
+    except MissionRawError as exc:
+        if getattr(exc.result, "name", "") == "NO_MISSION_AVAILABLE":
+            return []
+        raise FenceTransferError(
+            f"download failed: {_reason(exc)}", result=_result_name(exc)
+        ) from None
+    return from_raw(_in_sequence(raw))
+
+
+def _in_sequence(raw):
+    """The downloaded items, one per sequence number 0..n-1.
+
+    MAVSDK 4.1 keeps the items it already has when a repeated MISSION_COUNT (an answer to its
+    own re-sent MISSION_REQUEST_LIST, arriving late) restarts a download, and then returns some
+    items twice; ArduPilot sends the same item for the same number, so one per number is kept."""
+    by_seq = {}
+    for r in raw:
+        by_seq.setdefault(int(r.seq), r)
+    if sorted(by_seq) != list(range(len(by_seq))):
+        raise FenceTransferError(f"download failed: items came back numbered {sorted(by_seq)}")
+    return [by_seq[i] for i in range(len(by_seq))]
+
+
+async def upload_fence(vehicle, items) -> UploadReport:
+    """Upload, then download and compare. Raises FenceTransferError saying what failed and
+    what the vehicle now holds."""
+    from mavsdk.plugins.mission_raw import MissionRawError
+
+    t0 = time.monotonic()
+    try:
+        await vehicle.mission_raw.upload_geofence(to_raw(items))
+    except MissionRawError as exc:
+        got, holds = await _what_it_holds(vehicle)
+        if got is not None and same_items(items, got) == []:
+            # the vehicle stored the fence but its final MISSION_ACK was lost: the read-back,
+            # which is what success means here, shows the fence sent
+            return UploadReport(len(items), time.monotonic() - t0, True)
+        says = await vehicle.texts_since(t0)
+        raise FenceTransferError(
+            f"upload of {len(items)} fence items failed: {_reason(exc)}",
+            says,
+            holds,
+            result=_result_name(exc),
+        ) from None
+    got = await download_fence(vehicle)
+    seconds = time.monotonic() - t0
+    diffs = same_items(items, got)
+    if diffs:
+        raise FenceTransferError(
+            "the fence read back differs from the one sent: " + "; ".join(diffs[:3]),
+            await vehicle.texts_since(t0, 0.0),
+            f"the vehicle holds {len(got)} fence items",
+        )
+    return UploadReport(len(items), seconds, True)
+
+
+async def _what_it_holds(vehicle):
+    """After a failed upload: (items read back or None, what the vehicle holds in words).
+
+    Keeps asking while the vehicle may still be busy with the abandoned upload (see
+    VEHICLE_UPLOAD_TIMEOUT_S) and still sends heartbeats; each attempt ends within MAVSDK's
+    own timeout (about 2.5 s), so this takes at most about 11 s."""
+    deadline = time.monotonic() + VEHICLE_UPLOAD_TIMEOUT_S + 0.5
+    while True:
+        try:
+            got = await download_fence(vehicle)
+        except FenceTransferError as exc:
+            why = str(exc)
+        else:
+            return got, f"the vehicle still holds its previous fence ({len(got)} items)"
+        if not await _connected(vehicle):
+            return None, (
+                "the vehicle is no longer connected (no heartbeat), so what it holds "
+                "is unknown; ArduPilot keeps its previous fence when an upload fails"
+            )
+        if time.monotonic() >= deadline:
+            return None, f"could not read back what the vehicle holds ({why})"
+        await asyncio.sleep(0.1)
+
+
+async def _connected(vehicle) -> bool:
+    try:
+        return bool(await vehicle.system.is_connected())
+    except Exception:  # no way to tell: keep asking until the deadline
+        return True
