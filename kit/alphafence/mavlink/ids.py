@@ -34,8 +34,28 @@ MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION = 5003
 MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION = 5004
 
 # -- MAV_CMD: commands (COMMAND_LONG) ---------------------------------------------------
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN = 246
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_REQUEST_MESSAGE = 512
+MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
+
+# -- MAV_MODE_FLAG ----------------------------------------------------------------------
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+
+# -- COPTER_MODE (ArduPilot's custom_mode numbers for Copter) ---------------------------
+COPTER_MODE_GUIDED = 4
+COPTER_MODE_RTL = 6
+COPTER_MODE_LAND = 9
+COPTER_MODE_BRAKE = 17
+
+# -- EKF_STATUS_FLAGS -------------------------------------------------------------------
+EKF_POS_HORIZ_ABS = 16
+EKF_CONST_POS_MODE = 128
+EKF_PRED_POS_HORIZ_ABS = 512
+
+# -- GPS_FIX_TYPE -----------------------------------------------------------------------
+GPS_FIX_TYPE_3D_FIX = 3
 
 # -- MAV_FRAME --------------------------------------------------------------------------
 MAV_FRAME_GLOBAL = 0
@@ -50,9 +70,18 @@ MAV_MISSION_TYPE_FENCE = 1
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_TYPE_QUADROTOR = 2
 
-# -- message ids --------------------------------------------------------------------------
+# -- message ids ------------------------------------------------------------------------
+MAVLINK_MSG_ID_HEARTBEAT = 0
+MAVLINK_MSG_ID_SYSTEM_TIME = 2
+MAVLINK_MSG_ID_GPS_RAW_INT = 24
+MAVLINK_MSG_ID_GLOBAL_POSITION_INT = 33
+MAVLINK_MSG_ID_COMMAND_LONG = 76
 MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT = 87
+MAVLINK_MSG_ID_FENCE_STATUS = 162
+MAVLINK_MSG_ID_EKF_STATUS_REPORT = 193
 MAVLINK_MSG_ID_HOME_POSITION = 242
+MAVLINK_MSG_ID_ADSB_VEHICLE = 246
+MAVLINK_MSG_ID_STATUSTEXT = 253
 
 # -- groups -----------------------------------------------------------------------------
 FENCE_COMMANDS = frozenset(

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from alphafence.errors import RoutingError
 from alphafence.monitor.predict import Braking
 from alphafence.route.roadmap import NoRoute
 
@@ -46,7 +47,7 @@ POSITION_TARGET_GLOBAL_INT_ID = 87
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
 
-class RerouteFailed(Exception):
+class RerouteFailed(RoutingError):
     """A re-route that cannot be flown: ``str(err)`` is the one-line reason."""
 
 

@@ -27,12 +27,14 @@ import numpy as np
 import shapely
 from scipy.spatial import QhullError, Voronoi, cKDTree
 
+from alphafence.errors import RoutingError
+
 # The planner keeps this much more than the asked clearance, so that an independent exact
 # check (shapely.distance) never finds a path a rounding error closer than the clearance.
 EPS_CLEAR = 0.05
 
 
-class NoRoute(Exception):
+class NoRoute(RoutingError):
     """No route: ``str(err)`` is a one-line reason naming what blocks it."""
 
 

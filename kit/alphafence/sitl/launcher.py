@@ -47,7 +47,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from alphafence.errors import InputError
+from alphafence.errors import InputError, SitlError
 from alphafence.sitl.find import NOT_FOUND_HELP, ardupilot_tree, find_sitl_binary
 
 LOOPBACK = "127.0.0.1"
@@ -60,10 +60,6 @@ LOG_NAME = "sitl.log"
 
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 _PARAM = re.compile(r"^[A-Z][A-Z0-9_]{0,15}$")
-
-
-class SitlError(RuntimeError):
-    """SITL could not be started, exited early, or did not become ready in time."""
 
 
 # ---------------------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from alphafence.errors import VehicleError
 from alphafence.vehicle.signing import signing_timestamp
 
 LOOPBACK = "127.0.0.1"
@@ -35,7 +36,7 @@ SIGNED_FLAG = mavlink.MAVLINK_IFLAG_SIGNED
 MAX_DATAGRAM = 65536
 
 
-class BridgeError(RuntimeError):
+class BridgeError(VehicleError):
     """The vehicle side of a signed link could not be opened or went away."""
 
 

@@ -13,6 +13,7 @@ import math
 import time
 from dataclasses import dataclass
 
+from alphafence.errors import VehicleError
 from alphafence.geo.coords import from_e7, to_e7
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
@@ -55,7 +56,7 @@ REASONS = {
 }
 
 
-class FenceTransferError(RuntimeError):
+class FenceTransferError(VehicleError):
     def __init__(self, message, vehicle_says=(), holds=None, result=None):
         self.result = result  # MAVSDK's MissionRawResult name, when MAVSDK gave one
         self.vehicle_says = [" ".join(str(t).split()) for t in vehicle_says]  # one line

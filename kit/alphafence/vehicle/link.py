@@ -8,8 +8,10 @@ import contextlib
 import time
 from collections import deque
 
+from alphafence.errors import VehicleError
 
-class LinkError(RuntimeError):
+
+class LinkError(VehicleError):
     """The vehicle could not be reached, or went away."""
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from alphafence.errors import VehicleError
+
 # FENCE_TYPE bits: 1 max altitude, 2 circle around home, 4 polygons and circles, 8 min altitude.
 # FENCE_ACTION (Copter): 0 report, 1 RTL or land, 2 land, 3 SmartRTL/RTL/land, 4 brake or land.
 PROFILES = {
@@ -39,7 +41,7 @@ PROFILES = {
 INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
 
 
-class ParamError(RuntimeError):
+class ParamError(VehicleError):
     pass
 
 

@@ -22,7 +22,7 @@ import stat
 import time
 from pathlib import Path
 
-from alphafence.errors import InputError
+from alphafence.errors import InputError, VehicleError
 
 KEY_BYTES = 32
 MAX_KEY_FILE_BYTES = 4096
@@ -109,7 +109,7 @@ def key_id(key: bytes) -> str:
     return hashlib.sha256(b"alphafence-key-id" + key).hexdigest()[:8]
 
 
-class SigningSetupError(RuntimeError):
+class SigningSetupError(VehicleError):
     """The vehicle did not take the key (one line, saying what was seen)."""
 
 
