@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+
 from alphafence.build.compare import compare_methods
 from alphafence.build.fences import required_region
 from alphafence.build.pipeline import BuildOptions, build_fences

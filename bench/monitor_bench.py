@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import shapely
+
 from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_geojson import FenceRecord

@@ -15,13 +15,14 @@ import time
 
 import numpy as np
 import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
 from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.formats.rules import load_rules
 from alphafence.route import EPS_CLEAR, FenceRoadmap, NoRoute
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 CLEARANCE = 20.0
 PAIRS = 100

@@ -258,8 +258,9 @@ class _Soak:
 
     # -- the run ---------------------------------------------------------------------
     async def run(self):
-        from alphafence.monitor.runner import EventLog
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+
+        from alphafence.monitor.runner import EventLog
 
         loop = asyncio.get_running_loop()
         loop.set_exception_handler(self._on_loop_error)

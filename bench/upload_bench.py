@@ -12,6 +12,7 @@ import statistics
 import time
 
 import numpy as np
+
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
 from alphafence.sitl.find import find_sitl_binary

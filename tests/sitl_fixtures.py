@@ -18,6 +18,7 @@ instance's temporary working directory (its ``sitl.log``) for a post-mortem.
 import os
 
 import pytest
+
 from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
 
 DEFAULTS = {"home": "egham", "ready_timeout": 60.0}

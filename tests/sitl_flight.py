@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import pytest
 import shapely
+
 from alphafence.geo.frame import LocalFrame
 
 MAV_CMD_SET_MESSAGE_INTERVAL = 511

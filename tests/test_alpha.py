@@ -4,9 +4,10 @@ import math
 
 import numpy as np
 import shapely
-from alphafence.geo.alpha import alpha_shape
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from alphafence.geo.alpha import alpha_shape
 
 
 def squares(centres, size=10.0):

@@ -3,6 +3,7 @@
 import json
 
 import pytest
+
 from alphafence.build.bundle import generate_key, sign, signature_path, verify
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path

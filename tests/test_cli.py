@@ -7,6 +7,7 @@ import sys
 
 import pytest
 import shapely
+
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
 from alphafence.formats.qgc_plan import group_polygons, read_plan_fence

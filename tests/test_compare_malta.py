@@ -1,6 +1,7 @@
 """The paper's evaluation on real OpenStreetMap data (Malta 2018)."""
 
 import pytest
+
 from alphafence.build.compare import compare_methods
 from alphafence.build.fences import contains_with_margin
 from alphafence.build.pipeline import BuildOptions, build_fences

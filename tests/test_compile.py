@@ -7,6 +7,9 @@ import math
 import numpy as np
 import pytest
 import shapely
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 from alphafence.errors import InputError
 from alphafence.formats.fence_geojson import FenceRecord, read_fences
 from alphafence.formats.qgc_plan import group_polygons
@@ -20,8 +23,6 @@ from alphafence.mavlink.items import (
 )
 from alphafence.mavlink.storage import PROFILES, Profile, storage_bytes
 from alphafence.onboard.compile import compile_fences
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from .helpers import VerifyFrame
 

@@ -30,9 +30,9 @@ from __future__ import annotations
 import time
 
 import pytest
+
 from alphafence.geo.frame import LocalFrame
 from alphafence.vehicle.link import open_vehicle
-
 from tests.sitl_flight import (
     ALTITUDE,
     FAR_EDGE,

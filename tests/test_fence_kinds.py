@@ -3,6 +3,7 @@
 import json
 
 import shapely
+
 from alphafence.build.fences import contains_with_margin
 from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.formats.database import read_database
@@ -76,7 +77,6 @@ def test_keep_in_fence_lies_inside_the_area_minus_its_margin(write_json, rules):
 
 def test_ed269_applicability_reaches_the_fence_geojson(tmp_path):
     from alphafence.cli import main
-
     from tests.test_readers import ED269
 
     src = tmp_path / "zones.json"

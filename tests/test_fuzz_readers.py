@@ -8,14 +8,15 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 from alphafence.errors import InputError
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_geojson import read_fences
 from alphafence.formats.qgc_plan import read_plan_fence
 from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.formats.rules import load_rules
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 N = int(os.environ.get("ALPHAFENCE_FUZZ_EXAMPLES", "60"))
 FUZZ = settings(max_examples=N, deadline=None, suppress_health_check=list(HealthCheck))

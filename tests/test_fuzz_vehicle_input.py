@@ -18,6 +18,10 @@ import time
 from types import SimpleNamespace
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.formats.qgc_plan import group_polygons
 from alphafence.mavlink.items import POLYGON_EXCLUSION
@@ -27,10 +31,6 @@ from alphafence.monitor.runner import parse_adsb, parse_global_position
 from alphafence.vehicle.bridge import VehicleLink, signature_matches
 from alphafence.vehicle.fence_transfer import FenceTransferError, download_fence, from_raw
 from alphafence.vehicle.link import open_vehicle
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-from pymavlink.dialects.v20 import ardupilotmega as mav
-
 from tests.fake_vehicle import FakeVehicle, Faults
 from tests.test_upload_faults import NEW
 
@@ -216,6 +216,7 @@ def test_traffic_parsers_return_a_clean_report_or_none(fields, system_id):
 
 def _engine():
     import shapely
+
     from alphafence.geo.frame import LocalFrame
 
     frame = LocalFrame(14.5, 35.9)

@@ -32,6 +32,7 @@ import time
 
 import pytest
 import shapely
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import MonitorOptions, alert_text

@@ -4,6 +4,7 @@ import math
 
 import pytest
 import shapely
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.fenceset import FenceSet

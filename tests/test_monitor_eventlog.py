@@ -106,6 +106,7 @@ async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
     from types import SimpleNamespace
 
     import shapely
+
     from alphafence.formats.fence_geojson import FenceRecord
     from alphafence.monitor.engine import MonitorOptions
     from alphafence.monitor.fenceset import FenceSet

@@ -39,12 +39,12 @@ import statistics
 import time
 
 import pytest
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.runner import EventLog, Monitor
 from alphafence.vehicle.link import open_vehicle
-
 from tests.sitl_flight import (
     ALTITUDE,
     HALF_WIDTH,

@@ -7,11 +7,11 @@ import json
 from pathlib import Path
 
 import shapely
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import Engine, Sample
 from alphafence.monitor.fenceset import FenceSet
-
 from tests.sitl_flight import speedup_options
 
 TRACE = Path(__file__).parent / "data" / "trace-egham-fence-x5.jsonl"

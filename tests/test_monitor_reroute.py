@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import shapely
+
 from alphafence.cli import main
 from alphafence.errors import InputError
 from alphafence.formats.fence_geojson import FenceRecord

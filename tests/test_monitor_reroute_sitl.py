@@ -53,6 +53,7 @@ import time
 import numpy as np
 import pytest
 import shapely
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.ids import (
@@ -67,7 +68,6 @@ from alphafence.mavlink.ids import (
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.runner import EventLog, Monitor
 from alphafence.vehicle.link import open_vehicle
-
 from tests.sitl_flight import (
     ALTITUDE,
     ARM_TIMEOUT,

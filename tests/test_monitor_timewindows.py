@@ -4,6 +4,7 @@ from datetime import datetime, timezone
 
 import pytest
 import shapely
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.applicability import is_active, timed

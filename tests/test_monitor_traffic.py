@@ -1,6 +1,7 @@
 """Dynamic fences around other aircraft: CPA-based conflicts, growing radius, stale reports."""
 
 import pytest
+
 from alphafence.monitor.traffic import Aircraft, Traffic, TrafficOptions
 
 
@@ -44,6 +45,7 @@ def test_engine_turns_adsb_reports_into_conflict_events():
     import json
 
     import shapely
+
     from alphafence.formats.fence_geojson import FenceRecord
     from alphafence.geo.frame import LocalFrame
     from alphafence.monitor.engine import Engine, Sample, alert_text

@@ -4,9 +4,10 @@ import math
 
 import numpy as np
 import shapely
-from alphafence.geo.outward import simplify_polygon, simplify_ring
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from alphafence.geo.outward import simplify_polygon, simplify_ring
 
 
 @st.composite

@@ -5,6 +5,7 @@ import shutil
 
 import pytest
 import shapely
+
 from alphafence.errors import InputError
 from alphafence.formats.database import read_database
 from alphafence.formats.geojson import parse_hstore, tags_of

@@ -6,10 +6,11 @@ import math
 import numpy as np
 import pytest
 import shapely
-from alphafence.route import NoRoute, Roadmap
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
+
+from alphafence.route import NoRoute, Roadmap
 
 SIZE = 400.0  # scenes are SIZE x SIZE metres
 GRID = 4.0  # reference grid resolution (m)

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import shapely
+
 from alphafence.cli import main
 from alphafence.formats.fence_geojson import read_fences
 from alphafence.formats.mission import read_mission

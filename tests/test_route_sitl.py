@@ -38,6 +38,7 @@ import time
 import numpy as np
 import pytest
 import shapely
+
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.formats.qgc_plan import mission_items
 from alphafence.geo.frame import LocalFrame
@@ -54,7 +55,6 @@ from alphafence.route import FenceRoadmap
 from alphafence.vehicle.fence_transfer import upload_fence
 from alphafence.vehicle.link import open_vehicle
 from alphafence.vehicle.params import PROFILES, apply_params
-
 from tests.sitl_flight import (
     ALTITUDE,
     ARM_TIMEOUT,

@@ -1,4 +1,5 @@
 import pytest
+
 from alphafence.errors import InputError
 from alphafence.formats.rules import load_rules
 

@@ -10,6 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
+
 from alphafence.build.fences import METHODS
 from alphafence.build.outputs import render
 from alphafence.build.pipeline import BuildOptions, build_fences
@@ -18,8 +21,6 @@ from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
 from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.formats.rules import parse_rules
 from alphafence.geo.frame import LocalFrame
-from hypothesis import HealthCheck, example, given, settings
-from hypothesis import strategies as st
 
 from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
 

@@ -11,6 +11,8 @@ import os
 import stat
 
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
 from alphafence.cli import main
 from alphafence.errors import InputError
 from alphafence.vehicle.bridge import (
@@ -29,8 +31,6 @@ from alphafence.vehicle.signing import (
     signing_timestamp,
     write_new_key,
 )
-from pymavlink.dialects.v20 import ardupilotmega as mav
-
 from tests.fake_vehicle import FakeVehicle
 from tests.test_upload_faults import NEW, PREVIOUS
 

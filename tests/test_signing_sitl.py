@@ -25,6 +25,7 @@ import sys
 from importlib import resources
 
 import pytest
+
 from alphafence.formats import qgc_plan as plan
 from alphafence.formats.qgc_plan import read_plan_fence
 from alphafence.mavlink.items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, FenceItem

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from alphafence.cli import main
 from alphafence.errors import InputError
 from alphafence.sitl.launcher import (

@@ -28,6 +28,8 @@ import time
 from dataclasses import replace
 
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     POLYGON_EXCLUSION,
@@ -42,8 +44,6 @@ from alphafence.vehicle.fence_transfer import (
     upload_fence,
 )
 from alphafence.vehicle.link import LinkError, open_vehicle
-from pymavlink.dialects.v20 import ardupilotmega as mav
-
 from tests.fake_vehicle import FakeVehicle, Faults, free_udp_port
 
 MSG_MAX_S = 3.0  # a refused upload is reported within this (the ACK plus 0.3 s for STATUSTEXTs)

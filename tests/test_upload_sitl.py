@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 import shapely
+
 from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
