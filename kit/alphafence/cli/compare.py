@@ -70,7 +70,7 @@ def run(args) -> int:
     else:
         out_console.print(stats_table(cmp, opts))
     if args.figure:
-        from alphafence.plots.fences import comparison_figure
+        from alphafence.plots.compare import comparison_figure
 
         osm = any(".osm" in f or f.endswith(".pbf") for f in db.files)
         comparison_figure(

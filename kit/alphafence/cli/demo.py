@@ -14,7 +14,8 @@ from alphafence.cli.compare import stats_table
 from alphafence.formats.atomic import write_all
 from alphafence.formats.database import read_database
 from alphafence.formats.rules import load_rules
-from alphafence.plots.fences import comparison_figure, fence_map
+from alphafence.plots.compare import comparison_figure
+from alphafence.plots.fences import fence_map
 
 NOTE = "Synthetic demo scene authored by the AlphaFence project (not real places)."
 

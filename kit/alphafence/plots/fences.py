@@ -1,66 +1,45 @@
-"""Pictures: fences on a map, and the methods side by side."""
+"""Fences on a map: a build's fences over the restricted features, and the onboard fences a
+compile chose over the full-resolution ones."""
 
 from __future__ import annotations
 
-import io
 import math
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import shapely  # noqa: E402
-
-from alphafence.formats.atomic import write_bytes_atomic  # noqa: E402
-
-KIND_STYLE = {
-    "keep_out": dict(edgecolor="#c62828", facecolor="#c6282822", lw=1.4),
-    "warning": dict(edgecolor="#ef8f00", facecolor="none", lw=1.0, ls="--"),
-    "keep_in": dict(edgecolor="#2e7d32", facecolor="none", lw=1.6),
-}
-METHOD_COLOR = {"alpha": "#1565c0", "polygon": "#6a1b9a", "circle": "#ef6c00", "exact": "#2e7d32"}
-
-
-def _draw(ax, geom, **style):
-    from matplotlib.patches import PathPatch
-    from matplotlib.path import Path
-
-    for poly in shapely.get_parts(geom):
-        if poly.geom_type != "Polygon":
-            continue
-        rings = [np.asarray(poly.exterior.coords)] + [np.asarray(r.coords) for r in poly.interiors]
-        verts = np.concatenate(rings)
-        codes = np.concatenate(
-            [[Path.MOVETO] + [Path.LINETO] * (len(r) - 2) + [Path.CLOSEPOLY] for r in rings]
-        )
-        ax.add_patch(PathPatch(Path(verts, codes), **style))
-
-
-def _draw_restricted(ax, geom):
-    for part in shapely.get_parts(geom):
-        if part.geom_type == "Point":
-            ax.plot(part.x, part.y, "k.", ms=3)
-        elif part.geom_type == "LineString":
-            ax.plot(*np.asarray(part.coords).T, color="#555", lw=1)
-    _draw(ax, geom, edgecolor="#444", facecolor="#9e9e9e", lw=0.5)
-
-
-def _save(fig, path):
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=130, bbox_inches="tight")
-    plt.close(fig)
-    write_bytes_atomic(path, buf.getvalue())
+from alphafence.plots.common import (
+    KIND_STYLE,
+    draw_polygons,
+    draw_restricted,
+    save_figure,
+    subplots,
+)
 
 
 def fence_map(fences, sites, path, title="AlphaFence fences", note=None):
-    """All fences (WGS84) over the restricted features, equal-area-ish aspect."""
-    fig, ax = plt.subplots(figsize=(9, 9))
+    """Draw every fence (WGS84) over the restricted features and save it as PNG.
+
+    The aspect ratio is corrected for the latitude, so shapes look as they do on the ground.
+
+    Parameters
+    ----------
+    fences : list of Fence
+        As ``build_fences`` returns them; warning layers are drawn first, keep-out on top.
+    sites : list of Site
+        Their restricted areas are drawn in grey.
+    path : str or Path
+        The PNG to write.
+    title : str
+        The figure's title.
+    note : str, optional
+        A line of small print at the bottom (e.g. the data's attribution).
+    """
+    fig, ax = subplots(figsize=(9, 9))
     for s in sites:
-        _draw_restricted(ax, s.frame.geom_to_wgs84(s.geometry))
+        draw_restricted(ax, s.frame.geom_to_wgs84(s.geometry))
     order = {"warning": 0, "keep_in": 1, "keep_out": 2}
     for f in sorted(fences, key=lambda f: order.get(f.kind, 3)):
-        _draw(ax, f.geometry, **KIND_STYLE.get(f.kind, KIND_STYLE["keep_out"]))
+        draw_polygons(ax, f.geometry, **KIND_STYLE.get(f.kind, KIND_STYLE["keep_out"]))
     ax.autoscale_view()
     lat = np.mean(ax.get_ylim())
     ax.set_aspect(1.0 / max(math.cos(math.radians(lat)), 0.05), adjustable="datalim")
@@ -84,63 +63,28 @@ def fence_map(fences, sites, path, title="AlphaFence fences", note=None):
     ax.legend(handles=handles, loc="upper right", fontsize=8)
     if note:
         fig.text(0.01, 0.005, note, fontsize=7, color="#555")
-    _save(fig, path)
-
-
-def comparison_figure(sites, by_method, path, note=None):
-    """Rows: a few telling sites; columns: methods. Metric axes (the site's frame)."""
-    methods = list(by_method)
-    fig, axes = plt.subplots(
-        len(sites), len(methods), figsize=(3.2 * len(methods), 3.2 * len(sites)), squeeze=False
-    )
-    for r, site in enumerate(sites):
-        for c, m in enumerate(methods):
-            ax = axes[r][c]
-            fence = by_method[m][site.site_id]
-            _draw(
-                ax,
-                fence.local,
-                edgecolor=METHOD_COLOR.get(m, "k"),
-                facecolor=METHOD_COLOR.get(m, "k") + "22",
-                lw=1.5,
-            )
-            _draw_restricted(ax, site.geometry)
-            ax.autoscale_view()
-            ax.set_aspect("equal")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            g = site.geometry.area
-            over = (
-                (fence.area_m2 - shapely.intersection(fence.local, site.geometry).area) / g
-                if g
-                else 0
-            )
-            ax.set_title(f"{m}: {fence.vertices} v, +{100 * over:.0f}%", fontsize=9)
-            if c == 0:
-                label = (site.name or site.site_id)[:28]
-                ax.set_ylabel(f"{label}\n({site.category})", fontsize=8)
-        # the same extent across a row, so areas compare by eye
-        boxes = np.array([axes[r][c].dataLim.bounds for c in range(len(methods))])
-        x0, y0 = boxes[:, 0].min(), boxes[:, 1].min()
-        x1 = (boxes[:, 0] + boxes[:, 2]).max()
-        y1 = (boxes[:, 1] + boxes[:, 3]).max()
-        for c in range(len(methods)):
-            axes[r][c].set_xlim(x0, x1)
-            axes[r][c].set_ylim(y0, y1)
-    fig.suptitle("Fence methods side by side (grey: restricted area; +%: overshoot)", fontsize=11)
-    if note:
-        fig.text(0.01, 0.003, note, fontsize=7, color="#555")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def onboard_figure(records, result, path):
-    """Compiled onboard fences (blue) over the full-resolution fences (red), metric."""
-    fig, ax = plt.subplots(figsize=(9, 9))
+    """Draw the compiled onboard fences (blue, keep-in green) over the full-resolution fences
+    (red), in metres of the compile's frame, and save it as PNG.
+
+    Parameters
+    ----------
+    records : list of FenceRecord
+        The fences the compile read; those it left out as too far are not drawn.
+    result : CompileResult
+        What ``compile_fences`` returned.
+    path : str or Path
+        The PNG to write.
+    """
+    fig, ax = subplots(figsize=(9, 9))
     frame = result.frame
     dropped = set(result.dropped)
     for r in records:
         if r.kind in ("keep_out", "keep_in") and r.site_id not in dropped:
-            _draw(
+            draw_polygons(
                 ax,
                 frame.geom_to_local(r.geometry),
                 edgecolor="#c62828",
@@ -149,7 +93,7 @@ def onboard_figure(records, result, path):
             )
     for p in result.pieces:
         o = p.chosen
-        _draw(
+        draw_polygons(
             ax, o.local, edgecolor="#2e7d32" if p.inclusion else "#1565c0", facecolor="none", lw=1.3
         )
     ax.autoscale_view()
@@ -161,4 +105,4 @@ def onboard_figure(records, result, path):
         f"(blue) over full-resolution fences (red)",
         fontsize=10,
     )
-    _save(fig, path)
+    save_figure(fig, path)

@@ -5,20 +5,36 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from alphafence.plots.fences import KIND_STYLE, _draw, _save, plt
+from alphafence.plots.common import KIND_STYLE, draw_polygons, save_figure, subplots
 
 
 def route_figure(roadmap, route, path, title=None):
+    """Draw a route over its roadmap and save it as PNG, in metres of the roadmap's frame.
+
+    Keep-out fences, their clearance (dotted), warning layers, the roadmap's edges, the A*
+    path (dashed) and the smoothed route with its start and goal.
+
+    Parameters
+    ----------
+    roadmap : Roadmap
+        The roadmap the route was found on.
+    route : Route
+        What ``Roadmap.route`` returned.
+    path : str or Path
+        The PNG to write.
+    title : str, optional
+        By default the route's length, legs and least clearance.
+    """
     from matplotlib.collections import LineCollection
 
-    fig, ax = plt.subplots(figsize=(9, 9))
+    fig, ax = subplots(figsize=(9, 9))
     for g in roadmap.warning:
-        _draw(ax, g, **KIND_STYLE["warning"])
+        draw_polygons(ax, g, **KIND_STYLE["warning"])
     for g in roadmap.keep_out:
-        _draw(ax, g, **KIND_STYLE["keep_out"])
+        draw_polygons(ax, g, **KIND_STYLE["keep_out"])
     if roadmap.clearance > 0 and roadmap.keep_out.size:
         buf = shapely.union_all(shapely.buffer(roadmap.keep_out, roadmap.clearance))
-        _draw(ax, buf, edgecolor="#c6282888", facecolor="none", lw=0.6, ls=":")
+        draw_polygons(ax, buf, edgecolor="#c6282888", facecolor="none", lw=0.6, ls=":")
     V, E = roadmap.vertices, roadmap.edges
     if len(E):
         ax.add_collection(
@@ -44,4 +60,4 @@ def route_figure(roadmap, route, path, title=None):
         f"{route.min_clearance_m:.1f} m (asked {roadmap.clearance:g} m)",
         fontsize=10,
     )
-    _save(fig, path)
+    save_figure(fig, path)
