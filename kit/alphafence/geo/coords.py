@@ -40,6 +40,23 @@ def from_e7(value):
     return int(value) / E7
 
 
+def from_e7_float(value):
+    """MAVLink 1e-7 degrees -> degrees, for a number or an array, as it is (``value / 1e7``).
+
+    For values read off the link before they are checked: unlike :func:`from_e7` nothing is
+    truncated to an integer, so a NaN or an infinity comes back as such (for the caller's
+    range check) and a value that is not a number raises ``TypeError``.
+
+    Examples
+    --------
+    >>> from_e7_float(358909800)
+    35.89098
+    >>> from_e7_float(np.array([1e7, -2.5e7]))
+    array([ 1. , -2.5])
+    """
+    return value / E7
+
+
 def valid_lonlat(lon, lat) -> bool:
     """True when ``lon`` and ``lat`` are finite and within -180..180 and -90..90."""
     return (
