@@ -67,6 +67,17 @@ def valid_lonlat(lon, lat) -> bool:
     )
 
 
+def valid_lat(lat) -> bool:
+    """True when ``lat`` is finite and within -90..90 (:func:`valid_lonlat`'s latitude test)."""
+    return valid_lonlat(0.0, lat)
+
+
+def valid_lon(lon) -> bool:
+    """True when ``lon`` is finite and within -180..180 (:func:`valid_lonlat`'s longitude
+    test)."""
+    return valid_lonlat(lon, 0.0)
+
+
 def checked_position(path, where, lat, lon):
     """``(lon, lat)`` as floats, or a one-line InputError naming ``path`` and ``where``.
 
