@@ -76,7 +76,9 @@ MAV_MISSION_TYPE_FENCE = 1
 
 # -- MAV_AUTOPILOT / MAV_TYPE (as QGroundControl plans name the firmware and vehicle) ----
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_AUTOPILOT_INVALID = 8  # not a flight controller (a ground station, a companion)
 MAV_TYPE_QUADROTOR = 2
+MAV_TYPE_GCS = 6
 
 # -- message ids ------------------------------------------------------------------------
 MAVLINK_MSG_ID_HEARTBEAT = 0
