@@ -57,6 +57,19 @@ def from_e7_float(value):
     return value / E7
 
 
+def quantize_e7(deg):
+    """Degrees at MAVLink's resolution: rounded to the nearest 1e-7 degree.
+
+    The same as ``from_e7(to_e7(deg))``: what a vehicle stores.
+
+    Examples
+    --------
+    >>> quantize_e7(14.512345678)
+    14.5123457
+    """
+    return from_e7(to_e7(deg))
+
+
 def valid_lonlat(lon, lat) -> bool:
     """True when ``lon`` and ``lat`` are finite and within -180..180 and -90..90."""
     return (

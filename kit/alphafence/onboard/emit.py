@@ -1,0 +1,86 @@
+"""Onboard fence items from the chosen options: coordinates rounded to MAVLink's 1e-7
+degrees, and every polygon re-checked after rounding."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from alphafence.errors import InputError
+from alphafence.geo.coords import quantize_e7
+from alphafence.mavlink.items import (
+    CIRCLE_EXCLUSION,
+    POLYGON_EXCLUSION,
+    POLYGON_INCLUSION,
+    RETURN_POINT,
+    FenceItem,
+)
+
+
+def _round_lonlat(frame, xy):
+    lon, lat = frame.to_wgs84(np.asarray(xy)[:, 0], np.asarray(xy)[:, 1])
+    lon = np.array([quantize_e7(v) for v in np.atleast_1d(lon)])
+    lat = np.array([quantize_e7(v) for v in np.atleast_1d(lat)])
+    return lon, lat
+
+
+def emit_items(pieces, frame, return_point=None):
+    """The fence items of the pieces' chosen options, in upload order.
+
+    The return point first, then inclusions, then exclusion polygons, then circles. Polygons
+    run counter-clockwise; circle radii are rounded up to the centimetre, plus one.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+    frame : LocalFrame
+        The frame the pieces are in.
+    return_point : tuple, optional
+        ``(lon, lat)`` of the fence's return point.
+
+    Returns
+    -------
+    list of FenceItem
+
+    Raises
+    ------
+    InputError
+        If rounding a polygon to 1e-7 degrees broke its containment (a bug).
+    """
+    items = []
+    if return_point is not None:
+        items.append(
+            FenceItem(RETURN_POINT, 0.0, quantize_e7(return_point[0]), quantize_e7(return_point[1]))
+        )
+    for p in sorted(pieces, key=lambda p: (not p.inclusion, p.chosen.kind == "circle")):
+        o = p.chosen
+        if o.kind == "circle":
+            x, y, r = o.circle
+            lon, lat = _round_lonlat(frame, [(x, y)])
+            items.append(
+                FenceItem(
+                    CIRCLE_EXCLUSION,
+                    float(math.ceil(r * 100) / 100 + 0.01),
+                    float(lon[0]),
+                    float(lat[0]),
+                )
+            )
+            continue
+        ring = shapely.LinearRing(o.local.exterior)
+        pts = np.asarray(ring.coords)[:-1]
+        if not ring.is_ccw:
+            pts = pts[::-1]
+        lon, lat = _round_lonlat(frame, pts)
+        check = shapely.Polygon(np.column_stack(frame.to_local(lon, lat)))
+        ok = check.is_valid and (check.covers(p.local) if p.grows else p.local.covers(check))
+        if not ok:
+            raise InputError(
+                "compile",
+                f"fence {', '.join(p.sources)}: rounding to 1e-7 degrees broke "
+                "containment; please report this",
+            )
+        cmd = POLYGON_INCLUSION if p.inclusion else POLYGON_EXCLUSION
+        items.extend(FenceItem(cmd, float(len(pts)), float(a), float(b)) for a, b in zip(lon, lat))
+    return items

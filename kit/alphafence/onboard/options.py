@@ -1,0 +1,168 @@
+"""The ways one fence can be stored onboard: a circle, or a polygon of k vertices simplified
+*outward* (keep-out: the onboard fence still contains the fence) or *inward* (keep-in: it stays
+inside), each with what it costs in storage and in area."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from alphafence.build.fences import circle_polygon, enclosing_circle
+from alphafence.geo.alpha import outer_polygons
+from alphafence.geo.outward import simplify_polygon
+from alphafence.mavlink.storage import CIRCLE_BYTES, polygon_bytes
+
+PAD_M = 0.05  # onboard fences stand this far outside what they must contain (1e-7 deg < 1.2 cm)
+# vertex counts tried per fence (69 and 83 fill a Copter's and a Plane's storage alone)
+K_CANDIDATES = (
+    tuple(range(4, 13))
+    + (14, 16, 18, 20)
+    + tuple(range(24, 65, 4))
+    + (69, 76, 83, 96, 128, 160, 192, 224, 255)
+)
+
+
+@dataclass
+class Option:
+    """One way to store a fence onboard.
+
+    Attributes
+    ----------
+    kind : str
+        ``"circle"`` or ``"polygon"``.
+    items : int
+        Fence items it takes (a polygon: one a vertex).
+    bytes : int
+        Bytes of fence storage it takes.
+    loss : float
+        Square metres added (keep-out) or removed (keep-in) relative to the fence.
+    local : shapely.Polygon
+        The stored shape, metric (a circumscribed polygon for a circle).
+    circle : tuple, optional
+        ``(x, y, r)`` in metres, for a circle.
+    """
+
+    kind: str  # "circle" | "polygon"
+    items: int
+    bytes: int
+    loss: float  # m² added (keep-out) or removed (keep-in) relative to the fence
+    local: object  # metric polygon (a circumscribed polygon for circles)
+    circle: tuple | None = None  # (x, y, r) metric
+
+    @property
+    def label(self):
+        """``"circle"`` or ``"<k>-gon"``, for tables."""
+        return "circle" if self.kind == "circle" else f"{self.items}-gon"
+
+
+@dataclass
+class Piece:
+    """A polygon to store onboard (one fence, part of one, or several merged) and its options.
+
+    Attributes
+    ----------
+    sources : list of str
+        The site ids it stands for.
+    inclusion : bool
+        Keep-in (inclusion) rather than keep-out.
+    local : shapely.Polygon
+        What the onboard item(s) must contain (or stay inside), metric.
+    options : list of Option
+        Cheapest first, each losing less area than the cheaper ones.
+    choice : int
+        Index of the chosen option.
+    merged : bool
+        Made by merging pieces to fit the storage.
+    outward : bool, optional
+        Simplified outward; None means outward for keep-out and inward for keep-in.
+    """
+
+    sources: list
+    inclusion: bool
+    local: object  # the metric polygon the onboard item(s) must contain (or stay inside)
+    options: list
+    choice: int = 0
+    merged: bool = False
+    outward: bool | None = None  # None: outward for keep-out, inward for keep-in
+
+    @property
+    def grows(self) -> bool:
+        """Whether the stored shape must contain ``local`` (else it must lie inside it)."""
+        return (not self.inclusion) if self.outward is None else self.outward
+
+    @property
+    def chosen(self) -> Option:
+        """The chosen option."""
+        return self.options[self.choice]
+
+
+def _pareto(options):
+    """Options by increasing cost, each strictly better (less loss) than the cheaper ones."""
+    options.sort(key=lambda o: (o.items, o.bytes, o.loss))
+    out = []
+    for o in options:
+        if not out or o.loss < out[-1].loss - 1e-9:
+            out.append(o)
+    return out
+
+
+def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
+    """The ways one fence polygon can be stored, cheapest first.
+
+    A keep-out fence may be a circle (its own, grown by ``PAD_M``, or the enclosing one) or a
+    polygon simplified outward; a keep-in fence only a polygon simplified inward. Options that
+    cost more without losing less area are left out.
+
+    Parameters
+    ----------
+    poly : shapely.Polygon
+        The fence, metric.
+    inclusion : bool
+        Keep-in (simplify inward, no circle) rather than keep-out.
+    max_vertices : int
+        Most vertices of one polygon the vehicle accepts.
+    circle : tuple, optional
+        ``(x, y, r)`` of a circle fence, metric.
+
+    Returns
+    -------
+    list of Option
+
+    Examples
+    --------
+    >>> import shapely
+    >>> opts = piece_options(shapely.box(0, 0, 100, 50), False, 255)
+    >>> [o.label for o in opts]
+    ['circle', '4-gon']
+    >>> opts[1].bytes, round(opts[1].loss, 1)
+    (34, 15.0)
+    """
+    if inclusion:
+        inner = shapely.buffer(poly, -PAD_M, join_style="mitre")
+        base = outer_polygons(inner)
+        base = base[int(np.argmax(shapely.area(base)))] if len(base) else poly
+    else:
+        base = outer_polygons(shapely.buffer(poly, PAD_M, join_style="mitre", mitre_limit=10.0))[0]
+    area = poly.area
+    opts = []
+    if not inclusion:
+        c = circle if circle is not None else enclosing_circle(base)
+        c = (c[0], c[1], c[2] + PAD_M) if circle is not None else c
+        opts.append(
+            Option("circle", 1, CIRCLE_BYTES, math.pi * c[2] ** 2 - area, circle_polygon(*c), c)
+        )
+    n = len(base.exterior.coords) - 1
+    ks = sorted({k for k in K_CANDIDATES if k < n} | ({n} if n <= max_vertices else set()))
+    for k in ks:
+        if k > max_vertices:
+            break
+        simp = simplify_polygon(base, k, 0.0, outward=not inclusion) if k < n else base
+        v = len(simp.exterior.coords) - 1
+        if v > max_vertices or v < 3:
+            continue
+        loss = (area - simp.area) if inclusion else (simp.area - area)
+        opts.append(Option("polygon", v, polygon_bytes(v), max(loss, 0.0), simp))
+    return _pareto(opts)
