@@ -5,23 +5,83 @@ Each frame is an azimuthal equidistant projection on the WGS84 ellipsoid centred
 the geometry it serves, so distortion over a site (a few km) is far below a centimetre.
 A PROJ pipeline is used instead of a CRS pair: it is built in ~50 microseconds,
 so every site can afford its own frame.
+
+For a distance between two positions a few kilometres apart, where a frame is not worth
+building, :func:`short_distance_m` is the one short-range formula.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pyproj
 import shapely
 
+EARTH_RADIUS_M = 6_371_000.0  # the mean radius: short-range distances and offsets
+
+
+def short_distance_m(a, b) -> float:
+    """Horizontal metres between two ``(lat, lon)`` positions a few kilometres apart at most.
+
+    The equirectangular approximation (one cosine at the mean latitude, the mean Earth
+    radius): cheap enough for every position a monitor reads (GPS jumps, re-route legs,
+    arrival at a waypoint), good to a fraction of a percent at that range.
+
+    Parameters
+    ----------
+    a, b : tuple of float
+        ``(lat, lon)`` in degrees (the order MAVLink reports positions in).
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> round(short_distance_m((51.43, -0.55), (51.431, -0.55)), 2)
+    111.19
+    >>> round(short_distance_m((35.9, 14.5), (35.9, 14.51)), 1)
+    900.7
+    """
+    dlat = math.radians(b[0] - a[0])
+    dlon = math.radians(b[1] - a[1]) * math.cos(math.radians(0.5 * (a[0] + b[0])))
+    return EARTH_RADIUS_M * math.hypot(dlat, dlon)
+
 
 def wrap_lon(lon):
-    """Longitudes into [-180, 180] (PROJ may return -180.00000000000003)."""
+    """Longitudes into [-180, 180] (PROJ may return -180.00000000000003).
+
+    Examples
+    --------
+    >>> wrap_lon(190.0)
+    -170.0
+    """
     lon = np.asarray(lon, float)
     out = np.where(np.abs(lon) > 180.0, (lon + 180.0) % 360.0 - 180.0, lon)
     return out if out.ndim else float(out)
 
 
 class LocalFrame:
+    """Metres east (x) and north (y) of an origin: an azimuthal equidistant projection on the
+    WGS84 ellipsoid.
+
+    Parameters
+    ----------
+    lon0, lat0 : float
+        The origin, degrees.
+
+    Examples
+    --------
+    >>> frame = LocalFrame(14.5, 35.9)
+    >>> x, y = frame.to_local(14.51, 35.9)
+    >>> round(float(x), 1), round(float(y), 1)
+    (902.8, 0.0)
+    >>> import shapely
+    >>> round(frame.geom_to_local(shapely.box(14.5, 35.9, 14.51, 35.91)).area)
+    1001630
+    """
+
     __slots__ = ("lon0", "lat0", "_tr")
 
     def __init__(self, lon0: float, lat0: float):
@@ -37,9 +97,19 @@ class LocalFrame:
 
     # -- arrays ---------------------------------------------------------------
     def to_local(self, lon, lat):
+        """WGS84 ``lon``, ``lat`` (scalars or arrays, degrees) -> ``(x, y)`` in metres."""
         return self._tr.transform(np.asarray(lon, float), np.asarray(lat, float))
 
     def to_wgs84(self, x, y):
+        """``x``, ``y`` in metres (scalars or arrays) -> ``(lon, lat)`` in degrees, longitudes
+        wrapped into [-180, 180].
+
+        Examples
+        --------
+        >>> lon, lat = LocalFrame(14.5, 35.9).to_wgs84(0.0, 1000.0)
+        >>> round(float(lon), 6), round(float(lat), 6)
+        (14.5, 35.909012)
+        """
         lon, lat = self._tr.transform(
             np.asarray(x, float),
             np.asarray(y, float),
@@ -59,9 +129,11 @@ class LocalFrame:
 
     # -- geometries (scalars or arrays, vectorised) ---------------------------
     def geom_to_local(self, geom):
+        """A WGS84 geometry (or array of them) in this frame's metres."""
         return shapely.transform(geom, self._fwd)
 
     def geom_to_wgs84(self, geom):
+        """A geometry (or array of them) in this frame's metres back to WGS84 (lon, lat)."""
         return shapely.transform(geom, self._inv)
 
     @classmethod
@@ -72,6 +144,15 @@ class LocalFrame:
 
     @classmethod
     def around_coords(cls, coords) -> LocalFrame:
+        """A frame centred on the bounds of ``(lon, lat)`` coordinates, antimeridian-aware.
+
+        Examples
+        --------
+        >>> LocalFrame.around_coords([(14.5, 35.9), (14.51, 35.91)])
+        LocalFrame(lon0=14.505000, lat0=35.905000)
+        >>> LocalFrame.around_coords([(179.9, 0.0), (-179.9, 1.0)])
+        LocalFrame(lon0=180.000000, lat0=0.500000)
+        """
         coords = np.asarray(coords, float).reshape(-1, 2)
         lon = coords[:, 0]
         lat = coords[:, 1]
