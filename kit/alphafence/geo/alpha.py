@@ -21,13 +21,34 @@ from scipy.spatial import Delaunay, QhullError
 
 
 def outer_polygons(geom):
-    """Polygon parts of ``geom`` with their holes filled."""
+    """Polygon parts of ``geom`` with their holes filled; other parts are left out.
+
+    Returns
+    -------
+    ndarray of shapely.Polygon
+
+    Examples
+    --------
+    >>> import shapely
+    >>> holed = shapely.Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(2, 2), (4, 2), (4, 4)]])
+    >>> outer_polygons(shapely.GeometryCollection([shapely.Point(0, 0), holed]))[0].area
+    100.0
+    """
     parts = shapely.get_parts(geom)
     parts = parts[shapely.get_type_id(parts) == 3]
     return shapely.polygons(shapely.get_exterior_ring(parts))
 
 
 def fill_holes(geom):
+    """``geom``'s polygons without holes, as one geometry (a Polygon when there is one part).
+
+    Examples
+    --------
+    >>> import shapely
+    >>> holed = shapely.Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(2, 2), (4, 2), (4, 4)]])
+    >>> fill_holes(holed).area
+    100.0
+    """
     polys = outer_polygons(geom)
     if len(polys) == 1:
         return polys[0]
@@ -35,6 +56,26 @@ def fill_holes(geom):
 
 
 def circumradii(pts, simplices):
+    """Circumradius and twice the area of each triangle.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (n, 2)
+    simplices : ndarray, shape (m, 3)
+        Vertex indices of each triangle.
+
+    Returns
+    -------
+    radius : ndarray, shape (m,)
+        Infinite for degenerate (zero-area) triangles.
+    area2 : ndarray, shape (m,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> circumradii(np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]]), np.array([[0, 1, 2]]))
+    (array([2.5]), array([12.]))
+    """
     a = pts[simplices[:, 0]]
     b = pts[simplices[:, 1]]
     c = pts[simplices[:, 2]]
@@ -57,7 +98,22 @@ def _adjacency(neighbors):
 
 def bottleneck_alpha(neighbors, weight, terminal) -> float:
     """Smallest alpha at which all terminal triangles are connected through triangles of
-    weight <= alpha (minimax path bottleneck over the MST)."""
+    weight <= alpha (minimax path bottleneck over the MST).
+
+    Parameters
+    ----------
+    neighbors : ndarray, shape (m, 3)
+        Delaunay neighbours of each triangle (-1 on the hull).
+    weight : ndarray, shape (m,)
+        Alpha at which each triangle joins the shape (0 for the site's own).
+    terminal : ndarray of bool, shape (m,)
+        The triangles that must end up connected.
+
+    Returns
+    -------
+    float
+        0 with at most one terminal, inf when finite triangles cannot connect them.
+    """
     n = len(weight)
     term = np.flatnonzero(terminal)
     if term.size <= 1:
@@ -89,8 +145,32 @@ def bottleneck_alpha(neighbors, weight, terminal) -> float:
 def alpha_shape(required, alpha: float | None = None):
     """Alpha shape enclosing ``required`` (metric coordinates).
 
-    Returns (geometry, alpha_used). ``alpha=None`` picks the smallest alpha that makes one
-    component; the result always covers ``required`` and has no holes.
+    The result always covers ``required`` and has no holes.
+
+    Parameters
+    ----------
+    required : shapely geometry
+        The region the shape must contain (its polygon parts), metres.
+    alpha : float, optional
+        Radius in metres; None picks the smallest alpha that joins every part into one
+        component.
+
+    Returns
+    -------
+    shape : shapely geometry
+        A Polygon, or a MultiPolygon when ``alpha`` is too small to join the parts.
+    alpha : float
+        The alpha used (0 for a single part, inf when the convex hull had to stand in).
+
+    Examples
+    --------
+    >>> import shapely
+    >>> two = shapely.union(shapely.box(0, 0, 10, 10), shapely.box(20, 0, 30, 10))
+    >>> shape, alpha = alpha_shape(two)
+    >>> shape.geom_type, round(alpha, 3), shape.area
+    ('Polygon', 7.071, 300.0)
+    >>> alpha_shape(two, 3.0)[0].geom_type
+    'MultiPolygon'
     """
     polys = outer_polygons(required)
     region = polys[0] if len(polys) == 1 else shapely.union_all(polys)
@@ -144,7 +224,14 @@ def _union_triangles(corners):
 def alpha_shape_points(points, alpha: float):
     """The plain Edelsbrunner alpha shape of a point set: the union of the Delaunay
     triangles whose circumradius is at most ``alpha`` (metres). This is what the
-    ``alphashape`` package computes (its parameter is 1 / alpha)."""
+    ``alphashape`` package computes (its parameter is 1 / alpha).
+
+    Examples
+    --------
+    >>> square = [(0, 0), (1, 0), (0, 1), (1, 1), (10, 10)]
+    >>> alpha_shape_points(square, 1.0).area
+    1.0
+    """
     pts = np.unique(np.asarray(points, float), axis=0)
     if len(pts) < 3:
         return shapely.Polygon()

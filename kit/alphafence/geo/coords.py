@@ -14,18 +14,36 @@ E7 = 10_000_000
 
 
 def latlon(lonlat):
-    """(lon, lat) pairs -> [lat, lon] lists (QGroundControl plan order)."""
+    """(lon, lat) pairs -> [lat, lon] lists (QGroundControl plan order).
+
+    Examples
+    --------
+    >>> latlon([(14.5, 35.9), (14.6, 36.0)])
+    [[35.9, 14.5], [36.0, 14.6]]
+    """
     return [[float(lat), float(lon)] for lon, lat in np.asarray(lonlat, dtype=float).reshape(-1, 2)]
 
 
 def lonlat_from_latlon(latlon_pairs):
-    """[lat, lon] pairs (plan order) -> (n, 2) array of (lon, lat)."""
+    """[lat, lon] pairs (plan order) -> (n, 2) array of (lon, lat).
+
+    Examples
+    --------
+    >>> lonlat_from_latlon([[35.9, 14.5]])
+    array([[14.5, 35.9]])
+    """
     arr = np.asarray(latlon_pairs, dtype=float).reshape(-1, 2)
     return arr[:, ::-1].copy()
 
 
 def to_e7(deg):
-    """Degrees -> MAVLink int32 in 1e-7 degrees (rounded to nearest)."""
+    """Degrees -> MAVLink int32 in 1e-7 degrees (rounded to nearest).
+
+    Examples
+    --------
+    >>> to_e7(35.89098)
+    358909800
+    """
     return int(round(float(deg) * E7))
 
 

@@ -30,7 +30,14 @@ MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbou
 
 
 def ring_coords(ring) -> np.ndarray:
-    """Vertices of a ring or (n, 2) array without the closing duplicate or repeats."""
+    """Vertices of a ring or (n, 2) array without the closing duplicate or repeats.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> ring_coords(shapely.box(0, 0, 1, 1).exterior).tolist()
+    [[1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]
+    """
     pts = np.asarray(
         shapely.get_coordinates(ring) if not isinstance(ring, np.ndarray) else ring, float
     )
@@ -45,6 +52,14 @@ def ring_coords(ring) -> np.ndarray:
 
 
 def signed_area(pts) -> float:
+    """Area of the ring through ``pts`` ((n, 2), not closed): positive counter-clockwise.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> signed_area(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
+    1.0
+    """
     x, y = pts[:, 0], pts[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
@@ -205,6 +220,31 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     A fast pass without per-step simplicity checks is tried first and kept when the result
     is a valid ring containing (outward) or contained in (inward) the input; otherwise the
     checked pass runs.
+
+    Parameters
+    ----------
+    pts : array_like or shapely.LinearRing
+        The ring's vertices, (n, 2), either orientation.
+    max_vertices : int
+        Operations higher than ``tolerance`` run while the ring has more vertices than this
+        (at least 4).
+    tolerance : float
+        Operations at most this high (metres) always run.
+    outward : bool
+        Only add area (else only remove it).
+
+    Returns
+    -------
+    ndarray, shape (m, 2)
+        The vertices, in the input's orientation, not closed.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> disc = shapely.Point(0, 0).buffer(100, quad_segs=16)
+    >>> octagon = shapely.Polygon(simplify_ring(disc.exterior, 8, 0.0))
+    >>> len(octagon.exterior.coords) - 1, octagon.covers(disc)
+    (8, True)
     """
     pts = ring_coords(pts)
     if len(pts) <= 3:
@@ -322,8 +362,38 @@ def prereduce(pts, target):
 
 
 def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = True):
-    """Shapely polygon (exterior only) simplified outward/inward; falls back to the
-    convex hull when the ring cannot be brought within ``max_vertices`` (outward only)."""
+    """A polygon's exterior simplified outward (containing it) or inward (inside it).
+
+    Rings of more than twice ``max_vertices`` are first brought near that by
+    :func:`prereduce` (outward only); an outward ring that cannot be brought within
+    ``max_vertices`` is replaced by its convex hull, simplified.
+
+    Parameters
+    ----------
+    poly : shapely.Polygon
+        Holes are ignored.
+    max_vertices : int
+        The most vertices wanted (at least 4 are kept).
+    tolerance : float
+        Operations at most this high (metres) always run.
+    outward : bool
+        Contain ``poly`` (keep-out fences) rather than lie inside it (keep-in fences).
+
+    Returns
+    -------
+    shapely.Polygon
+
+    Examples
+    --------
+    >>> import shapely
+    >>> disc = shapely.Point(0, 0).buffer(100, quad_segs=16)
+    >>> outer = simplify_polygon(disc, 8, 0.0)
+    >>> len(outer.exterior.coords) - 1, outer.covers(disc), round(outer.area)
+    (8, True, 33137)
+    >>> inner = simplify_polygon(disc, 8, 0.0, outward=False)
+    >>> disc.covers(inner), round(inner.area)
+    (True, 27810)
+    """
     pts = ring_coords(poly.exterior)
     if outward and len(pts) > 2 * max_vertices:
         if signed_area(pts) < 0:
