@@ -9,7 +9,15 @@ from pathlib import Path
 
 
 def write_all(outputs: dict):
-    """``outputs``: {path: text}. Either every file is written, or none is changed."""
+    """Write several text files all or nothing: either every file is written, or none is
+    changed.
+
+    Parameters
+    ----------
+    outputs : dict
+        ``{path: text}``; parent folders are made as needed. Text is written as UTF-8 with
+        ``\\n`` line ends and synced to disk before any file is renamed into place.
+    """
     temps = []
     try:
         for path, text in outputs.items():
@@ -33,6 +41,8 @@ def write_all(outputs: dict):
 
 
 def write_bytes_atomic(path, data: bytes):
+    """Write ``data`` to ``path`` through a temporary sibling, so ``path`` is either left as
+    it was or holds all of ``data``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)

@@ -24,6 +24,16 @@ _CIRCLE_SEGMENTS = 64
 
 
 def looks_like_ed269(doc) -> bool:
+    """Whether a parsed JSON document is ED-269 (zones with a ``restriction`` or a list of
+    geometries) rather than a GeoJSON FeatureCollection.
+
+    Examples
+    --------
+    >>> looks_like_ed269({"features": [{"restriction": "PROHIBITED"}]})
+    True
+    >>> looks_like_ed269({"type": "FeatureCollection", "features": []})
+    False
+    """
     feats = doc.get("features") if isinstance(doc, dict) else doc
     if isinstance(doc, dict) and doc.get("type") == "FeatureCollection":
         return False
@@ -36,7 +46,20 @@ def looks_like_ed269(doc) -> bool:
 
 
 def circle_polygon(lon, lat, radius_m):
-    """A polygon that contains the circle (circumscribed, so never cuts into it)."""
+    """A WGS84 polygon that contains the circle (circumscribed, so never cuts into it).
+
+    Parameters
+    ----------
+    lon, lat : float
+        The centre, degrees.
+    radius_m : float
+        The radius, metres (the polygon is built in a local metric frame).
+
+    Returns
+    -------
+    shapely.Polygon
+        64 vertices.
+    """
     frame = LocalFrame(lon, lat)
     r_out = radius_m / math.cos(math.pi / _CIRCLE_SEGMENTS)
     ang = (
@@ -94,6 +117,33 @@ def _projection(path, label, proj):
 
 
 def read_ed269_doc(path, doc, rules, repaired, skipped):
+    """The restricted features of a parsed ED-269 document.
+
+    Each geometry entry of each zone becomes one Feature, its tags ``ed269:restriction``,
+    ``ed269:reason`` and ``name`` matched against ``rules``; altitude limits are converted to
+    metres (a rule's limits stand in for missing ones).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, for messages.
+    doc : dict or list
+        The parsed JSON.
+    rules : Rules
+    repaired : list
+        Sources of invalid polygons are appended (they are repaired later).
+    skipped : collections.Counter
+        Reasons for zones left out are counted.
+
+    Returns
+    -------
+    list of Feature
+
+    Raises
+    ------
+    InputError
+        A one-line message naming the zone that is malformed.
+    """
     feats = doc.get("features") if isinstance(doc, dict) else doc
     if not isinstance(feats, list):
         raise InputError(path, "ED-269 document needs a 'features' list")

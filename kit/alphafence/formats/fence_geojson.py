@@ -24,6 +24,34 @@ KINDS = ("keep_out", "keep_in", "warning")
 
 @dataclass
 class FenceRecord:
+    """A fence as read back from the kit's fence GeoJSON (WGS84).
+
+    Attributes
+    ----------
+    site_id : str
+        ``"<category>/<source>"``, e.g. ``"hospital/way/1005"``.
+    kind : str
+        ``"keep_out"``, ``"keep_in"`` or ``"warning"``.
+    geometry : shapely.Polygon or shapely.MultiPolygon
+        Lon, lat.
+    margin_m : float
+        The margin the fence keeps around the restricted area.
+    name, category : str, optional
+    alt_min_m, alt_max_m : float, optional
+        The altitude band it applies to (None: unbounded).
+    circle : tuple, optional
+        ``(lon, lat, radius_m)`` of a circle fence.
+    properties : dict
+        Every property of the feature, as written.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> fence = FenceRecord("hospital/way/1", "keep_out", shapely.box(14.5, 35.9, 14.501, 35.901))
+    >>> fence.kind, fence.margin_m, fence.circle
+    ('keep_out', 0.0, None)
+    """
+
     site_id: str
     kind: str
     geometry: object  # WGS84 Polygon / MultiPolygon
@@ -37,6 +65,22 @@ class FenceRecord:
 
 
 def read_fences(path) -> list:
+    """The fences of a fence GeoJSON file written by ``alphafence build``.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    list of FenceRecord
+
+    Raises
+    ------
+    InputError
+        A one-line message naming the feature that is malformed (not a FeatureCollection,
+        unknown kind, a geometry that is not a polygon, coordinates out of range).
+    """
     doc = read_json(path)
     if (
         not isinstance(doc, dict)
@@ -103,6 +147,10 @@ DECIMALS = 8  # 1e-8 degrees is about 1 mm; fences carry 0.1 m of slack for it
 
 
 def fence_properties(f) -> dict:
+    """The GeoJSON properties of a built fence (``build.fences.Fence``): site, name,
+    category, kind, method, margin, altitude band, vertices, area and sources; ``alpha_m``,
+    ``center`` and ``radius_m`` for circles, ``repaired`` and the ED-269 ``zone`` when they
+    apply."""
     props = {
         "site_id": f.site_id,
         "name": f.name,
@@ -130,6 +178,19 @@ def fence_properties(f) -> dict:
 
 
 def fences_geojson(fences, meta: dict | None = None) -> dict:
+    """Built fences as a GeoJSON FeatureCollection (coordinates rounded to 1e-8 degrees).
+
+    Parameters
+    ----------
+    fences : list of Fence
+    meta : dict, optional
+        What the build was made of, stored under ``"alphafence"``.
+
+    Returns
+    -------
+    dict
+        Ready for :func:`dumps`.
+    """
     features = []
     for f in fences:
         gj = json.loads(shapely.to_geojson(f.geometry))
@@ -149,4 +210,11 @@ def _round(c):
 
 
 def dumps(doc) -> str:
+    """The document as compact JSON text (UTF-8 kept as is), one line and a newline.
+
+    Examples
+    --------
+    >>> dumps({"type": "FeatureCollection", "features": []})
+    '{"type":"FeatureCollection","features":[]}\\n'
+    """
     return json.dumps(doc, separators=(",", ":"), ensure_ascii=False) + "\n"

@@ -21,6 +21,13 @@ _ID_KEYS = ("osm_id", "osm_way_id", "osm_type", "fid", "id", "@id")
 
 
 def parse_hstore(text: str) -> dict:
+    """Tags from an hstore string (GDAL's ``other_tags``); NULL values are left out.
+
+    Examples
+    --------
+    >>> parse_hstore('"amenity"=>"hospital","name"=>"St. \\\\"Luke\\\\"","x"=>NULL')
+    {'amenity': 'hospital', 'name': 'St. "Luke"'}
+    """
     out = {}
     for m in _HSTORE.finditer(text):
         if m.group(2) is not None:
@@ -29,7 +36,14 @@ def parse_hstore(text: str) -> dict:
 
 
 def tags_of(props: dict) -> dict:
-    """Tag columns with nulls dropped; other_tags expanded; values as strings."""
+    """Tag columns with nulls dropped; other_tags expanded; values as strings.
+
+    Examples
+    --------
+    >>> tags_of({"osm_id": "5", "amenity": "hospital", "building": None,
+    ...          "other_tags": '"emergency"=>"yes"'})
+    {'amenity': 'hospital', 'emergency': 'yes'}
+    """
     tags = {}
     for key, value in props.items():
         if value is None or key in _ID_KEYS or key == "other_tags":
@@ -47,6 +61,18 @@ def tags_of(props: dict) -> dict:
 
 
 def source_of(feature: dict, props: dict, gtype: str, index: int) -> str:
+    """Where a feature came from, as ``"way/123"``: OSM ids (QGIS/GDAL columns), an ``@id``
+    or ``id`` with a slash, the feature's id, or else its index.
+
+    Examples
+    --------
+    >>> source_of({}, {"osm_way_id": "123"}, "area", 0)
+    'way/123'
+    >>> source_of({}, {"osm_id": "9"}, "point", 0)
+    'node/9'
+    >>> source_of({"id": 7}, {}, "area", 3), source_of({}, {}, "area", 3)
+    ('feature/7', 'feature/3')
+    """
     osm_type = props.get("osm_type")
     if props.get("osm_way_id") not in (None, ""):
         return f"way/{props['osm_way_id']}"
@@ -66,6 +92,30 @@ def source_of(feature: dict, props: dict, gtype: str, index: int) -> str:
 
 
 def read_geojson_doc(path, doc, rules, repaired, skipped):
+    """The restricted features of a parsed GeoJSON FeatureCollection.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, for messages.
+    doc : dict
+        The parsed JSON.
+    rules : Rules
+        Features no rule matches are left out.
+    repaired : list
+        Sources of invalid polygons are appended (they are repaired later).
+    skipped : collections.Counter
+        Reasons for features left out are counted.
+
+    Returns
+    -------
+    list of Feature
+
+    Raises
+    ------
+    InputError
+        A one-line message naming the feature that is malformed.
+    """
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
         raise InputError(path, "not a GeoJSON FeatureCollection")
     raw = doc.get("features")

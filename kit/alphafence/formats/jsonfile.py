@@ -11,10 +11,19 @@ MAX_JSON_MB_DEFAULT = 512  # JSON is parsed whole: refuse what would not fit, be
 
 
 def max_json_bytes() -> int:
+    """The largest JSON file read: ``$ALPHAFENCE_MAX_JSON_MB`` megabytes (default 512)."""
     return int(float(os.environ.get("ALPHAFENCE_MAX_JSON_MB", MAX_JSON_MB_DEFAULT)) * 1024 * 1024)
 
 
 def read_json(path):
+    """The parsed contents of a JSON file.
+
+    Raises
+    ------
+    InputError
+        A one-line message: no such file, larger than :func:`max_json_bytes`, not UTF-8, or
+        malformed (with line and column).
+    """
     try:
         size = os.path.getsize(path)
     except FileNotFoundError:

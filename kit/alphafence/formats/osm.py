@@ -19,6 +19,27 @@ from alphafence.formats.features import Feature, check_coordinates, flag_invalid
 
 
 def read_osm(path, rules, repaired, skipped):
+    """The restricted features of an OSM file (``.osm.pbf``, ``.osm``...), streamed.
+
+    Parameters
+    ----------
+    path : str or Path
+    rules : Rules
+        Only objects with a key some rule looks at are assembled.
+    repaired : list
+        Sources of invalid polygons are appended (they are repaired later).
+    skipped : collections.Counter
+        Reasons for objects left out are counted.
+
+    Returns
+    -------
+    list of Feature
+
+    Raises
+    ------
+    InputError
+        No such file, or not readable as OSM.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "no such file")

@@ -31,6 +31,17 @@ def group_polygons(items):
     -------
     polygons : list of tuple
     circles : list of FenceItem
+
+    Examples
+    --------
+    >>> from alphafence.mavlink.items import FenceItem
+    >>> square = [FenceItem(5002, 3.0, 14.5, 35.9), FenceItem(5002, 3.0, 14.6, 35.9),
+    ...           FenceItem(5002, 3.0, 14.5, 36.0)]
+    >>> polygons, circles = group_polygons(square + [FenceItem(5004, 50.0, 14.7, 35.8)])
+    >>> polygons
+    [(5002, [(14.5, 35.9), (14.6, 35.9), (14.5, 36.0)])]
+    >>> circles
+    [FenceItem(command=5004, param1=50.0, lon=14.7, lat=35.8)]
     """
     polygons, circles, i = [], [], 0
     while i < len(items):
@@ -59,6 +70,11 @@ def plan_document(items, home_lonlat=None, mission_items=None, breach_return=Non
         QGC SimpleItems (``mission_items``).
     breach_return : tuple, optional
         ``(lon, lat)`` of the fence's breach return point.
+
+    Returns
+    -------
+    dict
+        Ready for :func:`dumps`.
     """
     polygons, circles = group_polygons(items)
     if home_lonlat is None:
@@ -193,6 +209,18 @@ def mission_items(path_lonlat, alt, fly_back=True):
         Altitude above home, metres.
     fly_back : bool
         Fly the path back before RTL.
+
+    Returns
+    -------
+    list of dict
+
+    Examples
+    --------
+    >>> items = mission_items([(14.5, 35.9), (14.6, 35.95)], 30)
+    >>> [it["command"] for it in items]  # takeoff, waypoint, waypoint back, RTL
+    [22, 16, 16, 20]
+    >>> items[1]["params"]
+    [0, 0, 0, None, 35.95, 14.6, 30.0]
     """
     pts = np.asarray(path_lonlat, float).reshape(-1, 2)
     if fly_back and len(pts) > 1:

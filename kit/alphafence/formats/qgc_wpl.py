@@ -37,7 +37,8 @@ def waypoints_text(items) -> str:
     Examples
     --------
     >>> from alphafence.mavlink.items import FenceItem
-    >>> print(waypoints_text([FenceItem(5004, 50.0, 14.5, 35.9)]), end="")
+    >>> text = waypoints_text([FenceItem(5004, 50.0, 14.5, 35.9)])
+    >>> print(text, end="")  # tab separated  # doctest: +NORMALIZE_WHITESPACE
     QGC WPL 110
     0	0	0	5004	50.000000	0.000000	0.000000	0.000000	35.90000000	14.50000000	0.000000	1
     """

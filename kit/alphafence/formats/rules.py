@@ -20,6 +20,26 @@ GEOMETRIES = ("point", "line", "area")
 
 @dataclass(frozen=True)
 class Rule:
+    """One rule: the features it matches and what they become.
+
+    Attributes
+    ----------
+    index : int
+        Its place in the file (the first matching rule wins).
+    category : str
+        E.g. ``"hospital"``; fences are grouped and named by it.
+    kind : str
+        ``"keep_out"``, ``"warning"`` or ``"keep_in"``.
+    tags : tuple
+        ``((key, frozenset(values) | None), ...)``; None matches any value.
+    margin_m : float
+        Metres the fence keeps around the feature.
+    geometry : frozenset
+        The geometry types it applies to: ``"point"``, ``"line"``, ``"area"``.
+    alt_min_m, alt_max_m : float, optional
+        The altitude band its fences apply to.
+    """
+
     index: int
     category: str
     kind: str
@@ -30,6 +50,8 @@ class Rule:
     alt_max_m: float | None = None
 
     def matches(self, get, geomtype: str) -> bool:
+        """Whether a feature of ``geomtype`` whose tag values ``get(key)`` returns (None when
+        absent) has every tag this rule asks for."""
         if geomtype not in self.geometry:
             return False
         for key, values in self.tags:
@@ -41,6 +63,30 @@ class Rule:
 
 @dataclass
 class Rules:
+    """The rules in force, in order, with the widths given to points and lines.
+
+    Attributes
+    ----------
+    rules : list of Rule
+    point_radius_m : float
+        Radius of the disc a point feature stands for.
+    line_width_m : float
+        Width of the strip a line feature stands for.
+    source : str
+        ``"default"`` or the file they came from.
+    keys : tuple of str
+        Every tag key some rule looks at.
+
+    Examples
+    --------
+    >>> rules = parse_rules({"rule": [{"category": "hospital", "kind": "keep_out",
+    ...                                "tags": {"amenity": ["hospital", "clinic"]}}]})
+    >>> rules.match({"amenity": "clinic"}.get, "area").category
+    'hospital'
+    >>> rules.match({"amenity": "school"}.get, "area") is None
+    True
+    """
+
     rules: list
     point_radius_m: float = 30.0
     line_width_m: float = 10.0
@@ -69,6 +115,24 @@ def _number(path, where, value, name, minimum=None):
 
 
 def parse_rules(doc: dict, path="rules") -> Rules:
+    """Rules from a parsed TOML document (``[[rule]]`` entries and ``[defaults]``).
+
+    Parameters
+    ----------
+    doc : dict
+        The parsed TOML.
+    path : str or Path
+        Where it came from, for messages and ``Rules.source``.
+
+    Returns
+    -------
+    Rules
+
+    Raises
+    ------
+    InputError
+        A one-line message naming the rule that is wrong.
+    """
     defaults = doc.get("defaults", {})
     raw = doc.get("rule")
     if not isinstance(raw, list) or not raw:
@@ -130,7 +194,18 @@ def parse_rules(doc: dict, path="rules") -> Rules:
 
 
 def load_rules(path: str | Path | None = None) -> Rules:
-    """The shipped default rules, or a user's TOML file."""
+    """The shipped default rules, or a user's TOML file.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read, is not UTF-8 or TOML, or a rule is wrong.
+
+    Examples
+    --------
+    >>> load_rules().source
+    'default'
+    """
     if path is None:
         text = resources.files("alphafence").joinpath("data/rules.toml").read_text(encoding="utf-8")
         source = "default"
