@@ -23,14 +23,9 @@ from alphafence.vehicle.bridge import (
     signature_matches,
 )
 from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
+from alphafence.vehicle.keys import load_key, signing_timestamp, write_new_key
 from alphafence.vehicle.link import LinkError, open_vehicle
-from alphafence.vehicle.signing import (
-    SigningSetupError,
-    install_key,
-    load_key,
-    signing_timestamp,
-    write_new_key,
-)
+from alphafence.vehicle.signing import SigningSetupError, install_key
 from tests.fake_vehicle import FakeVehicle
 from tests.test_upload_faults import NEW, PREVIOUS
 

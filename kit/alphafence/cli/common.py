@@ -155,7 +155,7 @@ def signing_key(args):
     path), or None for an unsigned link."""
     import os
 
-    from alphafence.vehicle.signing import key_file_warning, load_key
+    from alphafence.vehicle.keys import key_file_warning, load_key
 
     path = args.signing_key or os.environ.get("ALPHAFENCE_SIGNING_KEY") or None
     if path is None:

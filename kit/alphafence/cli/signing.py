@@ -38,7 +38,7 @@ def register(sub):
 
 
 def run(args) -> int:
-    from alphafence.vehicle.signing import key_id, load_key, write_new_key
+    from alphafence.vehicle.keys import key_id, load_key, write_new_key
 
     if args.signing_verb == "keygen":
         key = write_new_key(args.key)
@@ -56,7 +56,8 @@ def run(args) -> int:
 
 
 async def _install(args, new, current) -> int:
-    from alphafence.vehicle.signing import SigningSetupError, install_key, key_id
+    from alphafence.vehicle.keys import key_id
+    from alphafence.vehicle.signing import SigningSetupError, install_key
 
     try:
         system = await install_key(args.connect, new, current, args.timeout)

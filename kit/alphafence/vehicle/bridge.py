@@ -27,7 +27,8 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from alphafence.errors import VehicleError
-from alphafence.vehicle.signing import signing_timestamp
+from alphafence.mavlink.udp import MavlinkDatagrams
+from alphafence.vehicle.keys import signing_timestamp
 
 LOOPBACK = "127.0.0.1"
 _URL = re.compile(r"(udpin|udpout|tcpout)://(\[[^\]]+\]|[^:/]*):(\d{1,5})/?")
@@ -76,6 +77,8 @@ def signature_matches(msgbuf: bytes, key: bytes) -> bool:
 
 @dataclass
 class LinkStats:
+    """What a :class:`VehicleLink` accepted, sent and dropped."""
+
     received: int = 0  # messages accepted from the vehicle
     sent: int = 0  # messages sent to the vehicle
     unsigned: int = 0  # dropped: no signature (signing expected)
@@ -125,7 +128,6 @@ class VehicleLink:
         self.stats = LinkStats()
         # one codec reads (and checks signatures), one writes (and signs)
         self.reader = mavlink.MAVLink(None)
-        self.reader.robust_parsing = True
         self.mav = mavlink.MAVLink(None, srcSystem=source[0], srcComponent=source[1])
         if key is not None:
             self.mav.signing.secret_key = bytes(key)
@@ -140,23 +142,20 @@ class VehicleLink:
                 )
         self.remote: tuple | None = None  # where the vehicle is (UDP)
         self.closed: str | None = None  # why the link ended
-        self._transport = None
+        # the socket (UDP), and the parser of a TCP stream too
+        self._wire = MavlinkDatagrams(self.reader, self._accept, self._reject)
         self._writer = None
         self._reader_task = None
 
     # -- life cycle -----------------------------------------------------------------
     async def open(self) -> VehicleLink:
-        loop = asyncio.get_running_loop()
+        """Open the connection the URL names. Raises BridgeError when it cannot."""
         try:
             if self.kind == "udpin":
-                self._transport, _ = await loop.create_datagram_endpoint(
-                    lambda: _Datagrams(self._received), local_addr=(self.host, self.port)
-                )
+                await self._wire.open(local_addr=(self.host, self.port))
             elif self.kind == "udpout":
                 self.remote = (self.host, self.port)
-                self._transport, _ = await loop.create_datagram_endpoint(
-                    lambda: _Datagrams(self._received), remote_addr=self.remote
-                )
+                await self._wire.open(remote_addr=self.remote)
             else:
                 reader, self._writer = await asyncio.wait_for(
                     asyncio.open_connection(self.host, self.port), 10.0
@@ -167,6 +166,7 @@ class VehicleLink:
         return self
 
     async def close(self) -> None:
+        """Close the connection (and wait until its socket is closed)."""
         if self._reader_task is not None:
             self._reader_task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -175,10 +175,8 @@ class VehicleLink:
             self._writer.close()
             with contextlib.suppress(Exception):
                 await self._writer.wait_closed()
-        if self._transport is not None:
-            self._transport.close()
-            await asyncio.sleep(0)  # the socket is closed on the next turn of the loop
-        self._transport = self._writer = self._reader_task = None
+        await self._wire.close()
+        self._writer = self._reader_task = None
 
     async def __aenter__(self):
         return await self.open()
@@ -206,9 +204,7 @@ class VehicleLink:
     def _write(self, buf: bytes) -> None:
         if self._writer is not None:
             self._writer.write(buf)
-        elif self._transport is not None and self.remote is not None:
-            self._transport.sendto(buf, self.remote)
-        else:
+        elif self.remote is None or not self._wire.send(buf, self.remote):
             return  # udpin before the vehicle has been heard: nowhere to send yet
         self.stats.sent += 1
 
@@ -225,26 +221,27 @@ class VehicleLink:
             self.closed = f"the connection failed ({exc})"
 
     def _received(self, data: bytes, addr) -> None:
-        try:
-            messages = self.reader.parse_buffer(data) or []
-        except Exception:  # pymavlink with robust parsing should not raise; never crash
+        """Bytes from the vehicle (a datagram, or a chunk of the TCP stream)."""
+        self._wire.feed(data, addr)
+
+    def _accept(self, msg, addr) -> None:
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            # an id this dialect does not know: pymavlink returns it without checking
+            # the signature, so it is dropped, never forwarded
             self.stats.garbage += 1
             return
-        for msg in messages:
-            if isinstance(msg, mavlink.MAVLink_bad_data):
-                self._count_bad(msg)
-                continue
-            if isinstance(msg, mavlink.MAVLink_unknown):
-                # an id this dialect does not know: pymavlink returns it without checking
-                # the signature, so it is dropped, never forwarded
-                self.stats.garbage += 1
-                continue
-            if self.key is not None:
-                self._follow_timestamp(msg)
-            if self.kind == "udpin" and addr is not None:
-                self.remote = addr  # learnt from accepted (verified, when signing) messages only
-            self.stats.received += 1
-            self.on_message(msg)
+        if self.key is not None:
+            self._follow_timestamp(msg)
+        if self.kind == "udpin" and addr is not None:
+            self.remote = addr  # learnt from accepted (verified, when signing) messages only
+        self.stats.received += 1
+        self.on_message(msg)
+
+    def _reject(self, msg, addr) -> None:
+        if msg is None:  # the parser raised (robust parsing should not); never crash
+            self.stats.garbage += 1
+        else:
+            self._count_bad(msg)
 
     def _follow_timestamp(self, msg) -> None:
         """Sign with timestamps no older than the vehicle's: it rejects a new stream more than
@@ -265,17 +262,6 @@ class VehicleLink:
             self.stats.garbage += 1
 
 
-class _Datagrams(asyncio.DatagramProtocol):
-    def __init__(self, received):
-        self.received = received
-
-    def datagram_received(self, data, addr):
-        self.received(data, addr)
-
-    def error_received(self, exc):  # ICMP port unreachable while the peer is not up yet
-        pass
-
-
 class SigningBridge:
     """``async with SigningBridge(url, key) as bridge:`` then point MAVSDK at
     ``bridge.local_url``. ``bridge.link.stats`` counts what was accepted and dropped."""
@@ -284,37 +270,34 @@ class SigningBridge:
         self.key = key
         self.link = VehicleLink(url, key, self._from_vehicle, link_id=link_id)
         self.local = mavlink.MAVLink(None)
-        self.local.robust_parsing = True
-        self._local_transport = None
+        # MAVSDK's side; its peer is MAVSDK's address, learnt from its first datagram
+        self._local = MavlinkDatagrams(self.local, self._from_mavsdk, self._not_forwarded)
         self._local_port: int | None = None
-        self._mavsdk: tuple | None = None  # MAVSDK's address, learnt from its first datagram
         self.from_mavsdk = 0
         self.not_forwarded = 0  # messages MAVSDK sent that pymavlink's dialect does not know
 
     @property
     def local_url(self) -> str:
+        """Where MAVSDK connects: ``udpout://127.0.0.1:PORT``."""
         if self._local_port is None:
             raise BridgeError("the signing bridge is not open")
         return f"udpout://{LOOPBACK}:{self._local_port}"
 
     async def open(self) -> SigningBridge:
+        """Open the link to the vehicle, then MAVSDK's loopback port. Raises BridgeError
+        when the vehicle side cannot be opened."""
         await self.link.open()
-        loop = asyncio.get_running_loop()
         try:
-            self._local_transport, _ = await loop.create_datagram_endpoint(
-                lambda: _Datagrams(self._from_mavsdk), local_addr=(LOOPBACK, 0)
-            )
+            await self._local.open(local_addr=(LOOPBACK, 0))
         except OSError:
             await self.link.close()
             raise
-        self._local_port = self._local_transport.get_extra_info("sockname")[1]
+        self._local_port = self._local.sockname[1]
         return self
 
     async def close(self) -> None:
-        if self._local_transport is not None:
-            self._local_transport.close()
-            self._local_transport = None
-            await asyncio.sleep(0)
+        """Close MAVSDK's port and the link to the vehicle."""
+        await self._local.close()
         await self.link.close()
 
     async def __aenter__(self):
@@ -324,21 +307,19 @@ class SigningBridge:
         await self.close()
 
     def diagnosis(self) -> str:
+        """Why the vehicle may have stayed silent ('' when nothing points to a reason)."""
         return self.link.closed or self.link.stats.diagnosis(key_given=True)
 
     def _from_vehicle(self, msg) -> None:
-        if self._local_transport is not None and self._mavsdk is not None:
-            self._local_transport.sendto(bytes(msg.get_msgbuf()), self._mavsdk)
+        self._local.send(bytes(msg.get_msgbuf()))  # to MAVSDK, once it has been heard
 
-    def _from_mavsdk(self, data: bytes, addr) -> None:
-        self._mavsdk = addr
-        try:
-            messages = self.local.parse_buffer(data) or []
-        except Exception:
+    def _from_mavsdk(self, msg, addr) -> None:
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            self.not_forwarded += 1
             return
-        for msg in messages:
-            if isinstance(msg, mavlink.MAVLink_bad_data | mavlink.MAVLink_unknown):
-                self.not_forwarded += 1
-                continue
-            self.from_mavsdk += 1
-            self.link.send(msg, (msg.get_srcSystem(), msg.get_srcComponent()), msg.get_seq())
+        self.from_mavsdk += 1
+        self.link.send(msg, (msg.get_srcSystem(), msg.get_srcComponent()), msg.get_seq())
+
+    def _not_forwarded(self, msg, addr) -> None:
+        if msg is not None:  # a frame pymavlink rejected (a datagram it raised on: nothing)
+            self.not_forwarded += 1

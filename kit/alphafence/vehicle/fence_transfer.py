@@ -14,7 +14,8 @@ import time
 from dataclasses import dataclass
 
 from alphafence.errors import VehicleError
-from alphafence.geo.coords import from_e7, to_e7
+from alphafence.geo.coords import from_e7, to_e7, valid_lonlat
+from alphafence.mavlink import ids
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     CIRCLE_INCLUSION,
@@ -25,8 +26,6 @@ from alphafence.mavlink.items import (
     FenceItem,
 )
 
-MISSION_TYPE_FENCE = 1
-FRAME_GLOBAL = 0
 # ArduPilot abandons a stalled upload 8 s after the last item it received, and until then answers
 # a download with MISSION_ACK(DENIED), which MAVSDK's download ignores (it times out instead).
 # MAVSDK gives up on an upload after about 2.5 s of silence: the vehicle may need the rest of
@@ -57,6 +56,20 @@ REASONS = {
 
 
 class FenceTransferError(VehicleError):
+    """A fence transfer failed, or what was read back is not what was sent.
+
+    Parameters
+    ----------
+    message : str
+        What failed.
+    vehicle_says : iterable of str
+        The vehicle's STATUSTEXTs around the failure (each made one line).
+    holds : str, optional
+        What the vehicle holds now, in words.
+    result : str, optional
+        MAVSDK's ``MissionRawResult`` name, when MAVSDK gave one.
+    """
+
     def __init__(self, message, vehicle_says=(), holds=None, result=None):
         self.result = result  # MAVSDK's MissionRawResult name, when MAVSDK gave one
         self.vehicle_says = [" ".join(str(t).split()) for t in vehicle_says]  # one line
@@ -71,18 +84,22 @@ class FenceTransferError(VehicleError):
 
 @dataclass
 class UploadReport:
+    """A verified upload: how many items, how long it took (upload and read-back)."""
+
     items: int
     seconds: float
     verified: bool
 
 
 def to_raw(items):
+    """FenceItems as MAVSDK ``mission_raw`` items (MISSION_ITEM_INT of mission type FENCE,
+    frame GLOBAL, positions in 1e-7 degrees)."""
     from mavsdk.plugins.mission_raw import MissionItem
 
     return [
         MissionItem(
             seq=i,
-            frame=FRAME_GLOBAL,
+            frame=ids.MAV_FRAME_GLOBAL,
             command=it.command,
             current=0,
             autocontinue=1,
@@ -93,7 +110,7 @@ def to_raw(items):
             x=to_e7(it.lat),
             y=to_e7(it.lon),
             z=0.0,
-            mission_type=MISSION_TYPE_FENCE,
+            mission_type=ids.MAV_MISSION_TYPE_FENCE,
         )
         for i, it in enumerate(items)
     ]
@@ -106,7 +123,11 @@ FENCE_COMMANDS = {
     CIRCLE_INCLUSION: "inclusion circle",
     CIRCLE_EXCLUSION: "exclusion circle",
 }
-MAX_DOWNLOAD_ITEMS = 1000  # ArduPilot's fence storage holds well under this (SD: a few hundred)
+MAX_DOWNLOAD_ITEMS = 1000
+"""The most fence items a download may bring: a vehicle claiming more is refused before the
+items are checked one by one, so a faulty or hostile count cannot make the kit hold and check
+an unbounded list. ArduPilot's fence storage holds well under this (on an SD card: a few
+hundred)."""
 
 
 def from_raw(raw):
@@ -135,12 +156,14 @@ def _checked_item(i, r):
         x, y, param1 = int(r.x), int(r.y), float(r.param1)
     except (TypeError, ValueError, OverflowError):
         raise _bad(i, "a field is not a number") from None
-    if mission_type != MISSION_TYPE_FENCE:
-        raise _bad(i, f"mission type {mission_type}, not a fence item (1)")
+    if mission_type != ids.MAV_MISSION_TYPE_FENCE:
+        raise _bad(
+            i, f"mission type {mission_type}, not a fence item ({ids.MAV_MISSION_TYPE_FENCE})"
+        )
     if command not in FENCE_COMMANDS:
         raise _bad(i, f"command {command} is not a fence item")
     lat, lon = from_e7(x), from_e7(y)
-    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+    if not valid_lonlat(lon, lat):
         raise _bad(i, f"position {lat:.7f}, {lon:.7f} is out of range")
     if not math.isfinite(param1):
         raise _bad(i, f"parameter 1 is {param1}")
@@ -195,6 +218,8 @@ def _reason(exc) -> str:
 
 
 async def download_fence(vehicle):
+    """The fence the vehicle holds, as checked FenceItems ([] when it holds none). Raises
+    FenceTransferError when the download fails or what came is not a valid fence."""
     from mavsdk.plugins.mission_raw import MissionRawError
 
     try:

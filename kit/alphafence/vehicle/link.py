@@ -84,6 +84,25 @@ async def _open_mavsdk(url: str, shown_url: str, timeout: float, bridge=None):
 
 
 class Vehicle:
+    """A connected autopilot: MAVSDK's plugins for it, and the STATUSTEXTs it sent.
+
+    Parameters
+    ----------
+    system : mavsdk System
+        The autopilot MAVSDK discovered.
+    url : str
+        The connection as the operator gave it (for messages).
+
+    Attributes
+    ----------
+    mission_raw, action, param, telemetry
+        MAVSDK's plugins.
+    texts : deque
+        ``(monotonic time, text)`` of the last 50 STATUSTEXTs.
+    bridge : SigningBridge or None
+        The loopback signing bridge of a signed link.
+    """
+
     def __init__(self, system, url):
         from mavsdk.asyncio.plugins.action import ActionAsync
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
@@ -101,9 +120,11 @@ class Vehicle:
         self._task = None
 
     async def start(self):
+        """Start collecting the vehicle's STATUSTEXTs."""
         self._task = asyncio.create_task(self._collect_texts())
 
     async def close(self):
+        """Stop collecting STATUSTEXTs."""
         if self._task:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):

@@ -42,11 +42,13 @@ INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
 
 
 class ParamError(VehicleError):
-    pass
+    """A fence parameter could not be set or read, or reads back differently."""
 
 
 @dataclass
 class ParamReport:
+    """The parameters as read back after setting them (name -> value)."""
+
     values: dict
 
 
@@ -71,6 +73,8 @@ async def apply_params(vehicle, values: dict) -> ParamReport:
 
 
 async def read_params(vehicle, names) -> dict:
+    """The vehicle's value of each parameter in ``names``; ParamError when one cannot be
+    read."""
     out = {}
     for name in names:
         try:
