@@ -23,7 +23,7 @@ async def _measure(osm):
     from alphafence.monitor.engine import MonitorOptions
     from alphafence.monitor.fenceset import FenceSet
     from alphafence.monitor.runner import EventLog, Monitor
-    from alphafence.sitl.launcher import launch_sitl
+    from alphafence.sitl import launch_sitl
     from alphafence.vehicle.link import open_vehicle
 
     rules = load_rules()

@@ -463,7 +463,7 @@ async def _soak(osm, minutes, console):
     from alphafence.formats.fence_geojson import FenceRecord
     from alphafence.formats.rules import load_rules
     from alphafence.monitor.fenceset import FenceSet
-    from alphafence.sitl.launcher import launch_sitl
+    from alphafence.sitl import launch_sitl
     from alphafence.vehicle.link import open_vehicle
 
     rules = load_rules()

@@ -28,7 +28,7 @@ def full_polygon(n=69, lon0=-0.545, lat0=51.433, radius=300.0):
 
 
 async def _measure(repeat):
-    from alphafence.sitl.launcher import launch_sitl
+    from alphafence.sitl import launch_sitl
     from alphafence.vehicle.fence_transfer import upload_fence
     from alphafence.vehicle.link import open_vehicle
 

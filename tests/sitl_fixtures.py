@@ -7,7 +7,7 @@
 
       @pytest.mark.parametrize("sitl", [{"home": "malta_airport", "speedup": 1}], indirect=True)
 
-  Any keyword of ``alphafence.sitl.launcher.SitlInstance`` works, plus ``ready_timeout``.
+  Any keyword of ``alphafence.sitl.SitlInstance`` works, plus ``ready_timeout``.
 - ``sitl_factory``: ``await sitl_factory(**options)`` launches more instances (ready unless
   ``ready_timeout=None``); all are stopped after the test.
 
@@ -41,7 +41,7 @@ def sitl_binary():
 
 @pytest.fixture
 async def sitl_factory(sitl_binary):
-    from alphafence.sitl.launcher import SitlInstance
+    from alphafence.sitl.instance import SitlInstance
 
     started = []
 

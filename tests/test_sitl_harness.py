@@ -15,23 +15,13 @@ from pathlib import Path
 import pytest
 
 from alphafence.cli import main
-from alphafence.errors import InputError
-from alphafence.sitl.launcher import (
-    COPTER_DEFAULTS,
-    RCIN_BASE_PORT,
-    Home,
-    ReadyState,
-    SitlError,
-    SitlInstance,
-    defaults_files,
-    kit_parm_path,
-    load_homes,
-    parse_homes,
-    reserve_instance,
-    resolve_home,
-    sitl_command,
-    write_param_file,
-)
+from alphafence.errors import InputError, SitlError
+from alphafence.sitl.cmdline import defaults_files, sitl_command, write_param_file
+from alphafence.sitl.find import COPTER_DEFAULTS
+from alphafence.sitl.homes import Home, kit_parm_path, load_homes, parse_homes, resolve_home
+from alphafence.sitl.instance import SitlInstance
+from alphafence.sitl.ports import RCIN_BASE_PORT, reserve_instance
+from alphafence.sitl.readiness import ReadyState
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -62,7 +62,7 @@ def run(args) -> int:
             return 1
         print(found)
         return 0
-    from alphafence.sitl.launcher import SitlError, SitlInstance
+    from alphafence.sitl.instance import SitlError, SitlInstance
 
     sitl = SitlInstance(  # resolves the home first: a bad name is an InputError
         args.home,
@@ -86,7 +86,7 @@ def run(args) -> int:
 
 
 def list_homes() -> int:
-    from alphafence.sitl.launcher import load_homes
+    from alphafence.sitl.homes import load_homes
 
     for name, home in load_homes().items():
         print(f"{name:16} {home.arg():34} {home.description}")
@@ -94,7 +94,7 @@ def list_homes() -> int:
 
 
 async def serve(sitl, *, wait: bool, timeout: float) -> int:
-    from alphafence.sitl.launcher import copter_defaults
+    from alphafence.sitl.cmdline import copter_defaults
 
     def say(text):
         print(text, flush=True)

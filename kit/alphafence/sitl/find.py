@@ -6,6 +6,7 @@ import os
 import shutil
 from pathlib import Path
 
+COPTER_DEFAULTS = "Tools/autotest/default_params/copter.parm"  # inside an ArduPilot tree
 NOT_FOUND_HELP = (
     "no ArduPilot SITL binary found: set ARDUPILOT_SITL=/path/to/arducopter, or ARDUPILOT_HOME to an "
     "ArduPilot tree built with './waf configure --board sitl && ./waf copter' (see ArduPilot's BUILD.md), "
@@ -14,6 +15,8 @@ NOT_FOUND_HELP = (
 
 
 def candidates():
+    """Where to look, in order: $ARDUPILOT_SITL, $ARDUPILOT_HOME's build, ~/ardupilot's build,
+    ``arducopter`` on PATH (paths that may not exist)."""
     env = os.environ.get("ARDUPILOT_SITL")
     if env:
         yield Path(env).expanduser()
@@ -38,6 +41,6 @@ def find_sitl_binary() -> Path | None:
 def ardupilot_tree(binary: Path) -> Path | None:
     """The ArduPilot source tree a binary was built in (for its default parameter files)."""
     for parent in binary.resolve().parents:
-        if (parent / "Tools/autotest/default_params/copter.parm").is_file():
+        if (parent / COPTER_DEFAULTS).is_file():
             return parent
     return None
