@@ -31,8 +31,9 @@ heartbeats and MAVSDK's discovery traffic cannot shift the numbering), late (re-
 messages, duplicated and out-of-order requests, NACKs, a stall and a disconnect. Everything
 the fake sees, sends and loses is recorded in ``FakeVehicle.log``.
 
-No threads and no mavutil: pymavlink's MAVLink 2 encoder/decoder writes into a buffer that
-the asyncio datagram transport sends.
+No threads and no mavutil: the kit's pymavlink-over-UDP endpoint
+(``alphafence.mavlink.udp.MavlinkDatagrams``) parses and encodes with the fake's own pymavlink
+codec; the faults are applied here, around it.
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from alphafence.mavlink.udp import MavlinkDatagrams
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
@@ -221,30 +224,18 @@ class Upload:
         return len(self.items)
 
 
-class _Buffer:
-    """The file pymavlink's encoder writes to; the datagram transport empties it."""
+class _Wire(MavlinkDatagrams):
+    """The fake's socket: the kit's pymavlink-over-UDP endpoint, deaf while disconnected."""
 
-    def __init__(self):
-        self.chunks: list[bytes] = []
-
-    def write(self, data):
-        self.chunks.append(bytes(data))
-
-    def take(self) -> bytes:
-        data = b"".join(self.chunks)
-        self.chunks.clear()
-        return data
-
-
-class _Protocol(asyncio.DatagramProtocol):
     def __init__(self, vehicle: FakeVehicle):
+        super().__init__(vehicle._mav, vehicle._received, vehicle._rejected)
         self.vehicle = vehicle
 
     def datagram_received(self, data, addr):
-        self.vehicle._received(data)
-
-    def error_received(self, exc):  # e.g. ICMP port unreachable before MAVSDK listens
-        pass
+        if self.vehicle.disconnected:
+            return
+        self.vehicle._heard = True
+        super().datagram_received(data, addr)
 
 
 class FakeVehicle:
@@ -276,9 +267,8 @@ class FakeVehicle:
         self.fence_writes = 0  # fences stored (successful uploads and clears)
         self.disconnected = False
         self.upload: Upload | None = None
-        self._buffer = _Buffer()
-        self._mav = mav.MAVLink(self._buffer, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self._mav.robust_parsing = True
+        self._mav = mav.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self._wire = _Wire(self)  # parses and encodes with self._mav
         self.dropped = 0  # messages that did not decode, or were not signed with the key
         self.signing_setups: list[bytes] = []  # keys received in SETUP_SIGNING
         self._set_key(signing_key)
@@ -289,8 +279,8 @@ class FakeVehicle:
             "out": random.Random(self.faults.seed * 2),
         }
         self._heard = False
+        self._arrived = asyncio.Event()  # set whenever a message is logged as received
         self._t0 = time.monotonic()
-        self._transport = None
         self._tasks: list[asyncio.Task] = []
         self._loop = None
 
@@ -303,9 +293,7 @@ class FakeVehicle:
     async def start(self):
         self._loop = asyncio.get_running_loop()
         self._t0 = time.monotonic()
-        self._transport, _ = await self._loop.create_datagram_endpoint(
-            lambda: _Protocol(self), local_addr=("127.0.0.1", 0)
-        )
+        await self._wire.open(local_addr=("127.0.0.1", 0))
         self._tasks = [asyncio.create_task(self._heartbeats()), asyncio.create_task(self._update())]
         return self
 
@@ -318,9 +306,7 @@ class FakeVehicle:
             except asyncio.CancelledError:
                 pass
         self._tasks = []
-        if self._transport is not None:
-            self._transport.close()
-            self._transport = None
+        await self._wire.close()
 
     async def __aenter__(self):
         return await self.start()
@@ -342,7 +328,21 @@ class FakeVehicle:
         return [detail for _, what, n, detail in self.log if what.startswith("out") and n == name]
 
     def received(self, name: str) -> list:
+        """Details of the messages of that name that came in (not those lost)."""
         return [detail for _, what, n, detail in self.log if what == "in" and n == name]
+
+    async def wait_received(self, name: str, count: int = 1, timeout: float = 5.0) -> list:
+        """:meth:`received` once ``count`` messages of that name have come in: for what a
+        client sends after its own call has returned (MAVSDK acknowledges a download after
+        handing the items over). Raises TimeoutError after ``timeout`` seconds."""
+
+        async def enough():
+            while len(self.received(name)) < count:
+                self._arrived.clear()
+                await self._arrived.wait()
+
+        await asyncio.wait_for(enough(), timeout)
+        return self.received(name)
 
     # ---------------------------------------------------------------- wire
 
@@ -351,6 +351,8 @@ class FakeVehicle:
 
     def _note(self, what, name, detail):
         self.log.append((round(self._now(), 4), what, name, detail))
+        if what == "in":
+            self._arrived.set()
 
     def _number(self, direction):
         """Number the next mission message going ``direction`` ("in" or "out"): (its number,
@@ -365,10 +367,9 @@ class FakeVehicle:
 
     def _send(self, msg, detail=""):
         """Encode and send one message, through the scripted faults."""
-        if self._transport is None or self.disconnected:
+        if self._wire.transport is None or self.disconnected:
             return
-        self._mav.send(msg)  # a lost message still uses up a sequence number, as on a radio
-        data = self._buffer.take()
+        data = self._wire.encode(msg)  # a lost message still uses up a sequence number
         name = msg.get_type()
         delay = 0.0
         if name in MISSION_MESSAGES:
@@ -385,37 +386,30 @@ class FakeVehicle:
             self._sendto(data)
 
     def _sendto(self, data):
-        if self._transport is not None and not self.disconnected:
-            self._transport.sendto(data, ("127.0.0.1", self.port))
+        if not self.disconnected:
+            self._wire.send(data, ("127.0.0.1", self.port))
 
-    def _received(self, data: bytes):
-        if self.disconnected:
+    def _rejected(self, msg, addr):
+        if msg is not None:  # garbled, or (signing on) not signed with the key
+            self.dropped += 1
+
+    def _received(self, msg, addr):
+        if self.disconnected:  # a handler went silent: nothing more of this datagram
             return
-        self._heard = True
-        try:
-            msgs = self._mav.parse_buffer(data) or []
-        except Exception:  # a garbled datagram; the robust parser should not raise
+        name = msg.get_type()
+        target = getattr(msg, "target_system", None)
+        if target not in (None, 0, SYSTEM_ID):
             return
-        for msg in msgs:
-            name = msg.get_type()
-            if name == "BAD_DATA":  # garbled, or (signing on) not signed with the key
-                self.dropped += 1
-                continue
-            target = getattr(msg, "target_system", None)
-            if target not in (None, 0, SYSTEM_ID):
-                continue
-            if name in MISSION_MESSAGES:
-                _, lost = self._number("in")
-                if lost:
-                    self._note("lost-in", name, _detail(msg))
-                    continue
-            if name not in ("HEARTBEAT",):
-                self._note("in", name, _detail(msg))
-            handler = getattr(self, "_on_" + name.lower(), None)
-            if handler is not None:
-                handler(msg)
-            if self.disconnected:
+        if name in MISSION_MESSAGES:
+            _, lost = self._number("in")
+            if lost:
+                self._note("lost-in", name, _detail(msg))
                 return
+        if name not in ("HEARTBEAT",):
+            self._note("in", name, _detail(msg))
+        handler = getattr(self, "_on_" + name.lower(), None)
+        if handler is not None:
+            handler(msg)
 
     # ---------------------------------------------------------------- signing
 
