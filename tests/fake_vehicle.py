@@ -333,8 +333,9 @@ class FakeVehicle:
 
     async def wait_received(self, name: str, count: int = 1, timeout: float = 5.0) -> list:
         """:meth:`received` once ``count`` messages of that name have come in: for what a
-        client sends after its own call has returned (MAVSDK acknowledges a download after
-        handing the items over). Raises TimeoutError after ``timeout`` seconds."""
+        client sends about when its own call returns (MAVSDK's closing MISSION_ACK of a
+        download comes over UDP, the download's result over gRPC: nothing orders the two).
+        Raises TimeoutError after ``timeout`` seconds."""
 
         async def enough():
             while len(self.received(name)) < count:
