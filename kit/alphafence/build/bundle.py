@@ -26,10 +26,19 @@ SUFFIX = ".sig.json"
 
 
 def signature_path(fences) -> Path:
+    """Where the signature of a fence file lives: beside it, ``.sig.json`` appended.
+
+    Examples
+    --------
+    >>> signature_path("out/fences.geojson").as_posix()
+    'out/fences.geojson.sig.json'
+    """
     return Path(str(fences) + SUFFIX)
 
 
 def generate_key(private_path, public_path):
+    """Make an Ed25519 key pair: the private key (PKCS#8 PEM, mode 0600) and the public key
+    (SubjectPublicKeyInfo PEM), written all or nothing."""
     key = Ed25519PrivateKey.generate()
     priv = key.private_bytes(
         serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
@@ -99,6 +108,21 @@ def _metadata(fences) -> dict:
 
 
 def sign(fences, private_key_path) -> Path:
+    """Sign a fence file: write its detached signature (:func:`signature_path`).
+
+    The signature covers the file's SHA-256 and metadata (tool, time, and the build's
+    inputs and options as the fence file records them).
+
+    Returns
+    -------
+    Path
+        The signature file.
+
+    Raises
+    ------
+    InputError
+        The key cannot be read or is not an Ed25519 private key; the fences cannot be read.
+    """
     key = _load(private_key_path, private=True)
     body = {"file": Path(fences).name, "sha256": _digest(fences), "metadata": _metadata(fences)}
     sig = key.sign(_payload(body))
@@ -114,7 +138,26 @@ def sign(fences, private_key_path) -> Path:
 
 
 def verify(fences, trusted_keys) -> dict:
-    """The signed metadata, or InputError saying why the bundle is not authentic."""
+    """The signed metadata, or InputError saying why the bundle is not authentic.
+
+    Parameters
+    ----------
+    fences : str or Path
+        The fence file; its signature is read from :func:`signature_path`.
+    trusted_keys : sequence of str or Path
+        PEM public keys the operator trusts (at least one).
+
+    Returns
+    -------
+    dict
+        The metadata that was signed.
+
+    Raises
+    ------
+    InputError
+        Not signed, malformed signature file, no trusted key given, signed by an untrusted
+        key, signature invalid, or the fences changed since.
+    """
     sig_path = signature_path(fences)
     if not sig_path.is_file():
         raise InputError(fences, f"not signed (no {sig_path.name})")

@@ -15,6 +15,25 @@ from alphafence.build.sites import group_sites
 
 @dataclass
 class MethodStats:
+    """How one method's fences fare over every site.
+
+    Attributes
+    ----------
+    method : str
+    sites : int
+    containment_pct : float
+        Share of the restricted area inside its fences, % (must be 100).
+    overshoot : float
+        Fence area outside the restricted area, over the restricted area.
+    excess : float
+        Fence area outside the restricted area grown by its margin, over the restricted area.
+    vertices_median, vertices_p95 : float
+        Vertices a fence (1 for a circle).
+    vertices_total : int
+    seconds : float
+        Time to group and fence every site.
+    """
+
     method: str
     sites: int
     containment_pct: float  # % of the restricted area inside its fences (must be 100)
@@ -26,11 +45,25 @@ class MethodStats:
     seconds: float
 
     def as_dict(self):
+        """The statistics as a plain dict (for ``--json``)."""
         return dataclasses.asdict(self)
 
 
 @dataclass
 class Comparison:
+    """The methods compared on the same sites.
+
+    Attributes
+    ----------
+    sites : list of Site
+    stats : list of MethodStats
+        One per method, in the order asked.
+    fences : dict
+        ``{method: {site_id: main Fence}}``.
+    group_seconds : float
+        Time to group the sites (once, for every method).
+    """
+
     sites: list
     stats: list
     fences: dict  # method -> {site_id: main fence}
@@ -38,11 +71,14 @@ class Comparison:
 
 
 def main_fences(result):
+    """``{site_id: Fence}``: each site's main fence (the one of the site's own kind, not its
+    warning layer) in a :class:`BuildResult`."""
     kinds = {s.site_id: s.kind for s in result.sites}
     return {f.site_id: f for f in result.fences if f.kind == kinds[f.site_id]}
 
 
 def method_stats(method, sites, fences, seconds) -> MethodStats:
+    """:class:`MethodStats` of one method's main fences (``{site_id: Fence}``) on ``sites``."""
     geoms = np.array([s.geometry for s in sites], dtype=object)
     local = np.array([fences[s.site_id].local for s in sites], dtype=object)
     margins = np.array([fences[s.site_id].margin_m for s in sites])
@@ -69,6 +105,24 @@ def method_stats(method, sites, fences, seconds) -> MethodStats:
 def compare_methods(
     features, rules, methods, options: BuildOptions | None = None, progress=None
 ) -> Comparison:
+    """Build every site's fences with each method, on sites grouped once.
+
+    Warning layers are left out; every method gets the same ``options`` otherwise.
+
+    Parameters
+    ----------
+    features : list of Feature
+    rules : Rules
+    methods : sequence of str
+        E.g. ``METHODS``.
+    options : BuildOptions, optional
+    progress : callable, optional
+        ``progress(done, total)`` after each method.
+
+    Returns
+    -------
+    Comparison
+    """
     options = options or BuildOptions()
     t0 = time.perf_counter()
     sites = group_sites(features, rules, options.join_m)

@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from alphafence.build.sites import circle_steps
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
 from alphafence.geo.outward import simplify_polygon
-from alphafence.build.sites import circle_steps
 
 METHODS = ("alpha", "polygon", "circle", "exact")
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
@@ -26,6 +26,25 @@ CIRCLE_SEGMENTS = 64
 
 @dataclass
 class FenceOptions:
+    """How fences are made.
+
+    Attributes
+    ----------
+    method : str
+        ``"alpha"`` (alpha shape), ``"polygon"`` (convex hull), ``"circle"`` or ``"exact"``
+        (the required region itself).
+    alpha_radius : float, optional
+        Alpha in metres; None picks the smallest that joins each site into one piece.
+    max_vertices : int
+        Simplify (outward) to at most this many vertices a polygon.
+    tolerance_m : float
+        Simplifications adding at most this much height always run.
+    warn_distance_m : float
+        Width of the warning layer around keep-out fences (0: none).
+    margin_m : float, optional
+        Overrides every rule's margin (0 is the paper's setting).
+    """
+
     method: str = "alpha"
     alpha_radius: float | None = None  # metres; None = automatic per site
     max_vertices: int = 32
@@ -36,6 +55,45 @@ class FenceOptions:
 
 @dataclass
 class Fence:
+    """A fence around a site, in the site's metric frame.
+
+    Attributes
+    ----------
+    site_id, name, category : str
+        From the site.
+    kind : str
+        ``"keep_out"``, ``"keep_in"`` or ``"warning"``.
+    method : str
+        How it was made (``FenceOptions.method``).
+    margin_m : float
+        Least distance from the restricted area to the fence's boundary.
+    alt_min_m, alt_max_m : float, optional
+        The altitude band it applies to.
+    sources : list of str
+    frame : LocalFrame
+    local : shapely.Polygon or shapely.MultiPolygon
+        The fence, metres.
+    circle : tuple, optional
+        ``(x, y, radius)`` in metres, for a circle fence.
+    alpha_m : float, optional
+        The alpha used.
+    repaired : bool
+        The fence failed its containment check and was united with the required region.
+    properties : dict
+        ED-269 restriction, reasons, references and applicability, when the features had them.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.geo.frame import LocalFrame
+    >>> fence = Fence("hospital/way/1", None, "hospital", "keep_out", "exact", 30.0, None, None,
+    ...               ["way/1"], LocalFrame(14.5, 35.9), shapely.box(-50, -50, 50, 50))
+    >>> fence.vertices, fence.area_m2
+    (4, 10000.0)
+    >>> round(fence.geometry.bounds[0], 6)
+    14.499446
+    """
+
     site_id: str
     name: str | None
     category: str
@@ -63,6 +121,7 @@ class Fence:
 
     @property
     def vertices(self) -> int:
+        """Vertices of its outer rings (1 for a circle)."""
         if self.circle is not None:
             return 1
         rings = shapely.get_exterior_ring(shapely.get_parts(self.local))
@@ -70,6 +129,7 @@ class Fence:
 
     @property
     def area_m2(self) -> float:
+        """Its area, square metres (a circle's true area)."""
         if self.circle is not None:
             return math.pi * self.circle[2] ** 2
         return float(self.local.area)
@@ -90,14 +150,22 @@ def required_region(geometry, margin_m):
 
 
 def circle_polygon(x, y, r):
-    """A polygon that contains the circle (circumscribed)."""
+    """A 64-gon that contains the circle (circumscribed), metres."""
     ang = np.linspace(0, 2 * math.pi, CIRCLE_SEGMENTS, endpoint=False) + math.pi / CIRCLE_SEGMENTS
     r_out = r / math.cos(math.pi / CIRCLE_SEGMENTS)
     return shapely.Polygon(np.column_stack([x + r_out * np.cos(ang), y + r_out * np.sin(ang)]))
 
 
 def enclosing_circle(region):
-    """(x, y, r): a circle containing every vertex of ``region`` (so the whole polygon)."""
+    """(x, y, r): a circle containing every vertex of ``region`` (so the whole polygon).
+
+    Examples
+    --------
+    >>> import shapely
+    >>> x, y, r = enclosing_circle(shapely.box(0, 0, 2, 2))
+    >>> round(x, 6), round(y, 6), round(r, 6)
+    (1.0, 1.0, 1.414215)
+    """
     center = shapely.centroid(shapely.minimum_bounding_circle(region))
     pts = shapely.get_coordinates(region)
     cx, cy = center.x, center.y
@@ -114,7 +182,16 @@ def _simplify_parts(geom, opts, outward=True):
 
 
 def outer_fence(region, opts):
-    """Geometry (and circle, alpha) of an enclosing fence of ``region`` by opts.method."""
+    """An enclosing fence of ``region`` (metres) by ``opts.method``.
+
+    Returns
+    -------
+    geometry : shapely geometry
+    circle : tuple or None
+        ``(x, y, r)`` for the circle method.
+    alpha : float or None
+        The alpha used by the alpha method.
+    """
     method = opts.method
     if method == "alpha":
         shape, alpha = alpha_shape(region, opts.alpha_radius)
@@ -140,6 +217,17 @@ def covers_required(fence_geom, circle, geometry, margin_m) -> bool:
 
 
 def contains_with_margin(fence_geom, circle, geometry, margin_m, slack=0.0) -> bool:
+    """Whether ``geometry`` lies inside the fence and at least ``margin_m - slack`` from its
+    boundary (for a circle fence, ``circle = (x, y, r)``: every vertex within
+    ``r - margin_m + slack`` of the centre).
+
+    Examples
+    --------
+    >>> import shapely
+    >>> fence, house = shapely.box(-50, -50, 50, 50), shapely.box(-10, -10, 10, 10)
+    >>> contains_with_margin(fence, None, house, 40.0), contains_with_margin(fence, None, house, 41.0)
+    (True, False)
+    """
     if circle is not None:
         pts = shapely.get_coordinates(geometry)
         d = np.hypot(pts[:, 0] - circle[0], pts[:, 1] - circle[1])
@@ -164,7 +252,26 @@ def site_properties(site) -> dict:
 
 
 def site_fences(site, opts: FenceOptions):
-    """The fences of one site: its main fence, plus a warning layer for keep-out sites."""
+    """The fences of one site: its main fence, plus a warning layer for keep-out sites.
+
+    Every keep-out and warning fence is checked to contain the restricted area with its
+    margin, and united with the required region when the check fails (``repaired``). A
+    keep-in fence lies inside the area shrunk by the margin.
+
+    Parameters
+    ----------
+    site : Site
+    opts : FenceOptions
+
+    Returns
+    -------
+    list of Fence
+
+    Raises
+    ------
+    ValueError
+        A keep-in site that vanishes inside its margin.
+    """
     base = dict(
         site_id=site.site_id,
         name=site.name,

@@ -12,6 +12,8 @@ OSM_ATTRIBUTION = "Contains data © OpenStreetMap contributors, ODbL 1.0"
 
 
 def build_meta(db, rules, options) -> dict:
+    """What a build was made of, for the fence GeoJSON's ``"alphafence"`` member: tool, inputs,
+    rules, method and its options, the bbox, and OSM's attribution when OSM data was read."""
     meta = {
         "tool": f"alphafence {__version__}",
         "inputs": db.files,
@@ -33,6 +35,22 @@ def build_meta(db, rules, options) -> dict:
 
 
 def render(fences, meta, geojson_path=None, plan_path=None, waypoints_path=None) -> dict:
+    """A build's outputs as text, ready for an all-or-nothing ``write_all``.
+
+    Parameters
+    ----------
+    fences : list of Fence
+    meta : dict
+        From :func:`build_meta`.
+    geojson_path, plan_path, waypoints_path : str or Path, optional
+        The outputs wanted: the fence GeoJSON, a QGroundControl plan and a QGC WPL fence
+        file (the last two hold keep-out and keep-in fences only).
+
+    Returns
+    -------
+    dict
+        ``{path: text}``.
+    """
     out = {}
     if geojson_path:
         out[geojson_path] = geojson.dumps(geojson.fences_geojson(fences, meta))

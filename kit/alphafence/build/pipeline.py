@@ -11,11 +11,30 @@ from alphafence.build.sites import group_sites
 
 @dataclass
 class BuildOptions(FenceOptions):
+    """:class:`FenceOptions` plus how sites are grouped.
+
+    Attributes
+    ----------
+    join_m : float
+        Features closer than this (metres) share a site.
+    """
+
     join_m: float = 25.0
 
 
 @dataclass
 class BuildResult:
+    """What :func:`build_fences` made.
+
+    Attributes
+    ----------
+    sites : list of Site
+    fences : list of Fence
+        Each site's main fence, followed by its warning layer if it has one.
+    seconds : dict
+        Seconds per stage: ``"group"`` and ``"fence"``.
+    """
+
     sites: list
     fences: list
     seconds: dict = field(default_factory=dict)  # stage -> seconds
@@ -26,7 +45,39 @@ def build_fences(
 ) -> BuildResult:
     """Fences for every site formed by ``features`` (or for the given ``sites``).
 
-    ``progress(done, total)`` is called as sites complete (the CLI draws a bar with it).
+    Parameters
+    ----------
+    features : list of Feature
+        Restricted features, as ``read_database`` returns them.
+    rules : Rules
+    options : BuildOptions, optional
+    progress : callable, optional
+        ``progress(done, total)`` is called as sites complete (the CLI draws a bar with it).
+    sites : list of Site, optional
+        Sites grouped already (the comparison groups once for every method).
+
+    Returns
+    -------
+    BuildResult
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.features import Feature
+    >>> from alphafence.formats.rules import load_rules
+    >>> rules = load_rules()
+    >>> hospital = rules.match({"amenity": "hospital"}.get, "area")
+    >>> def ward(lon, source):  # a 45 m x 45 m building
+    ...     box = shapely.box(lon, 35.9, lon + 0.0005, 35.9004)
+    ...     return Feature(box, {"amenity": "hospital"}, source, "demo", hospital)
+    >>> wards = [ward(14.5, "way/1"), ward(14.5007, "way/2"), ward(14.51, "way/3")]
+    >>> result = build_fences(wards, rules)
+    >>> for fence in result.fences:
+    ...     print(fence.site_id, fence.kind, fence.vertices)
+    hospital/way/2 keep_out 26
+    hospital/way/2 warning 20
+    hospital/way/3 keep_out 20
+    hospital/way/3 warning 20
     """
     options = options or BuildOptions()
     t0 = time.perf_counter()

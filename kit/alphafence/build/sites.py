@@ -28,6 +28,29 @@ SMALL_REGION_M = 20_000.0  # a region this size shares one frame: distortion < 1
 
 @dataclass
 class Site:
+    """Restricted features of one category and kind close enough to share one fence.
+
+    Attributes
+    ----------
+    site_id : str
+        ``"<category>/<source of the largest feature>"``.
+    name : str, optional
+        The name of the largest named feature.
+    category, kind : str
+        From the rule.
+    margin_m : float
+        The rule's margin.
+    alt_min_m, alt_max_m : float, optional
+        The altitude band covering every feature's (None when one is unbounded).
+    frame : LocalFrame
+        The metric frame the parts are in.
+    parts : ndarray of shapely geometry
+        Each feature's restricted area in metres (points as discs, lines as strips).
+    sources : list of str
+        The features' sources, sorted.
+    features : list of Feature
+    """
+
     site_id: str
     name: str | None
     category: str
@@ -82,7 +105,38 @@ def _regions(geoms, widths, join_m):
 
 
 def group_sites(features, rules, join_m=25.0):
-    """Sites (list of Site) from restricted features."""
+    """Group restricted features into sites.
+
+    Features of one category, kind and margin that overlap or lie within ``join_m`` metres
+    of each other (points and lines widened first) form one site.
+
+    Parameters
+    ----------
+    features : list of Feature
+    rules : Rules
+        Their point radius and line width.
+    join_m : float
+        Largest gap, in metres, between features of one site.
+
+    Returns
+    -------
+    list of Site
+        Sorted by category and site id.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.features import Feature
+    >>> from alphafence.formats.rules import load_rules
+    >>> rules = load_rules()
+    >>> hospital = rules.match({"amenity": "hospital"}.get, "area")
+    >>> def ward(lon, source):  # a 45 m x 45 m building
+    ...     box = shapely.box(lon, 35.9, lon + 0.0005, 35.9004)
+    ...     return Feature(box, {"amenity": "hospital"}, source, "demo", hospital)
+    >>> wards = [ward(14.5, "way/1"), ward(14.5007, "way/2"), ward(14.51, "way/3")]
+    >>> [(s.site_id, s.sources) for s in group_sites(wards, rules)]  # 18 m apart, then 700 m
+    [('hospital/way/2', ['way/1', 'way/2']), ('hospital/way/3', ['way/3'])]
+    """
     by_class = defaultdict(list)
     for f in features:
         by_class[(f.category, f.kind, f.rule.margin_m)].append(f)
@@ -170,5 +224,10 @@ def circle_steps(quad_segs: int) -> float:
     GEOS rounds the number of fillet segments to the nearest integer, so one chord may span
     up to 1.5 times the nominal angle (pi / 2 / quad_segs); its midpoint then lies at
     cos(half that angle) of the radius.
+
+    Examples
+    --------
+    >>> round(circle_steps(8), 4)
+    1.0109
     """
     return 1.0 / math.cos(1.5 * math.pi / (4 * quad_segs))
