@@ -13,7 +13,20 @@ from alphafence.route.planner import fence_label as default_fence_label
 
 @dataclass
 class LegIssue:
-    """A leg that crosses or comes closer than the clearance to a keep-out fence."""
+    """A leg that crosses or comes closer than the clearance to a keep-out fence.
+
+    Attributes
+    ----------
+    leg : int
+        The leg's number, from 1.
+    start, end : str
+        The labels of its waypoints.
+    fence : str
+        The fence, as ``fence_label`` names it.
+    distance_m : float
+        Least distance from the leg to the fence (0 when it crosses).
+    crosses : bool
+    """
 
     leg: int  # 1-based
     start: str
@@ -26,7 +39,37 @@ class LegIssue:
 def check_legs(waypoints, records, clearance=20.0, fence_label=None):
     """Legs between consecutive waypoints that cross (distance 0) or graze (closer than
     ``clearance``) a keep-out fence, computed exactly in one local metric frame.
-    Returns (issues, legs, warning_legs)."""
+
+    Parameters
+    ----------
+    waypoints : list of Waypoint
+        The positions the mission flies through, in order (``read_mission``).
+    records : list of FenceRecord
+    clearance : float
+        Legs closer than this (metres) to a keep-out fence are issues.
+    fence_label : callable, optional
+        Names a fence in the issues (default: site id and name).
+
+    Returns
+    -------
+    issues : list of LegIssue
+        By leg, then fence.
+    legs : list of tuple
+        ``(number, from, to)`` for every leg, numbered from 1.
+    warning_legs : set of int
+        Numbers of the legs that enter a warning layer.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> from alphafence.formats.mission import Waypoint
+    >>> fence = FenceRecord("power/way/7", "keep_out", shapely.box(14.500, 35.900, 14.502, 35.902))
+    >>> mission = [Waypoint("home", 14.497, 35.901), Waypoint("item 1", 14.505, 35.901)]
+    >>> issues, legs, warning_legs = check_legs(mission, [fence])
+    >>> issues[0].leg, issues[0].fence, issues[0].crosses
+    (1, 'power/way/7', True)
+    """
     label = fence_label or default_fence_label
     keep_out = [r for r in records if r.kind == "keep_out"]
     warning = [r for r in records if r.kind == "warning"]

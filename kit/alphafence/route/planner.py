@@ -14,6 +14,16 @@ from alphafence.route.roadmap import Roadmap, Route
 
 
 def fence_label(record) -> str:
+    """How messages name a fence: its site id, and its name when it has one.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> box = shapely.box(14.500, 35.900, 14.502, 35.902)
+    >>> fence_label(FenceRecord("power/way/7", "keep_out", box, name="Substation"))
+    'power/way/7 (Substation)'
+    """
     if record.name and record.name != record.site_id:
         return f"{record.site_id} ({record.name})"
     return str(record.site_id)
@@ -21,8 +31,38 @@ def fence_label(record) -> str:
 
 class FenceRoadmap:
     """A :class:`Roadmap` over the keep-out fences of ``records`` (``FenceRecord``), warning
-    layers costing more than open air. ``extra_lonlat``: positions the frame and the roadmap
-    should also cover (a mission's start and goal)."""
+    layers costing more than open air.
+
+    Parameters
+    ----------
+    records : list of FenceRecord
+        Keep-out fences are avoided, warning layers cost more; keep-in fences are ignored.
+    clearance : float
+        Least distance from any keep-out fence, metres.
+    extra_lonlat : sequence of tuple
+        ``(lon, lat)`` positions the frame and the roadmap should also cover (a mission's
+        start and goal).
+    frame : LocalFrame, optional
+        By default one centred on the keep-out fences and ``extra_lonlat``.
+    **roadmap_options
+        Passed to :class:`Roadmap` (``spacing``, ``warning_cost``...).
+
+    Raises
+    ------
+    ValueError
+        No keep-out fence and no position to place a frame.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> box = shapely.box(14.500, 35.900, 14.502, 35.902)
+    >>> start, goal = (14.497, 35.901), (14.505, 35.901)  # west and east of the fence
+    >>> roadmap = FenceRoadmap([FenceRecord("power/way/7", "keep_out", box)], 20.0, [start, goal])
+    >>> route, lonlat = roadmap.route(start, goal)
+    >>> round(route.length_m), route.min_clearance_m >= 20, lonlat[-1].tolist()
+    (783, True, [14.505, 35.901])
+    """
 
     def __init__(self, records, clearance=20.0, extra_lonlat=(), frame=None, **roadmap_options):
         self.records = list(records)
@@ -55,6 +95,7 @@ class FenceRoadmap:
         )
 
     def to_local(self, lonlat):
+        """A ``(lon, lat)`` position in the roadmap's metres, as an array ``[x, y]``."""
         x, y = self.frame.to_local(lonlat[0], lonlat[1])
         return np.array([float(x), float(y)])
 
