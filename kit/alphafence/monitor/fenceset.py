@@ -21,6 +21,8 @@ KIND_CODES = {"keep_out": KEEP_OUT, "warning": WARNING, "keep_in": KEEP_IN}
 
 @dataclass
 class Hit:
+    """The nearest keep-out fence to a position."""
+
     index: int  # fence index
     distance_m: float  # to the fence (0 when inside)
     inside: bool
@@ -38,6 +40,22 @@ class Check:
 
 
 class FenceSet:
+    """Every fence in one metric frame, indexed for the monitor's per-position checks.
+
+    Parameters
+    ----------
+    records : iterable of FenceRecord
+        The fences (keep-out, warning, keep-in), with their altitude limits and ED-269
+        applicability (``properties["zone"]["applicability"]``).
+    frame : LocalFrame, optional
+        The metric frame; centred on the fences if omitted.
+
+    Raises
+    ------
+    ValueError
+        When there are no fences.
+    """
+
     def __init__(self, records, frame: LocalFrame | None = None):
         self.records = list(records)
         if not self.records:
@@ -62,6 +80,7 @@ class FenceSet:
 
     @classmethod
     def from_geojson(cls, path):
+        """The fences of a fence GeoJSON file (``alphafence build``'s output)."""
         from alphafence.formats.fence_geojson import read_fences
 
         return cls(read_fences(path))
@@ -83,6 +102,7 @@ class FenceSet:
         self._keep_in = [int(k) for k in np.flatnonzero(self.kind == KEEP_IN)]
 
     def recentre(self, lon, lat):
+        """A new frame centred on ``(lon, lat)``, and the index rebuilt in it."""
         self.frame = LocalFrame(lon, lat)
         self._build(np.array([r.geometry for r in self.records], dtype=object))
 

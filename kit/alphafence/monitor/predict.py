@@ -5,9 +5,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+EARTH_RADIUS_M = 6_371_000.0  # the mean radius: short-range distances and offsets
+
 
 @dataclass(frozen=True)
 class Braking:
+    """How the vehicle stops: reaction time, deceleration, and the margin kept at the end."""
+
     reaction_s: float = 1.5  # link + decision + autopilot mode change and response
     decel_mps2: float = 2.5  # a Copter in BRAKE decelerates at a few m/s²
     margin_m: float = 2.0
@@ -40,3 +44,19 @@ def closest_approach(rx, ry, rz, vx, vy, vz, horizon_s):
 def dynamic_radius(base_m: float, closing_speed_mps: float, reaction_s: float = 2.0) -> float:
     """A moving aircraft's keep-out cylinder grows with how fast the two close on each other."""
     return base_m + max(0.0, closing_speed_mps) * reaction_s
+
+
+def metres(a, b) -> float:
+    """Horizontal metres between two ``(lat, lon)`` a few kilometres apart at most.
+
+    The equirectangular approximation (one cosine at the mean latitude): the one formula the
+    monitor uses for short distances (GPS jumps, re-route legs, arrival at a waypoint).
+
+    Examples
+    --------
+    >>> round(metres((51.43, -0.55), (51.431, -0.55)), 2)
+    111.19
+    """
+    dlat = math.radians(b[0] - a[0])
+    dlon = math.radians(b[1] - a[1]) * math.cos(math.radians(0.5 * (a[0] + b[0])))
+    return EARTH_RADIUS_M * math.hypot(dlat, dlon)

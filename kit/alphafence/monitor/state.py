@@ -11,6 +11,8 @@ from alphafence.monitor.predict import Braking, stopping_distance, time_to_breac
 
 
 class Level(IntEnum):
+    """The monitor's alert levels, ordered: a higher one is worse."""
+
     CLEAR = 0
     WARNING = 1
     IMMINENT = 2
@@ -19,6 +21,8 @@ class Level(IntEnum):
 
 @dataclass
 class Assessment:
+    """One position's raw level, the fence it concerns and why."""
+
     level: Level
     fence: int | None
     distance_m: float
@@ -62,6 +66,8 @@ def assess(check, speed_mps, horizon_s, braking: Braking = None) -> Assessment:
 
 @dataclass
 class StateMachine:
+    """The alert level with hysteresis: up at once, down after ``hold_s`` of calm."""
+
     hold_s: float = 2.0
     level: Level = Level.CLEAR
     _calm_since: float | None = field(default=None, repr=False)

@@ -15,6 +15,8 @@ from alphafence.monitor.predict import closest_approach, dynamic_radius
 
 @dataclass
 class Aircraft:
+    """Another aircraft's latest report, in the monitor's frame."""
+
     key: str  # ICAO address or MAVLink system id
     t: float  # monotonic seconds of the report
     x: float  # metres east in the monitor's frame
@@ -28,6 +30,8 @@ class Aircraft:
 
 @dataclass(frozen=True)
 class TrafficOptions:
+    """The size of the cylinder around other aircraft and how long a report lasts."""
+
     horizontal_m: float = 150.0  # base radius of the cylinder
     vertical_m: float = 50.0  # half height
     reaction_s: float = 2.0  # the radius grows by closing speed times this
@@ -36,6 +40,8 @@ class TrafficOptions:
 
 @dataclass
 class Conflict:
+    """A predicted loss of separation with one aircraft."""
+
     key: str
     callsign: str
     t_cpa_s: float
@@ -46,16 +52,46 @@ class Conflict:
 
 
 class Traffic:
+    """The other aircraft around the vehicle and the conflicts they are in with it.
+
+    Parameters
+    ----------
+    options : TrafficOptions, optional
+        The defaults if omitted.
+    """
+
     def __init__(self, options: TrafficOptions | None = None):
         self.options = options or TrafficOptions()
         self.aircraft: dict = {}
 
     def report(self, a: Aircraft):
+        """Keep ``a`` as its aircraft's latest report (an older one than that kept is ignored)."""
         old = self.aircraft.get(a.key)
         if old is None or a.t >= old.t:
             self.aircraft[a.key] = a
 
     def conflicts(self, now, x, y, alt_m, ve, vn, vu=0.0, horizon_s=30.0) -> list:
+        """The aircraft the vehicle is, or within ``horizon_s`` will be, in conflict with.
+
+        Each aircraft is dead-reckoned from its report to ``now``; reports older than
+        ``stale_s`` are dropped on the way.
+
+        Parameters
+        ----------
+        now : float
+            Monotonic seconds, as the reports' ``t``.
+        x, y, alt_m : float
+            The vehicle: metres east and north in the monitor's frame, metres AMSL.
+        ve, vn, vu : float
+            Its velocity, m/s east, north and up.
+        horizon_s : float
+            How far ahead to predict.
+
+        Returns
+        -------
+        list of Conflict
+            Soonest closest approach first.
+        """
         o = self.options
         out = []
         for key in list(self.aircraft):
