@@ -41,7 +41,7 @@ def test_bbox_selects_and_an_empty_selection_is_an_error(malta, rules):
     assert 0 < len(sub.features) < 60
     with pytest.raises(InputError) as err:
         read_database([malta], rules, bbox=(13.0, 35.0, 13.1, 35.1))  # open sea
-    assert "no restricted features inside --bbox" in str(err.value)
+    assert "no restricted features inside the bounding box 13,35,13.1,35.1" in str(err.value)
     assert str(malta) in str(err.value)
 
 

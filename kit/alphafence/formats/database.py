@@ -30,10 +30,11 @@ def read_file(path, rules, repaired, skipped):
     )
 
 
-def read_database(paths, rules, bbox=None) -> Database:
+def read_database(paths, rules, bbox=None, *, bbox_name="the bounding box") -> Database:
     """Read every restricted feature (by ``rules``) from the given files.
 
-    Raises InputError with a one-line message on bad input or an empty selection.
+    Raises InputError with a one-line message on bad input or an empty selection
+    (``bbox_name`` says what the box is in that message: the command line passes ``--bbox``).
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]
@@ -43,6 +44,6 @@ def read_database(paths, rules, bbox=None) -> Database:
     selected = select_bbox(features, bbox)
     if not selected:
         where = ", ".join(str(p) for p in paths)
-        why = f" inside --bbox {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
+        why = f" inside {bbox_name} {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
         raise InputError(where, f"no restricted features{why} (rules: {rules.source})")
     return Database(selected, [str(p) for p in paths], repaired, skipped, bbox)

@@ -115,16 +115,35 @@ def select_bbox(features, bbox):
     return [f for f, k in zip(features, keep) if k]
 
 
-def parse_bbox(text: str):
+def parse_bbox(text: str, name: str = "bounding box"):
+    """``"minlon,minlat,maxlon,maxlat"`` -> a (minlon, minlat, maxlon, maxlat) tuple of floats.
+
+    Parameters
+    ----------
+    text : str
+        Four comma-separated numbers, lon/lat in degrees.
+    name : str, optional
+        What the text is, named in the error.
+
+    Raises
+    ------
+    InputError
+        Not four numbers, coordinates out of range, or a min not below its max.
+
+    Examples
+    --------
+    >>> parse_bbox("-77.5,38.7,-77.0,39.0")
+    (-77.5, 38.7, -77.0, 39.0)
+    """
     try:
         parts = [float(p) for p in text.split(",")]
     except ValueError:
         parts = []
     if len(parts) != 4:
-        raise InputError("--bbox", f"expected minlon,minlat,maxlon,maxlat, got {text!r}")
+        raise InputError(name, f"expected minlon,minlat,maxlon,maxlat, got {text!r}")
     minlon, minlat, maxlon, maxlat = parts
     if check_lonlat_array([[minlon, minlat], [maxlon, maxlat]]) is not None:
-        raise InputError("--bbox", f"coordinates out of range in {text!r}")
+        raise InputError(name, f"coordinates out of range in {text!r}")
     if minlon >= maxlon or minlat >= maxlat:
-        raise InputError("--bbox", f"min must be below max in {text!r}")
+        raise InputError(name, f"min must be below max in {text!r}")
     return (minlon, minlat, maxlon, maxlat)
