@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -182,3 +183,196 @@ def test_console_script_runs_the_demo(tmp_path):
     for name in ("fences.geojson", "fences.plan", "fences.waypoints", "fences.png", "compare.png"):
         assert (tmp_path / name).stat().st_size > 0
     assert "synthetic" in res.stdout.lower() and "alpha" in res.stdout
+
+
+# -- the command line's shape: negative values, errors and exit codes, entry points --------
+
+AREA = "-0.58,51.42,-0.52,51.44"  # the demo scene lies west of Greenwich: negative longitudes
+
+
+@pytest.fixture(scope="module")
+def demo_fences(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fences") / "f.geojson"
+    assert main(["build", str(scene_path()), "-o", str(out), "-q"]) == 0
+    return out
+
+
+def test_a_negative_bbox_after_a_space_is_a_value(tmp_path, demo_fences, capsys):
+    spaced = tmp_path / "spaced.geojson"
+    joined = tmp_path / "joined.geojson"
+    assert main(["build", str(scene_path()), "-o", str(spaced), "-q", "--bbox", AREA]) == 0
+    assert main(["build", str(scene_path()), "-o", str(joined), "-q", f"--bbox={AREA}"]) == 0
+    assert json.loads(spaced.read_text())["alphafence"]["bbox"] == [-0.58, 51.42, -0.52, 51.44]
+    assert json.loads(spaced.read_text())["features"] == json.loads(joined.read_text())["features"]
+    onboard = tmp_path / "onboard.plan"
+    code = main(["compile", str(demo_fences), "--bbox", AREA, "-o", str(onboard)])
+    assert code == 0 and read_plan_fence(onboard)
+    upload = ["upload", str(demo_fences), "--bbox", AREA, "--dry-run", "--allow-unsigned"]
+    assert main(upload) == 0
+    assert "nothing sent" in capsys.readouterr().out
+
+
+def test_a_negative_return_point_after_a_space_is_a_value(tmp_path, demo_fences):
+    onboard = tmp_path / "onboard.plan"
+    # a return point in the southern hemisphere is far from the area, but it is a position
+    code = main(
+        ["compile", str(demo_fences), "--bbox", AREA, "--return-point", "-35.36,149.16"]
+        + ["-o", str(onboard)]
+    )
+    assert code == 0
+    assert json.loads(onboard.read_text())["geoFence"]["breachReturn"][:2] == [-35.36, 149.16]
+
+
+@pytest.mark.parametrize("verb", ["build", "compile"])
+def test_a_bad_bbox_is_a_usage_error_for_every_verb(tmp_path, demo_fences, capsys, verb):
+    args = {
+        "build": ["build", str(scene_path()), "-o", str(tmp_path / "x.geojson")],
+        "compile": ["compile", str(demo_fences), "-o", str(tmp_path / "x.plan")],
+    }[verb]
+    for bad, says in (
+        ("1,2,3", "expected minlon,minlat,maxlon,maxlat, got '1,2,3'"),
+        ("-0.5,51.4,-0.6,51.5", "min must be below max"),
+        ("-190,51.4,-0.6,51.5", "coordinates out of range"),
+    ):
+        with pytest.raises(SystemExit) as exit_:
+            main([*args, "--bbox", bad])
+        assert exit_.value.code == 2
+        assert f"alphafence {verb}: error: argument --bbox: {says}" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_empty_selection_names_the_bbox_option(tmp_path, capsys):
+    out = tmp_path / "x.geojson"
+    assert main(["build", str(scene_path()), "-o", str(out), "--bbox", "13,35,13.1,35.1"]) == 2
+    err = capsys.readouterr().err
+    assert "no restricted features inside --bbox 13,35,13.1,35.1" in err
+    assert err.startswith("alphafence build: error: ") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    "args, says",
+    [
+        (["--margin", "-1"], "alphafence build: error: --margin: must be a non-negative number"),
+        (["--join", "nan"], "alphafence build: error: --join: must be a non-negative number"),
+        (["--max-vertices", "3"], "alphafence build: error: --max-vertices: must be at least 4"),
+        (["--alpha-radius", "0"], "--alpha-radius: must be a positive number of metres, not 0.0"),
+        (["--warn-distance", "-5"], "--warn-distance: must be a non-negative number of metres"),
+    ],
+)
+def test_out_of_range_values_are_one_line_input_errors(tmp_path, capsys, args, says):
+    out = tmp_path / "x.geojson"
+    assert main(["build", str(scene_path()), "-o", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert says in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_a_value_that_is_not_a_number_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["build", str(scene_path()), "-o", "x.geojson", "--margin", "wide"])
+    assert exit_.value.code == 2
+    assert "argument --margin: invalid float value: 'wide'" in capsys.readouterr().err
+
+
+def _errors():
+    from alphafence.errors import AlphaFenceError, InputError, RoutingError, SitlError, VehicleError
+    from alphafence.route.roadmap import NoRoute
+    from alphafence.vehicle.bridge import BridgeError
+    from alphafence.vehicle.fence_transfer import FenceTransferError
+    from alphafence.vehicle.link import LinkError
+    from alphafence.vehicle.params import ParamError
+    from alphafence.vehicle.signing import SigningSetupError
+
+    return [
+        (InputError("f.geojson", "bad ring", "feature 3"), 2, "f.geojson: feature 3: bad ring"),
+        (VehicleError("the vehicle refused"), 3, "the vehicle refused"),
+        (LinkError("no heartbeat"), 3, "no heartbeat"),
+        (BridgeError("udp://x: not a URL"), 3, "udp://x: not a URL"),
+        (FenceTransferError("upload failed"), 3, "upload failed"),
+        (ParamError("FENCE_ENABLE did not stick"), 3, "FENCE_ENABLE did not stick"),
+        (SigningSetupError("not confirmed"), 3, "not confirmed"),
+        (SitlError("no arducopter"), 1, "no arducopter"),
+        (RoutingError("blocked"), 1, "blocked"),
+        (NoRoute("the goal is enclosed"), 1, "the goal is enclosed"),
+        (AlphaFenceError("something"), 1, "something"),
+    ]
+
+
+@pytest.mark.parametrize("error, code, says", _errors(), ids=lambda v: type(v).__name__)
+def test_main_maps_each_error_to_its_exit_code(monkeypatch, capsys, error, code, says):
+    def run(args):
+        raise error
+
+    monkeypatch.setattr("alphafence.cli.bundle.run", run)
+    assert main(["bundle", "keygen", "--private", "k.pem", "--public", "k.pub"]) == code
+    captured = capsys.readouterr()
+    assert captured.err == f"alphafence bundle: error: {says}\n" and captured.out == ""
+
+
+def test_main_maps_an_interrupt_to_130(monkeypatch, capsys):
+    def run(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("alphafence.cli.bundle.run", run)
+    assert main(["bundle", "keygen", "--private", "k.pem", "--public", "k.pub"]) == 130
+    assert capsys.readouterr().err == "alphafence: interrupted\n"
+
+
+def test_an_error_while_parsing_names_the_verb(capsys):
+    code = main(["route", "f.geojson", "--from", "95,14", "--to", "0,0", "-o", "m.plan"])
+    assert code == 2
+    assert capsys.readouterr().err == (
+        "alphafence route: error: --from: coordinate (lat 95.0, lon 14.0) out of range\n"
+    )
+
+
+def test_every_verb_has_help():
+    from alphafence.cli import VERBS
+
+    for verb in VERBS:
+        with pytest.raises(SystemExit) as exit_:
+            main([verb, "--help"])
+        assert exit_.value.code == 0, verb
+
+
+def test_no_verb_module_imports_another():
+    import ast
+    from pathlib import Path
+
+    import alphafence.cli
+    from alphafence.cli import VERBS
+
+    verbs = {f"alphafence.cli.{v.replace('-', '_')}" for v in VERBS}
+    folder = Path(alphafence.cli.__file__).parent
+    found = []
+    for verb in sorted(verbs):
+        tree = ast.parse((folder / f"{verb.rsplit('.', 1)[1]}.py").read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+            elif isinstance(node, ast.Import):
+                names = {a.name for a in node.names}
+            else:
+                continue
+            found += [f"{verb} -> {n}" for n in sorted(names & (verbs - {verb}))]
+    assert not found, found
+
+
+def test_python_m_and_the_console_script_are_the_same_command(tmp_path):
+    exe = os.path.join(os.path.dirname(sys.executable), "alphafence")
+    runs = {
+        name: [
+            subprocess.run([*cmd, *args], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+            for args in (["--help"], ["route", "f", "--from", "95,14", "--to", "0,0", "-o", "m"])
+        ]
+        for name, cmd in (("module", [sys.executable, "-m", "alphafence"]), ("script", [exe]))
+    }
+    for a, b in zip(runs["module"], runs["script"]):
+        assert (a.returncode, a.stdout, a.stderr) == (b.returncode, b.stdout, b.stderr)
+    help_, error = runs["script"]
+    assert help_.returncode == 0 and help_.stdout.startswith("usage: alphafence")
+    from alphafence.cli import VERBS
+
+    listed = help_.stdout.split("positional arguments:")[1]
+    assert [v for v in VERBS if not re.search(rf"^    {v}\s", listed, re.M)] == []
+    assert error.returncode == 2 and error.stderr.startswith("alphafence route: error: --from:")

@@ -173,3 +173,34 @@ def test_check_mission_bad_input(fences, tmp_path, capsys):
 
 def test_fence_records_round_trip(fences):
     assert {r.kind for r in read_fences(fences)} == {"keep_out", "warning"}
+
+
+def test_route_takes_negative_coordinates_after_a_space(tmp_path, capsys):
+    # south and west of Greenwich: "--from -35.36,149.16" is a value, not an unknown option
+    frame = LocalFrame(-58.4, -34.6)  # Buenos Aires: both coordinates negative
+    wall = frame.geom_to_wgs84(shapely.box(-20, -300, 20, 300))
+    doc = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {"site_id": "prison/1", "kind": "keep_out", "name": "prison"},
+                "geometry": shapely.geometry.mapping(wall),
+            }
+        ],
+    }
+    fences = tmp_path / "south.geojson"
+    fences.write_text(json.dumps(doc))
+
+    def at(x, y):
+        lon, lat = frame.to_wgs84(x, y)
+        return f"{float(lat):.8f},{float(lon):.8f}"
+
+    plan = tmp_path / "m.plan"
+    start, goal = at(-200, 0), at(200, 0)
+    assert start.startswith("-") and goal.startswith("-")
+    code = main(["route", str(fences), "--from", start, "--to", goal, "-o", str(plan)])
+    assert code == 0, capsys.readouterr()
+    lat, lon = json.loads(plan.read_text())["mission"]["items"][0]["params"][4:6]
+    x, y = frame.to_local(lon, lat)
+    assert abs(x + 200) < 0.05 and abs(y) < 0.05

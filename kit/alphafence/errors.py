@@ -9,7 +9,7 @@ class                exit code  raised when
 ===================  =========  ==============================================================
 ``AlphaFenceError``  1          (base; catch this to catch them all)
 ``InputError``       2          a file, a feature or a value is malformed or out of range
-``VehicleError``     1          the vehicle or the link to it failed, refused or disagreed
+``VehicleError``     3          the vehicle or the link to it failed, refused or disagreed
 ``SitlError``        1          an ArduPilot SITL binary is missing or did not start
 ``RoutingError``     1          no route exists (the message says what blocks it)
 ===================  =========  ==============================================================
@@ -67,6 +67,8 @@ class InputError(AlphaFenceError):
 class VehicleError(AlphaFenceError, RuntimeError):
     """The vehicle, or the link to it, failed: no connection, a refused or unverified
     transfer, a parameter that did not stick, a signing setup that was not confirmed."""
+
+    exit_code = 3
 
 
 class SitlError(AlphaFenceError, RuntimeError):

@@ -1,12 +1,19 @@
-"""The ``alphafence`` command: one verb per module, each a thin layer over the library."""
+"""The ``alphafence`` command: one verb per module, each a thin layer over the library.
+
+Each verb module has ``register(sub)``, which adds its sub-parser, and ``run(args)``, which
+calls the library and returns the exit status. Verbs import the library and the shared
+modules :mod:`~alphafence.cli.options` (argument types, option groups),
+:mod:`~alphafence.cli.common` (consoles, progress, trust) and :mod:`~alphafence.cli.tables`,
+never another verb. :func:`main` turns the library's errors into one line on stderr and the
+error's exit status.
+"""
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from alphafence import __version__
-from alphafence.errors import InputError
+from alphafence.errors import AlphaFenceError
 
 VERBS = (
     "build",
@@ -24,10 +31,19 @@ VERBS = (
 )
 
 
-def parser() -> argparse.ArgumentParser:
+def parser():
+    """The ``alphafence`` argument parser, with one sub-parser per verb in :data:`VERBS`.
+
+    Returns
+    -------
+    alphafence.cli.options.Parser
+        Parsed arguments carry ``verb`` and ``func``, the verb's ``run``.
+    """
     import importlib
 
-    p = argparse.ArgumentParser(
+    from alphafence.cli.options import Parser
+
+    p = Parser(
         prog="alphafence",
         description="Tight, safe alpha-shape geofences for ArduPilot vehicles.",
     )
@@ -39,12 +55,41 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = parser().parse_args(argv)
+    """Run the ``alphafence`` command line.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit status: the verb's own (0, or 1 for ``check-mission``'s crossing legs), the
+        ``exit_code`` of an :class:`~alphafence.errors.AlphaFenceError` (2 for bad input, 3
+        when the vehicle or its link fails, 1 otherwise), or 130 on Ctrl-C. A usage error
+        exits (``SystemExit``) with status 2, as argparse does.
+
+    Examples
+    --------
+    >>> main(["route", "fences.geojson", "--from", "95,14", "--to", "0,0", "-o", "m.plan"])
+    2
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = None
     try:
+        args = parser().parse_args(argv)
         return int(args.func(args) or 0)
-    except InputError as exc:
-        print(f"alphafence {args.verb}: error: {exc}", file=sys.stderr)
-        return 2
+    except AlphaFenceError as exc:
+        verb = args.verb if args is not None else _verb(argv)
+        print(f"alphafence {verb}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
     except KeyboardInterrupt:
         print("alphafence: interrupted", file=sys.stderr)
         return 130
+
+
+def _verb(argv):
+    # an error raised while parsing (by an argument type): the verb is the first word, as the
+    # top-level parser has no option that takes a value
+    return next((a for a in argv if not a.startswith("-")), "")

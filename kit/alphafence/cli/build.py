@@ -9,9 +9,9 @@ from rich.table import Table
 
 from alphafence.build.fences import METHODS
 from alphafence.build.outputs import build_meta, render
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.cli.common import add_database_options, callback, err_console, out_console, progress
-from alphafence.errors import InputError
+from alphafence.build.pipeline import build_fences
+from alphafence.cli.common import callback, err_console, out_console, progress
+from alphafence.cli.options import add_database_options, build_options, non_negative, positive
 from alphafence.formats.atomic import write_all
 from alphafence.formats.database import read_database
 from alphafence.formats.rules import load_rules
@@ -22,6 +22,7 @@ COPTER_ITEMS = PROFILES["copter"].items
 
 
 def register(sub):
+    """Add the ``build`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "build",
         help="build fences from a geofence database",
@@ -43,13 +44,13 @@ def register(sub):
     )
     p.add_argument(
         "--alpha-radius",
-        type=float,
+        type=positive("--alpha-radius", "metres"),
         metavar="M",
         help="force one alpha radius (metres) for every site",
     )
     p.add_argument(
         "--warn-distance",
-        type=float,
+        type=non_negative("--warn-distance", "metres"),
         default=30.0,
         metavar="M",
         help="warning layer this far beyond each keep-out fence (default 30; 0 = none)",
@@ -58,36 +59,14 @@ def register(sub):
     p.set_defaults(func=run)
 
 
-def options_from(args, **over) -> BuildOptions:
-    for name, value in (("--join", args.join), ("--max-vertices", args.max_vertices)):
-        if value is None or value < (4 if name == "--max-vertices" else 0):
-            raise InputError(name, f"invalid value {value}")
-    opts = BuildOptions(
-        method=getattr(args, "method", "alpha"),
-        alpha_radius=getattr(args, "alpha_radius", None),
-        max_vertices=args.max_vertices,
-        warn_distance_m=getattr(args, "warn_distance", 30.0),
-        margin_m=args.margin,
-        join_m=args.join,
-    )
-    for k, v in over.items():
-        setattr(opts, k, v)
-    if opts.alpha_radius is not None and not opts.alpha_radius > 0:
-        raise InputError("--alpha-radius", "must be a positive number of metres")
-    if opts.margin_m is not None and opts.margin_m < 0:
-        raise InputError("--margin", "must be >= 0")
-    if opts.warn_distance_m < 0:
-        raise InputError("--warn-distance", "must be >= 0")
-    return opts
-
-
 def run(args) -> int:
+    """Read the databases, build the fences, write them; exit status 0."""
     rules = load_rules(args.rules)
-    opts = options_from(args)
+    opts = build_options(args)
     with progress(not args.quiet) as prog:
         if prog is not None:
             t = prog.add_task("reading " + ", ".join(args.databases), total=None)
-        db = read_database(args.databases, rules, args.bbox)
+        db = read_database(args.databases, rules, args.bbox, bbox_name="--bbox")
         if prog is not None:
             prog.remove_task(t)
         result = build_fences(db.features, rules, opts, progress=callback(prog, "fencing sites"))
@@ -112,6 +91,8 @@ def run(args) -> int:
 
 
 def summary(db, result, opts, written):
+    """Print the fences built per category and kind, and notes on repairs, skipped features
+    and what does not fit a vehicle."""
     fences = result.fences
     table = Table(
         title=f"{len(result.sites)} sites from {len(db.features)} restricted features "

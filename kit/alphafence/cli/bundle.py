@@ -7,6 +7,7 @@ from alphafence.cli.common import out_console
 
 
 def register(sub):
+    """Add the ``bundle`` verb (keygen, sign, verify) to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "bundle",
         help="sign or verify a fence database",
@@ -26,6 +27,7 @@ def register(sub):
 
 
 def run(args) -> int:
+    """Make a key pair, sign fences, or verify them (exit 2 when they do not verify)."""
     if args.bundle_verb == "keygen":
         generate_key(args.private, args.public)
         out_console.print(f"wrote {args.private} (keep it secret) and {args.public}")

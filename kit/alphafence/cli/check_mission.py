@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-import math
-
 from rich.table import Table
 
 from alphafence.cli.common import err_console, out_console
-from alphafence.errors import InputError
+from alphafence.cli.options import non_negative
 from alphafence.formats.fence_geojson import read_fences
 
 
 def register(sub):
+    """Add the ``check-mission`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "check-mission",
         help="check a mission's legs against fences",
@@ -23,7 +22,7 @@ def register(sub):
     p.add_argument("--fences", required=True, metavar="FENCES", help="fence GeoJSON")
     p.add_argument(
         "--clearance",
-        type=float,
+        type=non_negative("--clearance"),
         default=20.0,
         metavar="M",
         help="legs closer than M metres graze a fence (default 20)",
@@ -32,11 +31,10 @@ def register(sub):
 
 
 def run(args) -> int:
+    """Print the legs near keep-out fences; exit 1 when any leg crosses one, else 0."""
     from alphafence.formats.mission import read_mission
     from alphafence.route.legs import check_legs
 
-    if not (math.isfinite(args.clearance) and args.clearance >= 0):
-        raise InputError("--clearance", f"must be a non-negative number, not {args.clearance}")
     records = read_fences(args.fences)
     waypoints = read_mission(args.mission)
     issues, legs, warning_legs = check_legs(waypoints, records, args.clearance)

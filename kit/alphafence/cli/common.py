@@ -1,7 +1,10 @@
-"""Options and output helpers shared by the verbs."""
+"""What the verbs share besides argument types: consoles, progress bars, the fence-signature
+options and check, the MAVLink signing-key option and key."""
 
 from __future__ import annotations
 
+import argparse
+import os
 import sys
 from contextlib import contextmanager
 
@@ -15,64 +18,22 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 
-from alphafence.formats.features import parse_bbox
+from alphafence.errors import InputError, VehicleError
 
 # piped or captured output gets a table-friendly width instead of rich's default 80 columns
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
 out_console = Console(width=None if sys.stdout.isatty() else 120)
 
 
-def add_database_options(p):
-    p.add_argument(
-        "databases",
-        nargs="+",
-        metavar="DATABASE",
-        help="geofence database(s): .osm.pbf, .osm, GeoJSON or ED-269 JSON",
-    )
-    p.add_argument("--rules", metavar="FILE", help="rules TOML (default: the shipped rules)")
-    p.add_argument(
-        "--bbox",
-        metavar="MINLON,MINLAT,MAXLON,MAXLAT",
-        type=_bbox,
-        help="only features intersecting this box",
-    )
-    p.add_argument(
-        "--join",
-        type=float,
-        default=25.0,
-        metavar="M",
-        help="features of one category within M metres form one site (default 25)",
-    )
-    p.add_argument(
-        "--margin",
-        type=float,
-        default=None,
-        metavar="M",
-        help="override every rule's margin (0 = the paper's setting)",
-    )
-    p.add_argument(
-        "--max-vertices",
-        type=int,
-        default=32,
-        metavar="N",
-        help="vertex budget per fence polygon (default 32)",
-    )
-
-
-def _bbox(text):
-    from alphafence.errors import InputError
-
-    try:
-        return parse_bbox(text)
-    except InputError as exc:
-        import argparse
-
-        raise argparse.ArgumentTypeError(exc.message) from None
-
-
 @contextmanager
 def progress(enabled=True):
-    """A rich progress bar on stderr (transient); yields a task factory."""
+    """A transient rich progress bar on stderr, or ``None`` when disabled or not a terminal.
+
+    Yields
+    ------
+    rich.progress.Progress or None
+        Pass it to :func:`callback` to draw a task into it.
+    """
     if not enabled or not sys.stderr.isatty():
         yield None
         return
@@ -100,7 +61,8 @@ def callback(prog, description):
     return update
 
 
-def add_trust_options(p):
+def add_trust_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--trusted-key`` and ``--allow-unsigned``, which :func:`check_trust` reads."""
     p.add_argument(
         "--trusted-key",
         action="append",
@@ -116,11 +78,21 @@ def add_trust_options(p):
 
 
 def check_trust(args, path):
-    """Refuse fences that do not verify against a trusted key, unless --allow-unsigned."""
-    import os
+    """Verify the fences at ``path`` against the trusted keys (``--trusted-key`` and
+    ``$ALPHAFENCE_TRUSTED_KEYS``).
 
+    Returns
+    -------
+    dict or None
+        The signature's metadata, or ``None`` for unverified fences used under
+        ``--allow-unsigned`` (a warning is printed).
+
+    Raises
+    ------
+    InputError
+        The fences do not verify and ``--allow-unsigned`` was not given.
+    """
     from alphafence.build.bundle import verify
-    from alphafence.errors import InputError
 
     keys = list(args.trusted_key) + [
         k for k in os.environ.get("ALPHAFENCE_TRUSTED_KEYS", "").split(os.pathsep) if k
@@ -140,7 +112,8 @@ def check_trust(args, path):
         ) from None
 
 
-def add_signing_option(p):
+def add_signing_option(p: argparse.ArgumentParser) -> None:
+    """Add ``--signing-key``, which :func:`signing_key` reads."""
     p.add_argument(
         "--signing-key",
         metavar="FILE",
@@ -153,8 +126,6 @@ def add_signing_option(p):
 def signing_key(args):
     """The 32-byte MAVLink signing key from --signing-key or $ALPHAFENCE_SIGNING_KEY (a file
     path), or None for an unsigned link."""
-    import os
-
     from alphafence.vehicle.keys import key_file_warning, load_key
 
     path = args.signing_key or os.environ.get("ALPHAFENCE_SIGNING_KEY") or None
@@ -166,9 +137,15 @@ def signing_key(args):
     return load_key(path)
 
 
-def unsigned_hint(args, exc) -> str:
-    """A hint after a transfer over an unsigned link timed out: the vehicle may be signing."""
-    signed = getattr(args, "key", None) or getattr(args, "signing_key", None)
-    if signed or getattr(exc, "result", None) != "TIMEOUT":
-        return ""
-    return " (if the vehicle has MAVLink signing on, give --signing-key)"
+@contextmanager
+def unsigned_hint(key):
+    """Add a hint to a vehicle error that timed out over an unsigned link (``key`` is None):
+    the vehicle may be signing, and ignoring what it cannot verify."""
+    try:
+        yield
+    except VehicleError as exc:
+        if key or getattr(exc, "result", None) != "TIMEOUT":
+            raise
+        raise VehicleError(
+            f"{exc} (if the vehicle has MAVLink signing on, give --signing-key)"
+        ) from exc

@@ -4,19 +4,19 @@ from __future__ import annotations
 
 import json
 
-from rich.table import Table
-
 from alphafence.build.compare import compare_methods, telling_sites
 from alphafence.build.fences import METHODS
 from alphafence.build.outputs import OSM_ATTRIBUTION
-from alphafence.cli.build import options_from
-from alphafence.cli.common import add_database_options, callback, out_console, progress
+from alphafence.cli.common import callback, out_console, progress
+from alphafence.cli.options import add_database_options, build_options
+from alphafence.cli.tables import stats_table
 from alphafence.errors import InputError
 from alphafence.formats.database import read_database
 from alphafence.formats.rules import load_rules
 
 
 def register(sub):
+    """Add the ``compare`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "compare",
         help="compare fence methods (containment, overshoot, vertices, time)",
@@ -25,7 +25,8 @@ def register(sub):
     add_database_options(p)
     p.add_argument(
         "--methods",
-        default="alpha,polygon,circle,exact",
+        type=methods,
+        default=list(METHODS),
         metavar="LIST",
         help="comma-separated methods (default alpha,polygon,circle,exact)",
     )
@@ -36,25 +37,32 @@ def register(sub):
     p.set_defaults(func=run)
 
 
-def parse_methods(text):
-    methods = [m.strip() for m in text.split(",") if m.strip()]
-    bad = [m for m in methods if m not in METHODS]
-    if bad or not methods:
+def methods(text):
+    """argparse type: comma-separated fence methods -> a list; unknown ones are an InputError.
+
+    Examples
+    --------
+    >>> methods("alpha, circle")
+    ['alpha', 'circle']
+    """
+    chosen = [m.strip() for m in text.split(",") if m.strip()]
+    bad = [m for m in chosen if m not in METHODS]
+    if bad or not chosen:
         raise InputError(
             "--methods",
             f"unknown method(s) {', '.join(bad) or '(none)'}; choose from {', '.join(METHODS)}",
         )
-    return methods
+    return chosen
 
 
 def run(args) -> int:
-    methods = parse_methods(args.methods)
+    """Build fences with each method and print (or, with --json, dump) how they compare."""
     rules = load_rules(args.rules)
-    opts = options_from(args)
+    opts = build_options(args)
     with progress(not args.json) as prog:
-        db = read_database(args.databases, rules, args.bbox)
+        db = read_database(args.databases, rules, args.bbox, bbox_name="--bbox")
         cmp = compare_methods(
-            db.features, rules, methods, opts, progress=callback(prog, "building fences")
+            db.features, rules, args.methods, opts, progress=callback(prog, "building fences")
         )
     if args.json:
         print(
@@ -79,31 +87,3 @@ def run(args) -> int:
         if not args.json:
             out_console.print(f"wrote {args.figure}")
     return 0
-
-
-def stats_table(cmp, opts) -> Table:
-    margin = "rules' margins" if opts.margin_m is None else f"margin {opts.margin_m:g} m"
-    t = Table(title=f"{cmp.stats[0].sites} sites, {margin}")
-    for col in (
-        "method",
-        "contain %",
-        "overshoot",
-        "excess",
-        "v median",
-        "v p95",
-        "v total",
-        "time s",
-    ):
-        t.add_column(col, justify="left" if col == "method" else "right")
-    for s in cmp.stats:
-        t.add_row(
-            s.method,
-            f"{s.containment_pct:.2f}",
-            f"{s.overshoot:.3f}",
-            f"{s.excess:.3f}",
-            f"{s.vertices_median:.0f}",
-            f"{s.vertices_p95:.0f}",
-            str(s.vertices_total),
-            f"{s.seconds:.2f}",
-        )
-    return t

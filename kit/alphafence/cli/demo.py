@@ -10,7 +10,7 @@ from alphafence.build.fences import METHODS
 from alphafence.build.outputs import build_meta, render
 from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.cli.common import out_console
-from alphafence.cli.compare import stats_table
+from alphafence.cli.tables import stats_table
 from alphafence.formats.atomic import write_all
 from alphafence.formats.database import read_database
 from alphafence.formats.rules import load_rules
@@ -21,10 +21,12 @@ NOTE = "Synthetic demo scene authored by the AlphaFence project (not real places
 
 
 def scene_path() -> Path:
+    """The shipped synthetic demo scene (GeoJSON)."""
     return Path(str(resources.files("alphafence").joinpath("data/demo-scene.geojson")))
 
 
 def register(sub):
+    """Add the ``demo`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "demo",
         help="build fences for the shipped synthetic demo scene",
@@ -41,6 +43,7 @@ def register(sub):
 
 
 def run(args) -> int:
+    """Build, draw and compare fences for the demo scene into ``--output-dir``; exit 0."""
     out = Path(args.output_dir)
     scene = scene_path()
     rules = load_rules()

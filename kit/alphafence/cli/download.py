@@ -4,19 +4,14 @@ from __future__ import annotations
 
 import asyncio
 
-from alphafence.cli.common import (
-    add_signing_option,
-    err_console,
-    out_console,
-    signing_key,
-    unsigned_hint,
-)
+from alphafence.cli.common import add_signing_option, out_console, signing_key, unsigned_hint
 from alphafence.formats import qgc_plan as plan
 from alphafence.formats import qgc_wpl as waypoints
 from alphafence.formats.atomic import write_all
 
 
 def register(sub):
+    """Add the ``download`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "download",
         help="read the fence a vehicle holds",
@@ -33,22 +28,19 @@ def register(sub):
 
 
 def run(args) -> int:
+    """Download the vehicle's fence and write it; exit 0, or 3 when the vehicle or the link
+    fails (a :class:`~alphafence.errors.VehicleError`)."""
     args.key = signing_key(args)
     return asyncio.run(_download(args))
 
 
 async def _download(args) -> int:
-    from alphafence.vehicle.fence_transfer import FenceTransferError, download_fence
-    from alphafence.vehicle.link import LinkError, open_vehicle
+    from alphafence.vehicle.fence_transfer import download_fence
+    from alphafence.vehicle.link import open_vehicle
 
-    try:
+    with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
             items = await download_fence(vehicle)
-    except (FenceTransferError, LinkError) as exc:
-        err_console.print(
-            f"alphafence download: error: {exc}{unsigned_hint(args, exc)}", soft_wrap=True
-        )
-        return 3
     out = {args.output: plan.dumps(plan.plan_document(items))}
     if args.waypoints:
         out[args.waypoints] = waypoints.waypoints_text(items)

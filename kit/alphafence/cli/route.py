@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-import math
-import sys
-
 from alphafence.cli.common import out_console
-from alphafence.errors import InputError
+from alphafence.cli.options import latlon, non_negative, positive
+from alphafence.errors import RoutingError
 from alphafence.formats import qgc_plan as plan
 from alphafence.formats.atomic import write_all
 from alphafence.formats.fence_geojson import read_fences
 
 
 def register(sub):
+    """Add the ``route`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "route",
         help="plan a mission around the keep-out fences",
@@ -22,14 +21,27 @@ def register(sub):
         "Exit code 1 when no route exists (one line says what blocks it), 2 on bad input.",
     )
     p.add_argument("fences", metavar="FENCES", help="fences from 'alphafence build' (GeoJSON)")
-    p.add_argument("--from", dest="start", required=True, metavar="LAT,LON", help="start")
-    p.add_argument("--to", dest="goal", required=True, metavar="LAT,LON", help="goal")
     p.add_argument(
-        "--alt", type=float, default=30.0, metavar="M", help="altitude above home (default 30)"
+        "--from",
+        dest="start",
+        type=latlon("--from"),
+        required=True,
+        metavar="LAT,LON",
+        help="start",
+    )
+    p.add_argument(
+        "--to", dest="goal", type=latlon("--to"), required=True, metavar="LAT,LON", help="goal"
+    )
+    p.add_argument(
+        "--alt",
+        type=positive("--alt", "metres"),
+        default=30.0,
+        metavar="M",
+        help="altitude above home (default 30)",
     )
     p.add_argument(
         "--clearance",
-        type=float,
+        type=non_negative("--clearance"),
         default=20.0,
         metavar="M",
         help="least distance from any keep-out fence (default 20)",
@@ -46,30 +58,14 @@ def register(sub):
     p.set_defaults(func=run)
 
 
-def parse_latlon(option, text):
-    """'LAT,LON' -> (lon, lat)."""
-    from alphafence.geo.coords import valid_lonlat
-
-    try:
-        lat, lon = (float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError(option, f"expected LAT,LON, got {text!r}") from None
-    if not valid_lonlat(lon, lat):
-        raise InputError(option, f"coordinate (lat {lat}, lon {lon}) out of range")
-    return lon, lat
-
-
 def run(args) -> int:
+    """Plan the route and write the mission; exit 0, or 1 (a
+    :class:`~alphafence.errors.RoutingError`) when no route exists."""
     from alphafence.formats.qgc_plan import mission_items
     from alphafence.formats.qgc_wpl import mission_waypoints_text
     from alphafence.route import FenceRoadmap, NoRoute
 
-    start = parse_latlon("--from", args.start)
-    goal = parse_latlon("--to", args.goal)
-    if not (math.isfinite(args.clearance) and args.clearance >= 0):
-        raise InputError("--clearance", f"must be a non-negative number, not {args.clearance}")
-    if not (math.isfinite(args.alt) and args.alt > 0):
-        raise InputError("--alt", f"must be a positive number of metres, not {args.alt}")
+    start, goal = args.start, args.goal
     records = read_fences(args.fences)
     if not any(r.kind == "keep_out" for r in records):
         out_console.print("[yellow]note:[/] no keep-out fences: the route is a straight line")
@@ -77,8 +73,7 @@ def run(args) -> int:
     try:
         route, lonlat = rm.route(start, goal)
     except NoRoute as exc:
-        print(f"alphafence route: error: {args.fences}: no route: {exc}", file=sys.stderr)
-        return 1
+        raise RoutingError(f"{args.fences}: no route: {exc}") from None
     items = mission_items(lonlat, args.alt, fly_back=not args.one_way)
     out = {args.output: plan.dumps(plan.plan_document([], start, items))}
     if args.waypoints:

@@ -10,6 +10,7 @@ from alphafence.errors import InputError
 
 
 def register(sub):
+    """Add the ``signing`` verb (keygen, setup, remove) to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "signing",
         help="MAVLink 2 signing: make a key, install it on a vehicle, or switch signing off",
@@ -38,6 +39,8 @@ def register(sub):
 
 
 def run(args) -> int:
+    """Write a key, or install or remove one on the vehicle; exit 0, or 3 when the vehicle
+    refuses or does not confirm (a :class:`~alphafence.errors.VehicleError`)."""
     from alphafence.vehicle.keys import key_id, load_key, write_new_key
 
     if args.signing_verb == "keygen":
@@ -57,13 +60,9 @@ def run(args) -> int:
 
 async def _install(args, new, current) -> int:
     from alphafence.vehicle.keys import key_id
-    from alphafence.vehicle.signing import SigningSetupError, install_key
+    from alphafence.vehicle.signing import install_key
 
-    try:
-        system = await install_key(args.connect, new, current, args.timeout)
-    except SigningSetupError as exc:
-        err_console.print(f"alphafence signing: error: {exc}", soft_wrap=True)
-        return 3
+    system = await install_key(args.connect, new, current, args.timeout)
     if new is None:
         out_console.print(f"vehicle {system}: signing switched off (it sends unsigned messages)")
     else:

@@ -9,6 +9,7 @@ from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
 
 
 def register(sub):
+    """Add the ``sitl`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "sitl",
         help="ArduPilot SITL helpers",
@@ -53,6 +54,8 @@ def register(sub):
 
 
 def run(args) -> int:
+    """Print the SITL binary found (exit 1 with how to build one if none), list the homes,
+    or run SITL at ``--home`` until Ctrl-C."""
     if args.list_homes:
         return list_homes()
     if args.home is None:
@@ -62,7 +65,7 @@ def run(args) -> int:
             return 1
         print(found)
         return 0
-    from alphafence.sitl.instance import SitlError, SitlInstance
+    from alphafence.sitl.instance import SitlInstance
 
     sitl = SitlInstance(  # resolves the home first: a bad name is an InputError
         args.home,
@@ -77,15 +80,13 @@ def run(args) -> int:
         return 1
     try:
         return asyncio.run(serve(sitl, wait=not args.no_wait, timeout=args.ready_timeout))
-    except SitlError as exc:
-        print(f"alphafence sitl: error: {exc}", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         print("alphafence sitl: stopped", file=sys.stderr)
         return 0
 
 
 def list_homes() -> int:
+    """Print the named homes, one a line; exit 0."""
     from alphafence.sitl.homes import load_homes
 
     for name, home in load_homes().items():
@@ -94,6 +95,8 @@ def list_homes() -> int:
 
 
 async def serve(sitl, *, wait: bool, timeout: float) -> int:
+    """Start ``sitl``, print how to connect (after its position estimate when ``wait``), and
+    wait for it to exit (exit status 1) or for Ctrl-C."""
     from alphafence.sitl.cmdline import copter_defaults
 
     def say(text):

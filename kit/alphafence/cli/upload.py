@@ -8,12 +8,12 @@ from alphafence.cli.common import (
     add_signing_option,
     add_trust_options,
     check_trust,
-    err_console,
     out_console,
     signing_key,
     unsigned_hint,
 )
-from alphafence.cli.compile import add_compile_options, compile_from_args, report
+from alphafence.cli.options import add_compile_options, bbox, compile_from_args
+from alphafence.cli.tables import compile_report
 from alphafence.errors import InputError
 from alphafence.formats.fence_geojson import read_fences
 from alphafence.formats.qgc_plan import read_plan_fence
@@ -22,6 +22,7 @@ from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
 
 
 def register(sub):
+    """Add the ``upload`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "upload",
         help="upload fences to a vehicle and verify them",
@@ -42,7 +43,10 @@ def register(sub):
     where = p.add_mutually_exclusive_group()
     where.add_argument("--area", metavar="MISSION.plan", help="operating area (for a .geojson)")
     where.add_argument(
-        "--bbox", metavar="MINLON,MINLAT,MAXLON,MAXLAT", help="operating area (for a .geojson)"
+        "--bbox",
+        type=bbox,
+        metavar="MINLON,MINLAT,MAXLON,MAXLAT",
+        help="operating area (for a .geojson)",
     )
     add_compile_options(p)
     p.add_argument(
@@ -60,6 +64,13 @@ def register(sub):
 
 
 def load_items(args):
+    """The fence items to upload and, for a fence GeoJSON, the compilation that made them.
+
+    Returns
+    -------
+    tuple
+        ``(items, CompileResult or None)``.
+    """
     name = args.fences.lower()
     if name.endswith(".plan"):
         return read_plan_fence(args.fences), None
@@ -74,10 +85,15 @@ def load_items(args):
 
 
 def run(args) -> int:
+    """Check the fences' signature, compile if needed, upload, read back, set parameters.
+
+    Exit status 0, or 3 when the vehicle or the link fails (a
+    :class:`~alphafence.errors.VehicleError`, mapped by :func:`alphafence.cli.main`).
+    """
     check_trust(args, args.fences)
     items, compiled = load_items(args)
     if compiled is not None:
-        report(compiled)
+        compile_report(compiled)
     if args.dry_run:
         out_console.print(f"dry run: {len(items)} fence items ready; nothing sent")
         return 0
@@ -88,11 +104,11 @@ def run(args) -> int:
 
 
 async def _upload(args, items) -> int:
-    from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
-    from alphafence.vehicle.link import LinkError, open_vehicle
-    from alphafence.vehicle.params import ParamError, apply_params
+    from alphafence.vehicle.fence_transfer import upload_fence
+    from alphafence.vehicle.link import open_vehicle
+    from alphafence.vehicle.params import apply_params
 
-    try:
+    with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
             rep = await upload_fence(vehicle, items)
             out_console.print(
@@ -104,9 +120,4 @@ async def _upload(args, items) -> int:
                     "parameters set and read back: "
                     + ", ".join(f"{k}={v:g}" for k, v in got.values.items())
                 )
-    except (FenceTransferError, LinkError, ParamError) as exc:
-        err_console.print(
-            f"alphafence upload: error: {exc}{unsigned_hint(args, exc)}", soft_wrap=True
-        )
-        return 3
     return 0

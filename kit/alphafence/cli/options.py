@@ -1,0 +1,280 @@
+"""Argument types and option groups shared by the verbs.
+
+Every value is checked where argparse converts it, by the ``type=`` functions below, so a
+verb's ``run()`` receives values already parsed and in range:
+
+* :func:`bbox` (``MINLON,MINLAT,MAXLON,MAXLAT``) fails as a usage error (argparse's message
+  and exit status 2);
+* :func:`latlon` (``LAT,LON``) and the number types raise :class:`~alphafence.errors.InputError`
+  naming the option, which :func:`alphafence.cli.main` prints on one line (exit status 2).
+
+:class:`Parser` also takes a value that starts with a minus sign and reads as numbers
+(``--bbox -77.5,38.7,-77.0,39.0``, ``--from -35.36,149.16``) as a value, not as an option.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+
+from alphafence.errors import InputError
+from alphafence.formats.features import parse_bbox
+from alphafence.geo.coords import valid_lonlat
+
+_NUMBER = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+# "-5", "-.5", "-1e3", and comma lists "-77.5,38.7,-77.0,39.0" (argparse alone knows only the first two)
+NEGATIVE_VALUE = re.compile(rf"^-{_NUMBER}(?:,-?{_NUMBER})*$")
+
+
+class Parser(argparse.ArgumentParser):
+    """An :class:`argparse.ArgumentParser` that reads ``-77.5,38.7`` as a value.
+
+    argparse takes an argument that starts with ``-`` for an option unless it looks like a
+    negative number (``-5``, ``-.5``), so ``--bbox -77.5,38.7,-77.0,39.0`` would fail with
+    "expected one argument". This parser also accepts comma-separated lists of numbers that
+    start with a negative one; the sub-parsers of its verbs are of the same class.
+
+    Examples
+    --------
+    >>> p = Parser(prog="x")
+    >>> _ = p.add_argument("--bbox")
+    >>> p.parse_args(["--bbox", "-77.5,38.7,-77.0,39.0"]).bbox
+    '-77.5,38.7,-77.0,39.0'
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # argparse consults this when an argument starts with '-' and names no option
+        self._negative_number_matcher = NEGATIVE_VALUE
+
+
+# ---------------------------------------------------------------------------------------------
+# argument types
+
+
+def bbox(text: str) -> tuple:
+    """argparse type: ``MINLON,MINLAT,MAXLON,MAXLAT`` -> a (minlon, minlat, maxlon, maxlat) tuple.
+
+    A malformed box, coordinates out of range or a min not below its max is a usage error
+    (``argparse.ArgumentTypeError``).
+    """
+    try:
+        return parse_bbox(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(exc.message) from None
+
+
+def latlon(flag: str):
+    """argparse type for the option ``flag``: ``LAT,LON`` -> a ``(lon, lat)`` tuple.
+
+    Parameters
+    ----------
+    flag : str
+        The option, named in the error (``"--from"``).
+
+    Returns
+    -------
+    callable
+        The type function; it raises :class:`~alphafence.errors.InputError` (exit status 2)
+        on a malformed or out-of-range position.
+
+    Examples
+    --------
+    >>> latlon("--from")("-35.36,149.16")
+    (149.16, -35.36)
+    """
+
+    def parse(text):
+        try:
+            lat, lon = (float(v) for v in text.split(","))
+        except ValueError:
+            raise InputError(flag, f"expected LAT,LON, got {text!r}") from None
+        if not valid_lonlat(lon, lat):
+            raise InputError(flag, f"coordinate (lat {lat}, lon {lon}) out of range")
+        return lon, lat
+
+    return parse
+
+
+def _number(flag, convert, ok, wrong):
+    def parse(text):
+        value = convert(text)  # ValueError: argparse's "invalid float value: 'x'"
+        if not ok(value):
+            raise InputError(flag, f"must be {wrong}, not {value}")
+        return value
+
+    parse.__name__ = convert.__name__
+    return parse
+
+
+def _of(unit):
+    return f" of {unit}" if unit else ""
+
+
+def positive(flag: str, unit: str = ""):
+    """argparse type for ``flag``: a finite number > 0 (float).
+
+    Parameters
+    ----------
+    flag : str
+        The option, named in the error.
+    unit : str, optional
+        What the number counts (``"metres"``), for the error.
+
+    Examples
+    --------
+    >>> positive("--alt", "metres")("30")
+    30.0
+    """
+    return _number(
+        flag, float, lambda v: math.isfinite(v) and v > 0, f"a positive number{_of(unit)}"
+    )
+
+
+def non_negative(flag: str, unit: str = ""):
+    """argparse type for ``flag``: a finite number >= 0 (float); see :func:`positive`."""
+    return _number(
+        flag, float, lambda v: math.isfinite(v) and v >= 0, f"a non-negative number{_of(unit)}"
+    )
+
+
+def at_least(flag: str, minimum: int):
+    """argparse type for ``flag``: an integer >= ``minimum``.
+
+    Examples
+    --------
+    >>> at_least("--items", 1)("40")
+    40
+    """
+    return _number(flag, int, lambda v: v >= minimum, f"at least {minimum}")
+
+
+# ---------------------------------------------------------------------------------------------
+# option groups
+
+
+def add_database_options(p: argparse.ArgumentParser) -> None:
+    """Add the geofence database and site-grouping options of ``build`` and ``compare``.
+
+    Their values become ``args.databases``, ``args.rules``, ``args.bbox``, ``args.join``,
+    ``args.margin`` and ``args.max_vertices``; :func:`build_options` turns them into the
+    library's :class:`~alphafence.build.pipeline.BuildOptions`.
+    """
+    p.add_argument(
+        "databases",
+        nargs="+",
+        metavar="DATABASE",
+        help="geofence database(s): .osm.pbf, .osm, GeoJSON or ED-269 JSON",
+    )
+    p.add_argument("--rules", metavar="FILE", help="rules TOML (default: the shipped rules)")
+    p.add_argument(
+        "--bbox",
+        metavar="MINLON,MINLAT,MAXLON,MAXLAT",
+        type=bbox,
+        help="only features intersecting this box",
+    )
+    p.add_argument(
+        "--join",
+        type=non_negative("--join", "metres"),
+        default=25.0,
+        metavar="M",
+        help="features of one category within M metres form one site (default 25)",
+    )
+    p.add_argument(
+        "--margin",
+        type=non_negative("--margin", "metres"),
+        default=None,
+        metavar="M",
+        help="override every rule's margin (0 = the paper's setting)",
+    )
+    p.add_argument(
+        "--max-vertices",
+        type=at_least("--max-vertices", 4),
+        default=32,
+        metavar="N",
+        help="vertex budget per fence polygon (default 32)",
+    )
+
+
+def build_options(args):
+    """The :class:`~alphafence.build.pipeline.BuildOptions` of :func:`add_database_options`'s
+    values, and of ``build``'s ``--method``, ``--alpha-radius`` and ``--warn-distance`` where
+    the verb has them."""
+    from alphafence.build.pipeline import BuildOptions
+
+    return BuildOptions(
+        method=getattr(args, "method", "alpha"),
+        alpha_radius=getattr(args, "alpha_radius", None),
+        max_vertices=args.max_vertices,
+        warn_distance_m=getattr(args, "warn_distance", 30.0),
+        margin_m=args.margin,
+        join_m=args.join,
+    )
+
+
+def add_compile_options(p: argparse.ArgumentParser) -> None:
+    """Add the options of ``compile`` and ``upload`` that size and place the onboard fence.
+
+    The operating area (``--area`` or ``--bbox``) is each verb's own; :func:`compile_from_args`
+    reads both.
+    """
+    from alphafence.mavlink.storage import PROFILES
+
+    size = p.add_mutually_exclusive_group()
+    size.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        default="copter",
+        help="vehicle fence storage (default copter: 70 items, 560 bytes)",
+    )
+    p.add_argument(
+        "--items",
+        type=at_least("--items", 1),
+        metavar="N",
+        help="at most N items (within the profile)",
+    )
+    p.add_argument(
+        "--distance",
+        type=float,
+        default=2000.0,
+        metavar="M",
+        help="fences within M metres of the area (default 2000)",
+    )
+    p.add_argument(
+        "--keep-in", type=float, metavar="M", help="add an inclusion fence M metres around the area"
+    )
+    p.add_argument(
+        "--return-point",
+        type=latlon("--return-point"),
+        metavar="LAT,LON",
+        help="the fence return point",
+    )
+
+
+def compile_from_args(args, records):
+    """Compile ``records`` for the operating area and storage :func:`add_compile_options` and
+    the verb's ``--area`` / ``--bbox`` describe.
+
+    Returns
+    -------
+    alphafence.onboard.compile.CompileResult
+    """
+    import shapely
+
+    from alphafence.mavlink.storage import PROFILES
+    from alphafence.onboard.compile import compile_fences, operating_area_from_plan
+
+    if getattr(args, "area", None):
+        area, _ = operating_area_from_plan(args.area)
+    else:
+        area = shapely.box(*args.bbox)
+    return compile_fences(
+        records,
+        area,
+        PROFILES[args.profile],
+        args.distance,
+        args.keep_in,
+        args.return_point,
+        args.items,
+    )

@@ -1,0 +1,86 @@
+"""Tables more than one verb prints: the method comparison (``compare``, ``demo``) and the
+onboard fence (``compile``, ``upload``)."""
+
+from __future__ import annotations
+
+from rich.table import Table
+
+from alphafence.cli.common import err_console, out_console
+
+
+def stats_table(cmp, opts) -> Table:
+    """The comparison of fence methods, one row per method.
+
+    Parameters
+    ----------
+    cmp : alphafence.build.compare.Comparison
+        What :func:`alphafence.build.compare.compare_methods` returned.
+    opts : alphafence.build.pipeline.BuildOptions
+        The options it ran with (the title names the margin).
+    """
+    margin = "rules' margins" if opts.margin_m is None else f"margin {opts.margin_m:g} m"
+    t = Table(title=f"{cmp.stats[0].sites} sites, {margin}")
+    for col in (
+        "method",
+        "contain %",
+        "overshoot",
+        "excess",
+        "v median",
+        "v p95",
+        "v total",
+        "time s",
+    ):
+        t.add_column(col, justify="left" if col == "method" else "right")
+    for s in cmp.stats:
+        t.add_row(
+            s.method,
+            f"{s.containment_pct:.2f}",
+            f"{s.overshoot:.3f}",
+            f"{s.excess:.3f}",
+            f"{s.vertices_median:.0f}",
+            f"{s.vertices_p95:.0f}",
+            str(s.vertices_total),
+            f"{s.seconds:.2f}",
+        )
+    return t
+
+
+def compile_report(result) -> None:
+    """Print what a compilation stored, piece by piece, and notes on what it left out or merged.
+
+    Parameters
+    ----------
+    result : alphafence.onboard.compile.CompileResult
+    """
+    t = Table(
+        title=f"{len(result.items)} items, {result.bytes_used} of {result.profile.bytes} bytes "
+        f"({result.profile.name}); area added {result.loss_m2 / 1e4:.2f} ha"
+    )
+    for col in ("fence(s)", "kind", "stored as", "items", "bytes", "area lost m²"):
+        t.add_column(col, justify="left" if col in ("fence(s)", "kind", "stored as") else "right")
+    for p in result.pieces:
+        o = p.chosen
+        full = len(p.local.exterior.coords) - 1
+        label = ", ".join(p.sources[:3]) + (
+            f" (+{len(p.sources) - 3})" if len(p.sources) > 3 else ""
+        )
+        how = (
+            o.label
+            + (" (merged)" if p.merged else "")
+            + (f" of {full}" if o.kind == "polygon" and o.items < full else "")
+        )
+        t.add_row(
+            label,
+            "keep-in" if p.inclusion else "keep-out",
+            how,
+            str(o.items),
+            str(o.bytes),
+            f"{o.loss:.0f}",
+        )
+    out_console.print(t)
+    if result.dropped:
+        err_console.print(
+            f"[yellow]note:[/] {len(result.dropped)} fence(s) farther than the selection distance were left out"
+        )
+    for m in result.merges:
+        err_console.print(f"[yellow]note:[/] merged {', '.join(m)} to fit the storage")
