@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-EARTH_RADIUS_M = 6_371_000.0  # the mean radius: short-range distances and offsets
+from alphafence.geo.frame import EARTH_RADIUS_M, short_distance_m  # noqa: F401 (re-exported)
 
 
 @dataclass(frozen=True)
@@ -50,13 +50,12 @@ def metres(a, b) -> float:
     """Horizontal metres between two ``(lat, lon)`` a few kilometres apart at most.
 
     The equirectangular approximation (one cosine at the mean latitude): the one formula the
-    monitor uses for short distances (GPS jumps, re-route legs, arrival at a waypoint).
+    monitor uses for short distances (GPS jumps, re-route legs, arrival at a waypoint), kept
+    once in :func:`alphafence.geo.frame.short_distance_m`.
 
     Examples
     --------
     >>> round(metres((51.43, -0.55), (51.431, -0.55)), 2)
     111.19
     """
-    dlat = math.radians(b[0] - a[0])
-    dlon = math.radians(b[1] - a[1]) * math.cos(math.radians(0.5 * (a[0] + b[0])))
-    return EARTH_RADIUS_M * math.hypot(dlat, dlon)
+    return short_distance_m(a, b)
