@@ -13,13 +13,14 @@ from alphafence.cli.common import (
     out_console,
     signing_key,
 )
-from alphafence.errors import InputError
+from alphafence.cli.options import non_negative, positive
 from alphafence.monitor.engine import ACTIONS, MonitorOptions
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.predict import Braking
 
 
 def register(sub):
+    """Add the ``monitor`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "monitor",
         help="watch a flight against the fences (companion computer)",
@@ -31,7 +32,7 @@ def register(sub):
     p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
     p.add_argument(
         "--horizon",
-        type=float,
+        type=positive("--horizon", "seconds"),
         default=15.0,
         metavar="S",
         help="look-ahead in seconds (default 15)",
@@ -45,7 +46,7 @@ def register(sub):
     )
     p.add_argument(
         "--reroute-clearance",
-        type=float,
+        type=non_negative("--reroute-clearance", "metres"),
         default=20.0,
         metavar="M",
         help="distance a re-route keeps from every keep-out fence (default 20)",
@@ -53,13 +54,17 @@ def register(sub):
     p.add_argument("--breach-action", choices=ACTIONS, default="rtl")
     p.add_argument(
         "--decel",
-        type=float,
+        type=positive("--decel", "m/s²"),
         default=2.5,
         metavar="M/S2",
         help="braking deceleration (default 2.5)",
     )
     p.add_argument(
-        "--reaction", type=float, default=1.5, metavar="S", help="reaction time (default 1.5)"
+        "--reaction",
+        type=non_negative("--reaction", "seconds"),
+        default=1.5,
+        metavar="S",
+        help="reaction time (default 1.5)",
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
     p.add_argument(
@@ -84,8 +89,7 @@ def register(sub):
 
 
 def run(args) -> int:
-    if args.horizon <= 0 or args.decel <= 0 or args.reaction < 0:
-        raise InputError("monitor", "--horizon and --decel must be positive, --reaction >= 0")
+    """Monitor the flight until Ctrl-C or SIGTERM; exit 0, or 3 when the link fails."""
     check_trust(args, args.fences)
     fences = FenceSet.from_geojson(args.fences)
     options = MonitorOptions(
