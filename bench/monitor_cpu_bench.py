@@ -20,9 +20,11 @@ async def _measure(osm):
     from alphafence.formats.database import read_database
     from alphafence.formats.fence_geojson import FenceRecord
     from alphafence.formats.rules import load_rules
-    from alphafence.monitor.engine import MonitorOptions
+    from alphafence.monitor.eventlog import EventLog
     from alphafence.monitor.fenceset import FenceSet
-    from alphafence.monitor.runner import EventLog, Monitor
+    from alphafence.monitor.observe import Observer
+    from alphafence.monitor.options import MonitorOptions
+    from alphafence.monitor.runner import Monitor
     from alphafence.sitl import launch_sitl
     from alphafence.vehicle.link import open_vehicle
 
@@ -33,17 +35,25 @@ async def _measure(osm):
     )
     async with launch_sitl(home="malta_airport", speedup=1) as sitl:
         async with open_vehicle(sitl.connection_url) as vehicle:
-            monitor = Monitor(vehicle, fences, MonitorOptions(), EventLog(None), rate_hz=50.0)
+
+            class Checks(Observer):
+                """Counts the positions the monitor checks against the fences."""
+
+                n = 0
+
+                def on_step(self, step):
+                    self.n += step.checked
+
+            checks = Checks()
+            monitor = Monitor(
+                vehicle, fences, MonitorOptions(), EventLog(None), rate_hz=50.0, observers=[checks]
+            )
             stop = asyncio.Event()
             task = asyncio.create_task(monitor.run(stop))
             await asyncio.sleep(3.0)  # subscriptions up, rates applied
-            c0, w0, n0 = time.process_time(), time.perf_counter(), monitor.engine.checks
+            c0, w0, n0 = time.process_time(), time.perf_counter(), checks.n
             await asyncio.sleep(SECONDS)
-            cpu, wall, n = (
-                time.process_time() - c0,
-                time.perf_counter() - w0,
-                monitor.engine.checks - n0,
-            )
+            cpu, wall, n = time.process_time() - c0, time.perf_counter() - w0, checks.n - n0
             stop.set()
             await task
     return cpu / wall, n / wall, len(fences.records)

@@ -9,7 +9,7 @@ messages are forwarded to our link; see tests/test_monitor_adsb_sitl.py): 3 airc
 around the vehicle (300 m spread) at the vehicle's cruise altitude, climbing about 3 m/s, so
 conflicts open and clear all the time. The fences are all of Malta's, built from the OSM file as
 bench/monitor_cpu_bench.py does. The real :class:`alphafence.monitor.runner.Monitor` runs the whole
-time on the bench's MAVSDK connection, with an :class:`EventLog` appending to a temporary file
+time on the bench's MAVSDK connection, with an ``EventLog`` appending to a temporary file
 (as ``alphafence monitor --log`` does), at ``rate_hz`` 10, alert only (no enforce). Its options
 are the speedup-scaled ones of the SITL tests (tests/sitl_flight.py ``speedup_options``): the
 engine's durations are wall seconds while speeds are the vehicle's, so ``hold_s``,
@@ -27,10 +27,11 @@ What "no check missed" means here. At speedup 10 the 10 Hz position stream arriv
 wall. The runner wakes on every new position (and at least every ``TICK_S`` = 0.1 s) and
 checks the *latest* one: positions arriving within one turn of its loop are coalesced into a
 single check, by design. So a position is never checked "late" by being queued; it is covered by
-the next check of the same or a newer position. The bench counts every position the runner's
-position stream yields (a subclass of Monitor wraps ``_follow``) and times every
-``engine.step``; the target is: **every position is covered by a check (of it or a newer
-position) within one runner tick, 0.1 s wall** (1 s of flight at speedup 10), i.e. the
+the next check of the same or a newer position. The bench watches the monitor through its
+public observer hook (:mod:`alphafence.monitor.observe`): every position the position feed
+delivers, with its arrival time, and every engine step, with the time it began. The target is:
+**every position is covered by a check (of it or a newer position) within one runner tick,
+0.1 s wall** (1 s of flight at speedup 10), i.e. the
 longest wait from a position's arrival to the next check, over the whole soak, is < 0.1 s, and
 no position is left uncovered at the end. It also reports positions per check (the coalescing),
 the longest gap between consecutive checks, and the longest gap between arriving positions
@@ -39,7 +40,7 @@ Engine steps that stop at the GPS glitch / no-fix test do no fence check; they a
 separately.
 
 "No unhandled exception": a loop exception handler records anything asyncio reports (for
-example "Task exception was never retrieved"); the Monitor's own tasks (telemetry followers,
+example "Task exception was never retrieved"); the Monitor's own tasks (one per feed: telemetry,
 ADS-B) and its run() task are inspected every minute and at the end for a task that died with an
 exception (run() swallows those when it stops); and the event log's handled-error events
 (``action_failed``, ``alert_failed``, ``adsb_unavailable``, ``traffic_link_unavailable``) are
@@ -62,6 +63,7 @@ import tempfile
 import time
 from collections import Counter
 
+from alphafence.mavlink import ids
 from alphafence.sitl.find import find_sitl_binary
 
 SPEEDUP = 10
@@ -92,10 +94,6 @@ RSS_EVERY_S = 30.0
 PROGRESS_S = 60.0
 MAX_GROWTH_MB = 20.0
 HANDLED_ERRORS = ("action_failed", "alert_failed", "adsb_unavailable", "traffic_link_unavailable")
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-MAV_CMD_DO_SET_MODE = 176
-SYSTEM_TIME_ID = 2
-COPTER_GUIDED = 4
 
 
 def _rss_mb() -> float:
@@ -108,7 +106,7 @@ def _rss_mb() -> float:
 
 def _options(speedup: float):
     """MonitorOptions scaled for SITL at ``speedup`` (as tests/sitl_flight.speedup_options)."""
-    from alphafence.monitor.engine import MonitorOptions
+    from alphafence.monitor.options import MonitorOptions
 
     o = MonitorOptions(enforce=False)
     o.hold_s /= speedup
@@ -136,8 +134,8 @@ class _Stats:
         self.max_batch = 0
         self.batch = 0
 
-    def position(self):
-        now = time.monotonic()
+    def position(self, now):
+        """A position arrived at ``now``."""
         if self.last_position is not None:
             self.max_position_gap = max(self.max_position_gap, now - self.last_position)
         self.last_position = now
@@ -147,6 +145,7 @@ class _Stats:
             self.uncovered_since = now
 
     def step(self, now, checked):
+        """An engine step began at ``now``; ``checked``: it did a fence check."""
         self.steps += 1
         if self.uncovered_since is not None:
             wait = now - self.uncovered_since
@@ -166,46 +165,26 @@ class _Stats:
         return 0.0 if self.uncovered_since is None else time.monotonic() - self.uncovered_since
 
 
-def _soak_monitor_class():
-    from alphafence.monitor.runner import Monitor
+def _soak_observer(stats: _Stats):
+    """An observer of the real Monitor that counts every position it receives and times every
+    engine step (the monitor itself unchanged)."""
+    from alphafence.monitor.observe import Observer
 
-    class SoakMonitor(Monitor):
-        """The real Monitor, with every position it receives counted and every engine step
-        timed (nothing else changed)."""
+    class SoakObserver(Observer):
+        def on_value(self, stream, t, value):
+            if stream == "position":
+                stats.position(t)
 
-        def __init__(self, *args, stats: _Stats, **kwargs):
-            super().__init__(*args, **kwargs)
-            self.stats = stats
-            engine, step = self.engine, self.engine.step
+        def on_step(self, step):
+            stats.step(step.started, step.checked)
 
-            def timed_step(sample):
-                now, before = time.monotonic(), engine.checks
-                out = step(sample)
-                stats.step(now, engine.checks > before)
-                return out
-
-            engine.step = timed_step
-
-        async def _follow(self, stream, key, wake=False):
-            if wake:
-                stream = self._counted(stream)
-            await super()._follow(stream, key, wake)
-
-        async def _counted(self, stream):
-            async for value in stream:
-                self.stats.position()
-                yield value
-
-    return SoakMonitor
+    return SoakObserver()
 
 
 async def _command(direct, command, *params):
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
+    from alphafence.monitor.commands import command_long
 
-    p = list(params) + [0.0] * (7 - len(params))
-    fields = {"target_system": 1, "target_component": 1, "command": command, "confirmation": 0}
-    fields.update({f"param{i + 1}": float(v) for i, v in enumerate(p)})
-    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
+    ack = await command_long(direct, 1, command, *params)
     return json.loads(ack.fields_json or "{}").get("result")
 
 
@@ -250,7 +229,7 @@ class _Soak:
                     self.dead_tasks[t] = exc
                 elif t is self.monitor_task or t in self.monitor.tasks:
                     # a follower whose stream ended, or run() returning before stop: dead too
-                    self.dead_tasks[t] = RuntimeError(f"task {t.get_coro().__name__} ended")
+                    self.dead_tasks[t] = RuntimeError(f"task {t.get_name()} ended")
 
     def _on_loop_error(self, loop, context):
         self.loop_errors.append(context.get("message", "") + f" {context.get('exception')!r}")
@@ -260,7 +239,8 @@ class _Soak:
     async def run(self):
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 
-        from alphafence.monitor.runner import EventLog
+        from alphafence.monitor.eventlog import EventLog
+        from alphafence.monitor.runner import Monitor
 
         loop = asyncio.get_running_loop()
         loop.set_exception_handler(self._on_loop_error)
@@ -268,17 +248,17 @@ class _Soak:
         with tempfile.TemporaryDirectory(prefix="alphafence-soak-") as tmp:
             self.log_path = os.path.join(tmp, "events.jsonl")
             self.log = EventLog(self.log_path)
-            self.monitor = _soak_monitor_class()(
+            self.monitor = Monitor(
                 self.vehicle,
                 self.fences,
                 _options(self.sitl.speedup),
                 self.log,
                 rate_hz=RATE_HZ,
-                stats=self.stats,
+                observers=[_soak_observer(self.stats)],
             )
             stop = asyncio.Event()
             self.t0 = time.monotonic()
-            self.monitor_task = asyncio.create_task(self.monitor.run(stop))
+            self.monitor_task = asyncio.create_task(self.monitor.run(stop), name="monitor.run")
             helpers = [
                 asyncio.create_task(c())
                 for c in (self._sim_clock, self._sample_rss, self._progress)
@@ -315,7 +295,9 @@ class _Soak:
     async def _sim_clock(self):
         """SYSTEM_TIME at 1 Hz of vehicle time: how many flight minutes the soak covered."""
         with contextlib.suppress(Exception):
-            await _command(self.direct, MAV_CMD_SET_MESSAGE_INTERVAL, SYSTEM_TIME_ID, 1e6)
+            await _command(
+                self.direct, ids.MAV_CMD_SET_MESSAGE_INTERVAL, ids.MAVLINK_MSG_ID_SYSTEM_TIME, 1e6
+            )
         async for message in self.direct.subscribe_message("SYSTEM_TIME"):
             ms = json.loads(message.fields_json)["time_boot_ms"]
             if len(self.boot_ms) < 2:
@@ -413,7 +395,12 @@ class _Soak:
         await self._wait("telemetry", lambda: self._latest("position") is not None, 30)
         # after a landing ArduCopter is left in LAND, which refuses arming: GUIDED first
         with contextlib.suppress(Exception):
-            await _command(self.direct, MAV_CMD_DO_SET_MODE, 1, COPTER_GUIDED)
+            await _command(
+                self.direct,
+                ids.MAV_CMD_DO_SET_MODE,
+                ids.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                ids.COPTER_MODE_GUIDED,
+            )
         await action.set_takeoff_altitude(ALTITUDE)
         deadline = time.monotonic() + 60.0
         while True:
@@ -573,7 +560,7 @@ def run(osm, Row, minutes=30.0, console=None):
             "soak: unhandled exceptions",
             str(unhandled)
             + "".join(f"; {m}" for m in soak.loop_errors[:3])
-            + "".join(f"; {t.get_coro().__name__}: {e!r}" for t, e in soak.dead_tasks.items()),
+            + "".join(f"; {t.get_name()}: {e!r}" for t, e in soak.dead_tasks.items()),
             "0",
             f"handled: {handled}",
             "-",

@@ -190,7 +190,7 @@ def speedup_options(speedup: float, **kw):
     (telemetry arrival times) while speeds and the braking model are the vehicle's, so the
     wall-clock ones are scaled. Unscaled, at speedup 5, 10 m/s is 50 m/s per wall second,
     within arrival jitter of ``max_speed_mps``, and ``backoff_s`` lasts 75 s of flight."""
-    from alphafence.monitor.engine import MonitorOptions
+    from alphafence.monitor.options import MonitorOptions
 
     o = MonitorOptions(**kw)
     o.hold_s /= speedup

@@ -35,9 +35,12 @@ import shapely
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.engine import MonitorOptions, alert_text
+from alphafence.monitor.eventlog import EventLog
+from alphafence.monitor.events import alert_text
 from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.monitor.observe import Observer
+from alphafence.monitor.options import MonitorOptions
+from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.link import open_vehicle
 
 pytestmark = pytest.mark.sitl
@@ -71,19 +74,25 @@ async def _watch(sitl):
     async with open_vehicle(sitl.connection_url) as vehicle:
         t0 = time.monotonic()
         log = EventLog()
-        monitor = Monitor(vehicle, _far_keep_out(frame), MonitorOptions(enforce=False), log)
+
+        class Counted(Observer):  # count every ADSB_VEHICLE the runner hands the engine
+            def on_value(self, stream, t, value):
+                if stream != "adsb":
+                    return
+                seen["reports"] += 1
+                seen["keys"].add(str(value["key"]))
+                seen["alts"].append(value["alt_amsl_m"])
+                if seen["first_report"] is None:
+                    seen["first_report"] = t
+
+        monitor = Monitor(
+            vehicle,
+            _far_keep_out(frame),
+            MonitorOptions(enforce=False),
+            log,
+            observers=[Counted()],
+        )
         engine = monitor.engine
-        report = engine.aircraft
-
-        def counted(**kwargs):  # count every ADSB_VEHICLE the runner hands the engine
-            seen["reports"] += 1
-            seen["keys"].add(str(kwargs["key"]))
-            seen["alts"].append(kwargs["alt_amsl_m"])
-            if seen["first_report"] is None:
-                seen["first_report"] = time.monotonic()
-            report(**kwargs)
-
-        engine.aircraft = counted
         stop = asyncio.Event()
         task = asyncio.create_task(monitor.run(stop))
         try:

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from alphafence.cli import main
-from alphafence.monitor.runner import EventLog
+from alphafence.monitor.eventlog import EventLog
 
 DEMO_SCENE = (
     Path(__file__).resolve().parents[1] / "kit" / "alphafence" / "data" / "demo-scene.geojson"
@@ -108,15 +108,15 @@ async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
     import shapely
 
     from alphafence.formats.fence_geojson import FenceRecord
-    from alphafence.monitor.engine import MonitorOptions
     from alphafence.monitor.fenceset import FenceSet
+    from alphafence.monitor.options import MonitorOptions
     from alphafence.monitor.runner import Monitor
 
     fences = FenceSet([FenceRecord("sq", "keep_out", shapely.box(14.50, 35.90, 14.51, 35.91))])
     vehicle = SimpleNamespace(telemetry=_Telemetry(), system=None)
     log = EventLog(None)
     monitor = Monitor(vehicle, fences, MonitorOptions(), log)
-    monitor._adsb = asyncio.Event().wait  # no MAVSDK system behind the stub: no ADS-B
+    monitor.feeds.pop("adsb")  # no MAVSDK system behind the stub: no ADS-B
     stop = asyncio.Event()
     task = asyncio.create_task(monitor.run(stop))
     await asyncio.sleep(2.5)

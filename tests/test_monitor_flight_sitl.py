@@ -42,8 +42,10 @@ import pytest
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.monitor.observe import Observer
+from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.link import open_vehicle
 from tests.sitl_flight import (
     ALTITUDE,
@@ -114,6 +116,16 @@ def _effective_speedup(log: FlightLog, t0: float, t1: float) -> float:
     return wall_speed / statistics.mean(fast)
 
 
+class _Trace(Observer):
+    """Every telemetry sample the monitor stepped on, in order."""
+
+    def __init__(self, samples: list):
+        self.samples = samples
+
+    def on_step(self, step):
+        self.samples.append(step.sample)
+
+
 class _Flight:
     """One flight with the monitor running on the test's own connection."""
 
@@ -149,7 +161,7 @@ class _Flight:
                     _monitor_fences(frame),
                     speedup_options(self.sitl.speedup, enforce=self.enforce),
                     self.monitor_log,
-                    record=self.trace,
+                    observers=[_Trace(self.trace)],
                 )
                 monitor_task = asyncio.create_task(monitor.run(stop))
 

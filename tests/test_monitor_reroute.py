@@ -18,8 +18,10 @@ from alphafence.cli import main
 from alphafence.errors import InputError
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.engine import Engine, MonitorOptions, Sample
+from alphafence.monitor.engine import Engine, Sample
+from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.predict import Braking, stopping_distance
 from alphafence.monitor.reroute import (
     Rerouter,
@@ -30,7 +32,7 @@ from alphafence.monitor.reroute import (
     planning_lead_m,
     waypoints,
 )
-from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.monitor.runner import Monitor
 from alphafence.route.roadmap import NoRoute
 
 FRAME = LocalFrame(-0.55, 51.43)
@@ -348,17 +350,17 @@ async def run_reroute(fences, records, goal_xy):
     async def no_alert(text, event):
         return None
 
-    monitor._alert = no_alert
-    monitor.rerouter = await Rerouter.build(records, CLEARANCE)
+    monitor.commands.alert = no_alert
+    monitor.reroute.rerouter = await Rerouter.build(records, CLEARANCE)
     glon, glat = (float(v) for v in FRAME.to_wgs84(*goal_xy))
-    monitor.target = (time.monotonic(), glon, glat)
+    monitor.reroute.target = (time.monotonic(), glon, glat)
     for s in fly(0.0, (0, 0), (0, 199)):
         events = monitor.engine.step(s)
         for e in events:
-            monitor._handle(e)
-        if monitor.reroute_task is not None:
+            monitor.handle(e)
+        if monitor.reroute.task is not None:
             break
-    await asyncio.wait_for(monitor.reroute_task, 10)
+    await asyncio.wait_for(monitor.reroute.task, 10)
     await asyncio.sleep(0.05)  # the fallback action's own task
     return monitor, action
 

@@ -65,8 +65,9 @@ from alphafence.mavlink.ids import (
 from alphafence.mavlink.ids import (
     MAV_CMD_NAV_WAYPOINT as NAV_WAYPOINT,
 )
+from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.runner import EventLog, Monitor
+from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.link import open_vehicle
 from tests.sitl_flight import (
     ALTITUDE,

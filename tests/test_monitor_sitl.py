@@ -8,8 +8,8 @@ import shapely
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.engine import MonitorOptions
 from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.runner import run_monitor
 
 pytestmark = pytest.mark.sitl

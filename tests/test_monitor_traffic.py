@@ -48,9 +48,10 @@ def test_engine_turns_adsb_reports_into_conflict_events():
 
     from alphafence.formats.fence_geojson import FenceRecord
     from alphafence.geo.frame import LocalFrame
-    from alphafence.monitor.engine import Engine, Sample, alert_text
+    from alphafence.monitor.engine import Engine, Sample
+    from alphafence.monitor.events import alert_text
+    from alphafence.monitor.feeds import parse_adsb
     from alphafence.monitor.fenceset import FenceSet
-    from alphafence.monitor.runner import parse_adsb
 
     frame = LocalFrame(-0.55, 51.43)
     far = frame.geom_to_wgs84(shapely.box(5000, 5000, 5100, 5100))
@@ -87,7 +88,7 @@ def test_engine_turns_adsb_reports_into_conflict_events():
 def test_other_mavlink_systems_become_traffic():
     import json
 
-    from alphafence.monitor.runner import parse_global_position
+    from alphafence.monitor.feeds import parse_global_position
 
     r = parse_global_position(
         7,

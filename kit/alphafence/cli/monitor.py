@@ -14,8 +14,8 @@ from alphafence.cli.common import (
     signing_key,
 )
 from alphafence.cli.options import non_negative, positive
-from alphafence.monitor.engine import ACTIONS, MonitorOptions
 from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.options import ACTIONS, MonitorOptions
 from alphafence.monitor.predict import Braking
 
 
@@ -106,7 +106,7 @@ def run(args) -> int:
     )
     args.key = signing_key(args)
     if args.log:
-        from alphafence.monitor.runner import check_log_path
+        from alphafence.monitor.eventlog import check_log_path
 
         check_log_path(args.log)
     return asyncio.run(_run(args, fences, options))

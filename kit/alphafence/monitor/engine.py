@@ -1,20 +1,21 @@
 """The monitor's decision engine: telemetry samples in, events out (alerts, level changes,
 actions, failsafes). Synchronous and I/O-free, so it is unit-tested and replayed on recorded
-traces; alphafence.monitor.runner feeds it from MAVSDK and carries out what it decides."""
+traces; alphafence.monitor.runner feeds it from MAVSDK and carries out what it decides.
+Events are built by alphafence.monitor.events (their alert texts too)."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
-from alphafence.errors import InputError
+from alphafence.geo.frame import short_distance_m
+from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
+from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.predict import Braking
+from alphafence.monitor.options import REROUTE, MonitorOptions
 from alphafence.monitor.state import Assessment, Level, StateMachine, assess
-from alphafence.monitor.traffic import Traffic, TrafficOptions
+from alphafence.monitor.traffic import Traffic
 
-REROUTE = "reroute"  # fly around the fence with the route planner (IMMINENT only)
-ACTIONS = ("none", "brake", "rtl", "land", REROUTE)
 REROUTE_FALLBACK = "brake"  # when no route (or no goal) exists
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
 # modes in which the pilot flies the vehicle (MAVSDK's names): switching into one of them, or
@@ -25,6 +26,12 @@ GLITCH_SLACK_M = 25.0  # telemetry arrival jitter must not look like a jump
 
 @dataclass
 class Sample:
+    """What the vehicle reported, as one input to :meth:`Engine.step`.
+
+    The runner builds one from the latest value of each telemetry stream when a new position
+    arrives; replay tests read them from recorded traces (``Sample(**json)``).
+    """
+
     t: float  # seconds (monotonic)
     lat: float
     lon: float
@@ -38,46 +45,20 @@ class Sample:
     gps_fix: int | None = None  # MAVLink GPS_FIX_TYPE (3 = 3D); None if unknown
 
 
-@dataclass
-class MonitorOptions:
-    horizon_s: float = 15.0
-    braking: Braking = field(default_factory=Braking)
-    enforce: bool = False
-    imminent_action: str = "brake"
-    breach_action: str = "rtl"
-    hold_s: float = 2.0  # hysteresis
-    backoff_s: float = 15.0  # after the pilot changes mode, alert only
-    stale_s: float = 1.0
-    max_speed_mps: float = 60.0  # a position jump faster than this is a GPS glitch
-    traffic: TrafficOptions = field(default_factory=TrafficOptions)
-    mavlink_traffic: bool = False  # other MAVLink systems' positions as traffic (ADS-B always)
-    link_lost_s: float = 5.0  # no telemetry this long: the link is lost
-    # what to command (with --enforce) on each failsafe event
-    on_glitch: str = "none"
-    on_stale: str = "none"
-    on_link_lost: str = "none"
-    # --imminent-action reroute: how far the re-route keeps from every keep-out fence
-    reroute_clearance_m: float = 20.0
-
-    def __post_init__(self):
-        for name in ("breach_action", "on_glitch", "on_stale", "on_link_lost"):
-            if getattr(self, name) == REROUTE:
-                flag = "--" + name.replace("_", "-")
-                raise InputError(
-                    "monitor",
-                    f"{flag} {REROUTE}: re-routing is only an --imminent-action "
-                    "(a breach or a failsafe needs brake, rtl, land or none)",
-                )
-        c = self.reroute_clearance_m
-        if not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
-            raise InputError("monitor", f"--reroute-clearance {c}: must be a number >= 0")
-
-    @property
-    def reroute(self) -> bool:
-        return self.enforce and self.imminent_action == REROUTE
-
-
 class Engine:
+    """The monitor's decisions, fed one telemetry sample (:meth:`step`) or timer tick
+    (:meth:`tick`) at a time; every call returns the events it decided (dicts, see
+    :mod:`alphafence.monitor.events`). ``checks`` counts the positions checked against the
+    fences; ``sm.level`` is the current alert level.
+
+    Parameters
+    ----------
+    fences : FenceSet
+        Every fence, indexed.
+    options : MonitorOptions, optional
+        The defaults if omitted.
+    """
+
     def __init__(self, fences: FenceSet, options: MonitorOptions | None = None):
         self.fences = fences
         self.options = options or MonitorOptions()
@@ -99,9 +80,32 @@ class Engine:
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
+        """Decide on one telemetry sample.
+
+        In order: a GPS without a 3D fix, an implausible position or a jump faster than
+        ``max_speed_mps`` is a ``gps_glitch`` (and the sample goes no further); telemetry back
+        after a stale spell is ``telemetry_resumed``; a mode change that is not the monitor's
+        own is the pilot taking over (``pilot_mode_change``, then alert only for
+        ``backoff_s``); then the position is checked against every fence along the track
+        (``checks`` counts these), its level passes the hysteresis and a change of level is a
+        ``level`` event followed by the action it calls for (``action`` or
+        ``action_withheld``, with ``enforce``); last, other aircraft in conflict
+        (``traffic_conflict``, ``traffic_clear``).
+
+        Parameters
+        ----------
+        s : Sample
+            The vehicle's latest position, velocity, mode, armed state and GPS fix; ``s.t``
+            must not go backwards (monotonic seconds).
+
+        Returns
+        -------
+        list of dict
+            The events, in the order they happened (empty when nothing changed).
+        """
         s = _finite_velocity(s)
         events = []
-        if s.gps_fix is not None and s.gps_fix < 3:
+        if s.gps_fix is not None and s.gps_fix < GPS_FIX_TYPE_3D_FIX:
             if not self.gps_degraded:
                 self.gps_degraded = True
                 return self._failsafe(
@@ -118,14 +122,14 @@ class Engine:
             )
         if self.last is not None and s.t >= self.last.t:
             dt = s.t - self.last.t
-            moved = _distance_m(self.last, s)
+            moved = short_distance_m((self.last.lat, self.last.lon), (s.lat, s.lon))
             if moved > self.options.max_speed_mps * dt + GLITCH_SLACK_M:
                 why = f"position jumped {moved:.0f} m in {dt:.2f} s"
                 return self._failsafe(s, "gps_glitch", self.options.on_glitch, reason=why)
         if self.stale:
             self.stale = False
             self.link_lost = False
-            events.append(self._event(s.t, "telemetry_resumed", s))
+            events.append(new_event("telemetry_resumed", s.t, s))
         events += self._pilot(s)
         self.last, self.last_t = s, s.t
         x, y = self.fences.frame.to_local(s.lon, s.lat)
@@ -140,16 +144,16 @@ class Engine:
         level, changed = self.sm.update(a.level, s.t)
         if changed:
             events.append(
-                self._event(
-                    s.t,
+                new_event(
                     "level",
+                    s.t,
                     s,
                     level=level.name,
                     previous=previous.name,
                     fence=self._site(a.fence),
-                    distance_m=_r(a.distance_m),
-                    time_to_breach_s=_r(a.time_to_breach_s),
-                    stopping_m=_r(a.stopping_m),
+                    distance_m=rounded(a.distance_m),
+                    time_to_breach_s=rounded(a.time_to_breach_s),
+                    stopping_m=rounded(a.stopping_m),
                     reason=a.reason,
                 )
             )
@@ -177,20 +181,20 @@ class Engine:
         for c in found:
             if c.key not in self.conflicts:
                 events.append(
-                    self._event(
-                        s.t,
+                    new_event(
                         "traffic_conflict",
+                        s.t,
                         s,
                         aircraft=c.key,
                         callsign=c.callsign,
-                        t_cpa_s=_r(c.t_cpa_s),
-                        separation_m=_r(c.horizontal_m),
-                        vertical_m=_r(c.vertical_m),
-                        radius_m=_r(c.radius_m),
+                        t_cpa_s=rounded(c.t_cpa_s),
+                        separation_m=rounded(c.horizontal_m),
+                        vertical_m=rounded(c.vertical_m),
+                        radius_m=rounded(c.radius_m),
                     )
                 )
         for key in self.conflicts - keys:
-            events.append(self._event(s.t, "traffic_clear", s, aircraft=key))
+            events.append(new_event("traffic_clear", s.t, s, aircraft=key))
         self.conflicts = keys
         return events
 
@@ -214,7 +218,7 @@ class Engine:
 
     def _failsafe(self, s, kind, action, t=None, **extra):
         t = s.t if t is None else t
-        events = [self._event(t, kind, s, **extra)]
+        events = [new_event(kind, t, s, **extra)]
         if self.options.enforce and action != "none" and t >= self.backoff_until:
             events += self._command(t, s, action, reason=kind)
         return events
@@ -228,7 +232,7 @@ class Engine:
         self.in_commanded_mode = True
         if mode_change:
             self._expect(t)
-        return [self._event(t, "reroute", self.last, **extra)]
+        return [new_event("reroute", t, self.last, **extra)]
 
     def reroute_done(self, t, resume: bool = False, **extra) -> list:
         """The vehicle reached the re-route's goal; ``resume``: the runner now switches back
@@ -239,20 +243,20 @@ class Engine:
             self.handing_back = True
         else:
             self.in_commanded_mode = False
-        return [self._event(t, "reroute_done", self.last, **extra)]
+        return [new_event("reroute_done", t, self.last, **extra)]
 
     def reroute_failed(self, t, reason, **extra) -> list:
         """No route (or no goal, or a leg not flown in time): brake instead."""
         self.rerouting = False
         s = self.last
-        events = [self._event(t, "reroute_failed", s, reason=reason, **extra)]
+        events = [new_event("reroute_failed", t, s, reason=reason, **extra)]
         if not self.options.enforce:
             return events
         if t < self.backoff_until:
             return events + [
-                self._event(
-                    t,
+                new_event(
                     "action_withheld",
+                    t,
                     s,
                     action=REROUTE_FALLBACK,
                     reason="pilot changed mode recently",
@@ -292,10 +296,10 @@ class Engine:
             self.rerouting = True
         elif self.rerouting:
             self.rerouting = False
-            events.append(self._event(t, "reroute_cancelled", s, reason=f"action {action}"))
+            events.append(new_event("reroute_cancelled", t, s, reason=f"action {action}"))
         if action != REROUTE:  # a re-route tells when it changes the mode (reroute_started)
             self._expect(t)
-        return events + [self._event(t, "action", s, action=action, **extra)]
+        return events + [new_event("action", t, s, action=action, **extra)]
 
     # -- decisions ------------------------------------------------------------------
     def _pilot(self, s):
@@ -315,11 +319,11 @@ class Engine:
         # the pilot took over (or undid the monitor's action): do not fight them for a while
         self.backoff_until = s.t + self.options.backoff_s
         events = [
-            self._event(s.t, "pilot_mode_change", s, mode=s.mode, backoff_s=self.options.backoff_s)
+            new_event("pilot_mode_change", s.t, s, mode=s.mode, backoff_s=self.options.backoff_s)
         ]
         if self.rerouting:  # the pilot flies now: the runner stops the re-route
             self.rerouting = False
-            events.append(self._event(s.t, "reroute_cancelled", s, reason="pilot changed mode"))
+            events.append(new_event("reroute_cancelled", s.t, s, reason="pilot changed mode"))
         return events
 
     def _act(self, s, level):
@@ -334,8 +338,8 @@ class Engine:
             return []
         if s.t < self.backoff_until:
             return [
-                self._event(
-                    s.t, "action_withheld", s, action=action, reason="pilot changed mode recently"
+                new_event(
+                    "action_withheld", s.t, s, action=action, reason="pilot changed mode recently"
                 )
             ]
         if s.armed is False:
@@ -346,20 +350,6 @@ class Engine:
 
     def _site(self, index):
         return None if index is None else self.fences.records[index].site_id
-
-    def _event(self, t, kind, s, **extra):
-        where = {}
-        if s is not None:
-            where = {"lat": _r(s.lat, 7), "lon": _r(s.lon, 7), "alt_m": _r(s.alt_m)}
-        return {"time": round(t, 3), "event": kind, **where, **extra}
-
-
-def _r(v, digits=2):
-    """Rounded for the log; None for what is missing or not finite (the log is strict JSON)."""
-    try:
-        return None if v is None or not math.isfinite(v) else round(float(v), digits)
-    except TypeError:
-        return None
 
 
 def _finite_velocity(s):
@@ -374,30 +364,3 @@ def _finite_velocity(s):
 def _plausible(s) -> bool:
     ok = all(isinstance(v, (int, float)) and math.isfinite(v) for v in (s.lat, s.lon, s.alt_m))
     return ok and abs(s.lat) <= 90 and abs(s.lon) <= 180 and not (s.lat == 0 and s.lon == 0)
-
-
-def _distance_m(a, b) -> float:
-    dlat = math.radians(b.lat - a.lat)
-    dlon = math.radians(b.lon - a.lon) * math.cos(math.radians(0.5 * (a.lat + b.lat)))
-    return 6_371_000.0 * math.hypot(dlat, dlon)
-
-
-def alert_text(event) -> str | None:
-    """A STATUSTEXT (<= 50 characters) for the ground station, or None."""
-    kind = event["event"]
-    if kind == "level":
-        text = f"AF {event['level']} {event.get('fence') or ''}"
-        if event.get("time_to_breach_s") is not None and event["level"] in ("WARNING", "IMMINENT"):
-            text += f" {event['time_to_breach_s']:.0f}s"
-        return text[:50]
-    if kind == "traffic_conflict":
-        who = event.get("callsign") or event["aircraft"]
-        return f"AF TRAFFIC {who} CPA {event['t_cpa_s']:.0f}s {event['separation_m']:.0f}m"[:50]
-    if kind in ("gps_glitch", "telemetry_stale", "link_lost", "action", "action_withheld"):
-        return f"AF {kind} {event.get('action', '')}".strip()[:50]
-    if kind == "reroute":
-        n = len(event.get("waypoints") or ())
-        return f"AF REROUTE {n} wp {event.get('length_m') or 0:.0f} m"[:50]
-    if kind in ("reroute_failed", "reroute_done", "reroute_cancelled"):
-        return f"AF {kind}"
-    return None

@@ -5,8 +5,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from alphafence.geo.frame import EARTH_RADIUS_M, short_distance_m  # noqa: F401 (re-exported)
-
 
 @dataclass(frozen=True)
 class Braking:
@@ -44,18 +42,3 @@ def closest_approach(rx, ry, rz, vx, vy, vz, horizon_s):
 def dynamic_radius(base_m: float, closing_speed_mps: float, reaction_s: float = 2.0) -> float:
     """A moving aircraft's keep-out cylinder grows with how fast the two close on each other."""
     return base_m + max(0.0, closing_speed_mps) * reaction_s
-
-
-def metres(a, b) -> float:
-    """Horizontal metres between two ``(lat, lon)`` a few kilometres apart at most.
-
-    The equirectangular approximation (one cosine at the mean latitude): the one formula the
-    monitor uses for short distances (GPS jumps, re-route legs, arrival at a waypoint), kept
-    once in :func:`alphafence.geo.frame.short_distance_m`.
-
-    Examples
-    --------
-    >>> round(metres((51.43, -0.55), (51.431, -0.55)), 2)
-    111.19
-    """
-    return short_distance_m(a, b)

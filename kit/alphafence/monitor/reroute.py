@@ -3,10 +3,11 @@
 A :class:`Rerouter` holds the route planner's roadmap (``alphafence.route.FenceRoadmap``) over the
 monitor's fences. It is built once when the monitor starts (``await Rerouter.build(...)``: on
 a large fence set that takes about a second, so it runs in a worker thread) and every query
-is independent, so the runner plans in a worker thread too and never blocks the event loop.
+is independent, so the monitor plans in a worker thread too and never blocks the event loop.
 
-The pieces the runner needs are pure functions of positions, velocities and fences, tested
-without MAVSDK:
+This module holds the planning; :mod:`alphafence.monitor.reroute_flight` flies the plans. The
+pieces it needs are pure functions of positions, velocities and fences, tested without
+MAVSDK:
 
 * :func:`goal_beyond_xy` - with no known target, the goal is the first point along the current
   track, beyond the fence ahead, that is clear of every keep-out by the clearance;
@@ -31,6 +32,9 @@ import numpy as np
 import shapely
 
 from alphafence.errors import RoutingError
+from alphafence.geo.coords import from_e7_float
+from alphafence.geo.frame import EARTH_RADIUS_M
+from alphafence.mavlink import ids
 from alphafence.monitor.predict import Braking
 from alphafence.route.roadmap import NoRoute
 
@@ -40,11 +44,16 @@ LEAD_STEP_M = 2.0
 LEG_MIN_SPEED_MPS = 2.0  # a leg taking longer than at this speed (plus slack) has failed
 LEG_SLACK_S = 20.0
 # mission item frames whose x, y are latitude, longitude (1e-7 degrees in MISSION_ITEM_INT)
-GLOBAL_FRAMES = {0, 3, 5, 6, 10, 11}
-NAV_COMMANDS_WITH_POSITION = {16, 17, 18, 19, 21, 22, 31, 82, 84, 85}
-TARGET_IGNORE_X, TARGET_IGNORE_Y = 1, 2  # POSITION_TARGET_TYPEMASK bits
-POSITION_TARGET_GLOBAL_INT_ID = 87
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
+GLOBAL_FRAMES = frozenset(
+    {
+        ids.MAV_FRAME_GLOBAL,
+        ids.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+        ids.MAV_FRAME_GLOBAL_INT,
+        ids.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        ids.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+        ids.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+    }
+)
 
 
 class RerouteFailed(RoutingError):
@@ -71,13 +80,6 @@ def waypoints(lonlat, skip_start: bool = True) -> list:
     return [(round(float(lat), 7), round(float(lon), 7)) for lon, lat in pts]
 
 
-def metres(a, b) -> float:
-    """Horizontal metres between two (lat, lon) a few kilometres apart at most."""
-    dlat = math.radians(b[0] - a[0])
-    dlon = math.radians(b[1] - a[1]) * math.cos(math.radians(0.5 * (a[0] + b[0])))
-    return 6_371_000.0 * math.hypot(dlat, dlon)
-
-
 def leg_timeout_s(length_m: float) -> float:
     """Seconds one leg may take: its length at a crawl, plus slack for turning and stopping."""
     return LEG_SLACK_S + max(0.0, float(length_m)) / LEG_MIN_SPEED_MPS
@@ -95,11 +97,14 @@ def parse_position_target(fields_json):
     when the message carries no horizontal position."""
     try:
         f = json.loads(fields_json)
-        lat, lon = f["lat_int"] / 1e7, f["lon_int"] / 1e7
+        lat, lon = from_e7_float(f["lat_int"]), from_e7_float(f["lon_int"])
         mask = int(f.get("type_mask", 0))
     except (ValueError, KeyError, TypeError):
         return None
-    if mask & TARGET_IGNORE_X and mask & TARGET_IGNORE_Y:
+    if (
+        mask & ids.POSITION_TARGET_TYPEMASK_X_IGNORE
+        and mask & ids.POSITION_TARGET_TYPEMASK_Y_IGNORE
+    ):
         return None
     if not (abs(lat) <= 90 and abs(lon) <= 180) or (lat == 0 and lon == 0):
         return None
@@ -111,11 +116,11 @@ def mission_goal(items, current: int):
     ArduPilot numbers them, home at 0), or None if it has none (RTL, a DO command, a takeoff
     or landing where the vehicle is)."""
     item = next((it for it in items if int(it.seq) == int(current)), None)
-    if item is None or int(item.command) not in NAV_COMMANDS_WITH_POSITION:
+    if item is None or int(item.command) not in ids.NAV_POSITION_COMMANDS:
         return None
     if int(item.frame) not in GLOBAL_FRAMES or (item.x == 0 and item.y == 0):
         return None
-    lat, lon = item.x / 1e7, item.y / 1e7
+    lat, lon = from_e7_float(item.x), from_e7_float(item.y)
     if not (abs(lat) <= 90 and abs(lon) <= 180):
         return None
     return (lon, lat)
@@ -174,10 +179,12 @@ class Rerouter:
         return await asyncio.to_thread(cls, records, clearance)
 
     def to_xy(self, lon, lat) -> np.ndarray:
+        """``(lon, lat)`` -> ``[x, y]`` metres in the planner's frame."""
         x, y = self.frame.to_local(lon, lat)
         return np.array([float(x), float(y)])
 
     def to_lonlat(self, xy) -> tuple:
+        """``[x, y]`` metres in the planner's frame -> ``(lon, lat)``."""
         lon, lat = self.frame.to_wgs84(float(xy[0]), float(xy[1]))
         return (float(lon), float(lat))
 
@@ -185,8 +192,8 @@ class Rerouter:
         """East/north velocity as a direction in the frame (the frame's grid north is not
         true north away from its origin)."""
         p = self.to_xy(lon, lat)
-        dlat = vn / 6_371_000.0 * 180.0 / math.pi
-        dlon = ve / (6_371_000.0 * max(math.cos(math.radians(lat)), 1e-6)) * 180.0 / math.pi
+        dlat = vn / EARTH_RADIUS_M * 180.0 / math.pi
+        dlon = ve / (EARTH_RADIUS_M * max(math.cos(math.radians(lat)), 1e-6)) * 180.0 / math.pi
         return self.to_xy(lon + dlon, lat + dlat) - p
 
     def goal_beyond(self, lon, lat, ve, vn, max_m=GOAL_SEARCH_M):
