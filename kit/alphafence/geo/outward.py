@@ -23,45 +23,11 @@ import math
 
 import numpy as np
 import shapely
-import shapely.errors
+
+from alphafence.geo.rings import ring_coords, ring_covers, signed_area, valid_ring
 
 _EPS = 1e-12
 MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
-
-
-def ring_coords(ring) -> np.ndarray:
-    """Vertices of a ring or (n, 2) array without the closing duplicate or repeats.
-
-    Examples
-    --------
-    >>> import shapely
-    >>> ring_coords(shapely.box(0, 0, 1, 1).exterior).tolist()
-    [[1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]
-    """
-    pts = np.asarray(
-        shapely.get_coordinates(ring) if not isinstance(ring, np.ndarray) else ring, float
-    )
-    pts = pts[:, :2]
-    if len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
-        pts = pts[:-1]
-    if len(pts) > 1:
-        keep = np.any(pts != np.roll(pts, 1, axis=0), axis=1)
-        keep[0] = True
-        pts = pts[keep]
-    return pts
-
-
-def signed_area(pts) -> float:
-    """Area of the ring through ``pts`` ((n, 2), not closed): positive counter-clockwise.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> signed_area(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
-    1.0
-    """
-    x, y = pts[:, 0], pts[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 def _vertex_op(P, prev, nxt, i):
@@ -258,7 +224,7 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     # the flipped ring is simplified "outward" in its own orientation: for inward
     # simplification that means the result must lie inside the input
     def ok(out):
-        return _contains(out, pts) if outward else (_valid(out) and _contains(pts, out))
+        return ring_covers(out, pts) if outward else (valid_ring(out) and ring_covers(pts, out))
 
     out = _greedy(pts, max_vertices, tolerance, check=False)
     if not ok(out):
@@ -329,24 +295,6 @@ def shifted_dp(pts, tol):
     return np.array(out)
 
 
-def _valid(pts):
-    return len(pts) >= 3 and shapely.Polygon(pts).is_valid
-
-
-def _contains(outer_pts, inner_pts):
-    """Is ``outer`` a valid ring covering ``inner`` (up to rounding in the last digits)?"""
-    outer = shapely.Polygon(outer_pts)
-    if not outer.is_valid:
-        return False
-    inner = shapely.Polygon(inner_pts)
-    try:
-        if outer.covers(inner):
-            return True
-        return shapely.difference(inner, outer).area <= 1e-9 * max(inner.area, 1.0)
-    except shapely.errors.GEOSException:
-        return False
-
-
 def prereduce(pts, target):
     """Bring a CCW ring near ``target`` vertices with :func:`shifted_dp`, verified."""
     if len(pts) <= target:
@@ -355,7 +303,7 @@ def prereduce(pts, target):
     tol = max(span * 1e-4, 1e-3)
     while tol < span:
         cand = shifted_dp(pts, tol)
-        if cand is not None and len(cand) <= target and _contains(cand, pts):
+        if cand is not None and len(cand) <= target and ring_covers(cand, pts):
             return cand
         tol *= 2.0
     return pts
