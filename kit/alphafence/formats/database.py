@@ -15,6 +15,27 @@ OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl
 
 
 def read_file(path, rules, repaired, skipped):
+    """The restricted features of one file, read by its suffix: OSM through pyosmium, JSON
+    as ED-269 when it looks like it, else as GeoJSON.
+
+    Parameters
+    ----------
+    path : str or Path
+    rules : Rules
+    repaired : list
+        Sources of invalid polygons are appended.
+    skipped : collections.Counter
+        Reasons for features left out are counted.
+
+    Returns
+    -------
+    list of Feature
+
+    Raises
+    ------
+    InputError
+        An unknown suffix, or what the reader raised.
+    """
     name = str(path).lower()
     if name.endswith(OSM_SUFFIXES):
         from alphafence.formats.osm import read_osm  # pyosmium, only when OSM is read
@@ -35,6 +56,15 @@ def read_database(paths, rules, bbox=None, *, bbox_name="the bounding box") -> D
 
     Raises InputError with a one-line message on bad input or an empty selection
     (``bbox_name`` says what the box is in that message: the command line passes ``--bbox``).
+
+    Examples
+    --------
+    >>> from importlib import resources
+    >>> from alphafence.formats.rules import load_rules
+    >>> scene = resources.files("alphafence").joinpath("data/demo-scene.geojson")
+    >>> db = read_database(str(scene), load_rules())
+    >>> len(db.features), db.repaired
+    (16, ['way/1015'])
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]

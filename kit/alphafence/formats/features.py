@@ -24,6 +24,36 @@ GEOMTYPES = {
 
 @dataclass
 class Feature:
+    """A restricted feature as read from a geofence database.
+
+    Attributes
+    ----------
+    geometry : shapely geometry
+        WGS84 lon, lat; possibly invalid (repaired later, in a metric frame).
+    tags : dict
+        OSM tags, or the pseudo-tags of an ED-269 zone.
+    source : str
+        ``"way/123"``, ``"relation/9"``, ``"node/5"``, ``"feature/3"`` or an ED-269 identifier.
+    origin : str
+        The file it came from.
+    rule : Rule
+        The rule that matched it.
+    alt_min_m, alt_max_m : float, optional
+        Its altitude band (the zone's, else the rule's).
+    properties : dict
+        E.g. an ED-269 zone's restriction and applicability.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.rules import load_rules
+    >>> tags = {"amenity": "hospital", "name": "St. Luke"}
+    >>> rule = load_rules().match(tags.get, "area")
+    >>> ward = Feature(shapely.box(14.5, 35.9, 14.501, 35.901), tags, "way/1", "demo", rule)
+    >>> ward.name, ward.geomtype, ward.category, ward.kind
+    ('St. Luke', 'area', 'hospital', 'keep_out')
+    """
+
     geometry: object  # shapely geometry, WGS84 lon/lat
     tags: dict
     source: str  # "way/123", "relation/9", "node/5", "feature/3", ED-269 identifier
@@ -35,23 +65,42 @@ class Feature:
 
     @property
     def name(self) -> str | None:
+        """Its ``name`` tag, if any."""
         return self.tags.get("name")
 
     @property
     def geomtype(self) -> str:
+        """``"point"``, ``"line"`` or ``"area"``."""
         return GEOMTYPES.get(self.geometry.geom_type, "area")
 
     @property
     def category(self) -> str:
+        """Its rule's category."""
         return self.rule.category
 
     @property
     def kind(self) -> str:
+        """Its rule's kind: ``"keep_out"``, ``"warning"`` or ``"keep_in"``."""
         return self.rule.kind
 
 
 @dataclass
 class Database:
+    """What ``read_database`` read.
+
+    Attributes
+    ----------
+    features : list of Feature
+        The restricted features (inside ``bbox`` when one was given).
+    files : list of str
+    repaired : list of str
+        Sources of invalid polygons (they are repaired in each site's frame).
+    skipped : collections.Counter
+        Reason -> how many features were left out for it.
+    bbox : tuple, optional
+        ``(minlon, minlat, maxlon, maxlat)`` the features were selected by.
+    """
+
     features: list
     files: list
     repaired: list = field(default_factory=list)  # sources of invalid polygons that were repaired
@@ -60,6 +109,14 @@ class Database:
 
 
 def geomtype_of(geom) -> str | None:
+    """``"point"``, ``"line"`` or ``"area"`` for a geometry's type, or None for others.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> geomtype_of(shapely.Point(0, 0)), geomtype_of(shapely.GeometryCollection())
+    ('point', None)
+    """
     return GEOMTYPES.get(geom.geom_type)
 
 
