@@ -152,3 +152,34 @@ def _public_definitions():
 def test_every_public_class_and_function_has_a_docstring():
     missing = sorted(name for name, obj in _public_definitions() if not inspect.getdoc(obj))
     assert not missing, f"{len(missing)} without a docstring:\n" + "\n".join(missing)
+
+
+def test_the_readme_layout_is_the_real_tree():
+    readme = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    block = readme.split("## Layout", 1)[1].split("```", 2)[1]
+    listed, folder = set(), None
+    for line in block.splitlines()[1:]:
+        if not line.strip() or line.startswith("kit/"):
+            continue
+        indent = len(line) - len(line.lstrip())
+        words = line.split()
+        if indent == 2 and words[0].endswith("/"):
+            folder = words[0]
+            continue
+        names = (
+            [w for w in words if w.endswith(".py")]
+            if indent == 4 or words[0].endswith(".py")
+            else []
+        )
+        names = names if indent == 4 else names[:1]
+        prefix = folder if indent == 4 else ""
+        listed.update(prefix + n for n in names)
+    real = {
+        str(p.relative_to(PACKAGE))
+        for p in PACKAGE.rglob("*.py")
+        if p.name != "__main__.py" and (p.name != "__init__.py" or p.parent == PACKAGE)
+    }
+    assert listed == real, (
+        f"in the README, not in the tree: {sorted(listed - real)}; "
+        f"in the tree, not in the README: {sorted(real - listed)}"
+    )

@@ -202,11 +202,11 @@ def test_reroute_failed_falls_back_to_brake(fences):
 
 
 def test_reroute_is_only_an_imminent_action(tmp_path, capsys):
-    with pytest.raises(InputError, match="--breach-action reroute"):
+    with pytest.raises(InputError, match="breach_action: reroute"):
         MonitorOptions(breach_action="reroute")
-    with pytest.raises(InputError, match="--on-glitch reroute"):
+    with pytest.raises(InputError, match="on_glitch: reroute"):
         MonitorOptions(on_glitch="reroute")
-    with pytest.raises(InputError, match="--reroute-clearance"):
+    with pytest.raises(InputError, match="reroute_clearance_m"):
         MonitorOptions(imminent_action="reroute", reroute_clearance_m=-1)
     feature = {
         "type": "Feature",

@@ -198,7 +198,7 @@ async def test_install_change_and_remove_a_key():
         async with open_vehicle(fake.url, 10, signing_key=KEY) as vehicle:
             await upload_fence(vehicle, NEW)
         # a vehicle that already signs takes a new key only from a message signed with the old
-        with pytest.raises(SigningSetupError, match="--signing-key"):
+        with pytest.raises(SigningSetupError, match="sign with the key it holds"):
             await install_key(fake.url, OTHER, None, timeout=3)
         assert fake._mav.signing.secret_key == KEY
         await install_key(fake.url, OTHER, KEY, timeout=5)

@@ -14,8 +14,9 @@ from alphafence.cli.common import (
     signing_key,
 )
 from alphafence.cli.options import non_negative, positive
+from alphafence.errors import InputError
 from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.options import ACTIONS, MonitorOptions
+from alphafence.monitor.options import ACTIONS, NOT_REROUTE, REROUTE, MonitorOptions
 from alphafence.monitor.predict import Braking
 
 
@@ -51,7 +52,9 @@ def register(sub):
         metavar="M",
         help="distance a re-route keeps from every keep-out fence (default 20)",
     )
-    p.add_argument("--breach-action", choices=ACTIONS, default="rtl")
+    p.add_argument(
+        "--breach-action", type=_not_reroute("--breach-action"), choices=ACTIONS, default="rtl"
+    )
     p.add_argument(
         "--decel",
         type=positive("--decel", "m/s²"),
@@ -78,7 +81,11 @@ def register(sub):
         ("--on-link-lost", "no telemetry for 5 s"),
     ):
         p.add_argument(
-            flag, choices=ACTIONS, default="none", help=f"action (with --enforce) on {what}"
+            flag,
+            type=_not_reroute(flag),
+            choices=ACTIONS,
+            default="none",
+            help=f"action (with --enforce) on {what}",
         )
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
@@ -86,6 +93,19 @@ def register(sub):
     add_trust_options(p)
     add_signing_option(p)
     p.set_defaults(func=run)
+
+
+def _not_reroute(flag):
+    """An argparse type for actions that cannot be a re-route (breach and failsafes)."""
+
+    def convert(text):
+        if text == REROUTE:
+            raise InputError(
+                f"{flag} {REROUTE}", NOT_REROUTE.replace("imminent action", "--imminent-action")
+            )
+        return text
+
+    return convert
 
 
 def run(args) -> int:

@@ -16,6 +16,10 @@ from alphafence.monitor.traffic import TrafficOptions
 REROUTE = "reroute"  # fly around the fence with the route planner (IMMINENT only)
 ACTIONS = ("none", "brake", "rtl", "land", REROUTE)
 
+NOT_REROUTE = (
+    "re-routing is only an imminent action (a breach or a failsafe needs brake, rtl, land or none)"
+)
+
 
 @dataclass
 class MonitorOptions:
@@ -50,15 +54,10 @@ class MonitorOptions:
     def __post_init__(self):
         for name in ("breach_action", "on_glitch", "on_stale", "on_link_lost"):
             if getattr(self, name) == REROUTE:
-                flag = "--" + name.replace("_", "-")
-                raise InputError(
-                    "monitor",
-                    f"{flag} {REROUTE}: re-routing is only an --imminent-action "
-                    "(a breach or a failsafe needs brake, rtl, land or none)",
-                )
+                raise InputError(name, f"{REROUTE}: {NOT_REROUTE}")
         c = self.reroute_clearance_m
         if not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
-            raise InputError("monitor", f"--reroute-clearance {c}: must be a number >= 0")
+            raise InputError("reroute_clearance_m", f"{c}: must be a number of metres >= 0")
 
     @property
     def reroute(self) -> bool:

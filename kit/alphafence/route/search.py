@@ -126,7 +126,7 @@ def diagnose(roadmap, s, g):
         return (
             "no route found on the roadmap although start and goal share free space "
             f"(gaps barely wider than twice the clearance of {roadmap.clearance:g} m); "
-            "try a smaller --clearance"
+            "try a smaller clearance"
         )
     # the enclosed end is the one whose free pocket is bounded (smaller)
     if cs is None or cg is None:

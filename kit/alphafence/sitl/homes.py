@@ -159,7 +159,7 @@ def resolve_home(home: str | Home, homes: Mapping[str, Home] | None = None) -> H
         except ValueError:
             values = None
         if values is not None:
-            _check_home("--home", home, *values)
+            _check_home("home", home, *values)
             return Home("custom", *values)
     known = ", ".join(sorted(homes))
-    raise InputError("--home", f"unknown home {home!r}: use one of {known}, or lat,lon,alt,heading")
+    raise InputError("home", f"unknown home {home!r}: use one of {known}, or lat,lon,alt,heading")

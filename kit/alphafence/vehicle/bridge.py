@@ -92,12 +92,12 @@ class LinkStats:
         if self.received == 0 and self.bad_signature:
             return (
                 f"the vehicle's messages are signed with another key ({self.bad_signature} "
-                "dropped): check --signing-key"
+                "dropped): check the signing key"
             )
         if self.received == 0 and self.unsigned:
             return (
                 f"the vehicle does not sign its messages ({self.unsigned} unsigned, dropped): "
-                "install the key with `alphafence signing setup`, or leave out --signing-key"
+                "install the key with `alphafence signing setup`, or connect without a signing key"
             )
         if self.received == 0:
             return "nothing at all came from the vehicle"

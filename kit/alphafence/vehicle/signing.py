@@ -87,7 +87,7 @@ async def install_key(
                 if state["signed_seen"] and current_key is None:
                     hint = (
                         ": the vehicle already signs its messages, and drops an unsigned "
-                        "SETUP_SIGNING; give the key it holds with --signing-key"
+                        "SETUP_SIGNING; sign with the key it holds"
                     )
                 raise SigningSetupError(f"{url}: the vehicle did not take the key{hint}")
             link.send(request)
