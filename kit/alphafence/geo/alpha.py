@@ -96,8 +96,8 @@ def _adjacency(neighbors):
     return t[ok], u[ok]
 
 
-def bottleneck_alpha(neighbors, weight, terminal) -> float:
-    """Smallest alpha at which all terminal triangles are connected through triangles of
+def bottleneck_alpha(neighbors, weight, terminal, links=None) -> float:
+    """Smallest alpha at which all terminals are connected through triangles of
     weight <= alpha (minimax path bottleneck over the MST).
 
     Parameters
@@ -108,17 +108,29 @@ def bottleneck_alpha(neighbors, weight, terminal) -> float:
         Alpha at which each triangle joins the shape (0 for the site's own).
     terminal : ndarray of bool, shape (m,)
         The triangles that must end up connected.
+    links : tuple of ndarray, optional
+        ``(part, triangle)`` pairs: the triangles that join each part of the site (overlap
+        it or share a stretch of its boundary). Then the parts, not ``terminal``, must end
+        up connected, each through any triangle that joins it.
 
     Returns
     -------
     float
         0 with at most one terminal, inf when finite triangles cannot connect them.
     """
+    m = len(weight)
+    a, b = _adjacency(neighbors)
+    if links is not None:
+        part, tri = links
+        n_parts = int(part.max()) + 1 if part.size else 0
+        a = np.concatenate([a, m + part])
+        b = np.concatenate([b, tri])
+        weight = np.concatenate([weight, np.zeros(n_parts)])
+        terminal = np.concatenate([np.zeros(m, bool), np.ones(n_parts, bool)])
     n = len(weight)
     term = np.flatnonzero(terminal)
     if term.size <= 1:
         return 0.0
-    a, b = _adjacency(neighbors)
     w = np.maximum(weight[a], weight[b])
     finite = np.isfinite(w)
     a, b, w = a[finite], b[finite], w[finite]
@@ -140,6 +152,15 @@ def bottleneck_alpha(neighbors, weight, terminal) -> float:
     # an edge of the tree weighs what its heavier triangle weighs
     edge_w = np.maximum(weight[child], weight[pred[child]])
     return float(edge_w.max()) if edge_w.size else 0.0
+
+
+def _overlaps(parts, triangles):
+    """``(part, triangle)`` index pairs whose union is one polygon: their interiors meet, or
+    their boundaries share a segment (a single shared point does not join them)."""
+    t, p = shapely.STRtree(triangles).query(parts, predicate="intersects")[::-1]
+    a, b = parts[p], triangles[t]
+    meet = shapely.relate_pattern(a, b, "T********") | shapely.relate_pattern(a, b, "****1****")
+    return p[meet], t[meet]
 
 
 def alpha_shape(required, alpha: float | None = None):
@@ -187,12 +208,16 @@ def alpha_shape(required, alpha: float | None = None):
         return shapely.convex_hull(region), float("inf")
     simplices = tri.simplices
     radius, area2 = circumradii(pts, simplices)
-    centroid = pts[simplices].mean(axis=1)
+    # a triangle is the site's own only when the site covers it: the triangulation is not
+    # constrained to the site's edges, so a triangle whose centroid lies in one part can
+    # still bridge the gap to another
+    triangles = shapely.polygons(pts[simplices])
     shapely.prepare(region)
-    inside = shapely.contains_xy(region, centroid[:, 0], centroid[:, 1])
-    weight = np.where(inside, 0.0, radius)
+    own = shapely.covered_by(triangles, region)
+    weight = np.where(own, 0.0, radius)
+    part_of, overlapping = _overlaps(np.asarray(shapely.get_parts(region)), triangles)
     if alpha is None:
-        alpha = bottleneck_alpha(tri.neighbors, weight, inside)
+        alpha = bottleneck_alpha(tri.neighbors, weight, own, links=(part_of, overlapping))
         if not np.isfinite(alpha):
             return shapely.convex_hull(region), alpha
     keep = weight <= alpha * (1.0 + 1e-9)
@@ -202,7 +227,9 @@ def alpha_shape(required, alpha: float | None = None):
     n = len(simplices)
     graph = coo_array((np.ones(both.sum()), (a[both], b[both])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
-    site_labels = np.unique(labels[inside & keep])
+    touches = np.zeros(n, bool)
+    touches[overlapping] = True
+    site_labels = np.unique(labels[touches & keep])
     keep &= np.isin(labels, site_labels)
     keep &= area2 > 0
     shape = _union_triangles(pts[simplices[keep]])
