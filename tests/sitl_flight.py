@@ -12,9 +12,8 @@ import pytest
 import shapely
 
 from alphafence.geo.frame import LocalFrame
-
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-FENCE_STATUS_ID = 162
+from alphafence.mavlink.ids import MAV_CMD_SET_MESSAGE_INTERVAL
+from alphafence.mavlink.ids import MAVLINK_MSG_ID_FENCE_STATUS as FENCE_STATUS_ID
 
 # The exclusion square every fenced flight uses, metres east (x) / north (y) of home, and the
 # altitude they fly at.
