@@ -3,12 +3,15 @@
 ArduPilot (``AC_PolyFence_loader``) stores a fence as a 4-byte header, then per polygon 2 bytes
 plus 8 a vertex, 13 bytes per circle, 9 for the return point, and a 1-byte end marker. Copter,
 SITL and a Navio2 without ``BRD_SD_FENCE`` have 560 bytes (at most 70 items); Plane and Rover
-672 (84 items). With ``BRD_SD_FENCE`` (Linux boards, SITL) the fence lives in a file of that
-many kB.
+672 (84 items). With ``BRD_SD_FENCE`` (kB, 1-64, read at boot; Linux boards such as the
+Navio2, and SITL) the fence lives in a file, ``fence.stg`` in the vehicle's working directory,
+of ``min(kB * 1024, 65535)`` bytes (``StorageAccess::attach_file``), which holds an eighth as
+many items (``AC_PolyFence_loader::max_items``); a polygon still holds at most 255 vertices.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from alphafence.mavlink.items import POLYGON_EXCLUSION, POLYGON_INCLUSION, RETURN_POINT
@@ -57,6 +60,48 @@ def storage_bytes(items) -> int:
     return total
 
 
+SD_FENCE_PARAM = "BRD_SD_FENCE"
+"""ArduPilot's parameter for file-backed fence storage (kB; 0: the board's own storage)."""
+SD_FENCE_MAX_KB = 64
+FILE_MAX_BYTES = 0xFFFF  # StorageAccess::attach_file caps a file region at 65535 bytes
+ITEM_BYTES = 8  # AC_PolyFence_loader::max_items: storage size / sizeof(Vector2l)
+
+
+def file_storage_bytes(kb: int) -> int:
+    """Bytes of fence storage ``BRD_SD_FENCE = kb`` gives (0 for 0).
+
+    Examples
+    --------
+    >>> file_storage_bytes(32), file_storage_bytes(64)
+    (32768, 65535)
+    """
+    return min(int(kb) * 1024, FILE_MAX_BYTES) if kb > 0 else 0
+
+
+def sd_fence_kb_needed(items) -> int:
+    """The least ``BRD_SD_FENCE`` (kB) whose file holds these items: their bytes, and eight
+    bytes an item (ArduPilot's item limit).
+
+    Parameters
+    ----------
+    items : sequence of FenceItem
+
+    Returns
+    -------
+    int
+        1 to 64, or more when no file storage can hold them.
+
+    Examples
+    --------
+    >>> from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
+    >>> sd_fence_kb_needed([FenceItem(POLYGON_EXCLUSION, 255.0, 14.5, 35.9)] * 255 * 12)
+    24
+    """
+    need = max(storage_bytes(items), ITEM_BYTES * len(items), 1)
+    kb = math.ceil(need / 1024)
+    return kb if file_storage_bytes(kb) >= need else kb + 1
+
+
 @dataclass(frozen=True)
 class Profile:
     """A vehicle's fence storage: the most items and bytes it accepts.
@@ -71,18 +116,62 @@ class Profile:
         Bytes of fence storage.
     max_polygon_vertices : int
         Most vertices of one polygon (ArduPilot's limit is 255).
+    sd_fence_kb : int
+        The ``BRD_SD_FENCE`` the storage assumes: 0 for the board's own storage.
     """
 
     name: str
     items: int
     bytes: int
     max_polygon_vertices: int = 255
+    sd_fence_kb: int = 0
 
+    @property
+    def file_backed(self) -> bool:
+        """Whether the storage is a file (``BRD_SD_FENCE`` > 0) the vehicle must have."""
+        return self.sd_fence_kb > 0
+
+
+def navio2_profile(sd_fence_kb: int = SD_FENCE_MAX_KB) -> Profile:
+    """The storage of ArduPilot on a Navio2 (or any Linux board, or SITL) with
+    ``BRD_SD_FENCE = sd_fence_kb``: room for the full-resolution fences.
+
+    Parameters
+    ----------
+    sd_fence_kb : int
+        1 to 64 (kB).
+
+    Raises
+    ------
+    ValueError
+        Outside 1..64.
+
+    Examples
+    --------
+    >>> p = navio2_profile()
+    >>> p.items, p.bytes, p.sd_fence_kb
+    (8191, 65535, 64)
+    >>> navio2_profile(8).items
+    1024
+    """
+    if not (isinstance(sd_fence_kb, int) and 1 <= sd_fence_kb <= SD_FENCE_MAX_KB):
+        raise ValueError(f"BRD_SD_FENCE takes 1 to {SD_FENCE_MAX_KB} kB, not {sd_fence_kb!r}")
+    size = file_storage_bytes(sd_fence_kb)
+    return Profile("navio2", size // ITEM_BYTES, size, sd_fence_kb=sd_fence_kb)
+
+
+BOARD_PROFILE = "copter"
+"""The profile whose storage a vehicle without ``BRD_SD_FENCE`` is assumed to have (the
+smallest: Copter, SITL and a Navio2 alike)."""
 
 PROFILES = {
     "copter": Profile("copter", 70, 560),
     "plane": Profile("plane", 84, 672),
     "rover": Profile("rover", 84, 672),
-    "sd-fence": Profile("sd-fence", 4096, 32 * 1024),  # BRD_SD_FENCE = 32 (kB)
+    "sd-fence": Profile("sd-fence", 4096, 32 * 1024, sd_fence_kb=32),  # BRD_SD_FENCE = 32 (kB)
+    "navio2": navio2_profile(),  # BRD_SD_FENCE = 64 (kB); other sizes: navio2_profile(kb)
 }
 """The storage profiles ``compile`` and ``upload --profile`` know."""
+
+MAX_FILE_ITEMS = FILE_MAX_BYTES // ITEM_BYTES
+"""The most fence items any ArduPilot vehicle holds (8191: ``BRD_SD_FENCE = 64``)."""

@@ -78,6 +78,10 @@ class Piece:
         Made by merging pieces to fit the storage.
     outward : bool, optional
         Simplified outward; None means outward for keep-out and inward for keep-in.
+    required : shapely geometry, optional
+        What the fences it stands for cover, metric, when that is less than ``local`` (a
+        merge: the union of the merged fences, so that its options' loss counts the gaps the
+        merged shape fills); None means ``local``.
     """
 
     sources: list
@@ -87,6 +91,7 @@ class Piece:
     choice: int = 0
     merged: bool = False
     outward: bool | None = None  # None: outward for keep-out, inward for keep-in
+    required: object = None  # the merged fences' union (None: local)
 
     @property
     def grows(self) -> bool:
@@ -114,7 +119,11 @@ def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
 
     A keep-out fence may be a circle (its own, grown by ``PAD_M``, or the enclosing one) or a
     polygon simplified outward; a keep-in fence only a polygon simplified inward. Options that
-    cost more without losing less area are left out.
+    cost more without losing less area are left out. The last, least-loss option is the
+    fence itself, every vertex ``PAD_M`` out (in, for keep-in) so that rounding to 1e-7
+    degrees cannot cut in: it loses only that strip, when the fence has at most
+    ``max_vertices`` vertices; a larger fence's last option is its outward (inward)
+    simplification to ``max_vertices``.
 
     Parameters
     ----------
