@@ -226,7 +226,14 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
         "--profile",
         choices=sorted(PROFILES),
         default="copter",
-        help="vehicle fence storage (default copter: 70 items, 560 bytes)",
+        help="vehicle fence storage (default copter: 70 items, 560 bytes; navio2: the fence in "
+        "a file of --sd-fence-kb, full resolution)",
+    )
+    p.add_argument(
+        "--sd-fence-kb",
+        type=sd_fence_kb,
+        metavar="N",
+        help="with --profile navio2: the vehicle's BRD_SD_FENCE, 1-64 kB (default 64)",
     )
     p.add_argument(
         "--items",
@@ -252,6 +259,46 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def sd_fence_kb(text: str) -> int:
+    """argparse type of ``--sd-fence-kb``: an integer from 1 to 64 (kB of ``BRD_SD_FENCE``).
+
+    Examples
+    --------
+    >>> sd_fence_kb("32")
+    32
+    """
+    from alphafence.mavlink.storage import SD_FENCE_MAX_KB
+
+    return _number(
+        "--sd-fence-kb", int, lambda v: 1 <= v <= SD_FENCE_MAX_KB, f"1 to {SD_FENCE_MAX_KB} (kB)"
+    )(text)
+
+
+def storage_profile(args):
+    """The :class:`~alphafence.mavlink.storage.Profile` that ``--profile`` (and, for
+    ``navio2``, ``--sd-fence-kb``) name.
+
+    Raises
+    ------
+    InputError
+        ``--sd-fence-kb`` with another profile.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> storage_profile(SimpleNamespace(profile="navio2", sd_fence_kb=8)).items
+    1024
+    """
+    from alphafence.mavlink.storage import PROFILES, navio2_profile
+
+    kb = getattr(args, "sd_fence_kb", None)
+    if args.profile == "navio2":
+        return navio2_profile(kb) if kb is not None else PROFILES["navio2"]
+    if kb is not None:
+        raise InputError("--sd-fence-kb", "sizes the navio2 profile only: add --profile navio2")
+    return PROFILES[args.profile]
+
+
 def compile_from_args(args, records):
     """Compile ``records`` for the operating area and storage :func:`add_compile_options` and
     the verb's ``--area`` / ``--bbox`` describe.
@@ -262,7 +309,6 @@ def compile_from_args(args, records):
     """
     import shapely
 
-    from alphafence.mavlink.storage import PROFILES
     from alphafence.onboard.compile import compile_fences, operating_area_from_plan
 
     if getattr(args, "area", None):
@@ -272,7 +318,7 @@ def compile_from_args(args, records):
     return compile_fences(
         records,
         area,
-        PROFILES[args.profile],
+        storage_profile(args),
         args.distance,
         args.keep_in,
         args.return_point,
