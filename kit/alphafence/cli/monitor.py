@@ -16,7 +16,13 @@ from alphafence.cli.common import (
 from alphafence.cli.options import non_negative, positive
 from alphafence.errors import InputError
 from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.options import ACTIONS, NOT_REROUTE, REROUTE, MonitorOptions
+from alphafence.monitor.options import (
+    ACTIONS,
+    NOT_REROUTE,
+    ONBOARD_MODES,
+    REROUTE,
+    MonitorOptions,
+)
 from alphafence.monitor.predict import Braking
 
 
@@ -71,6 +77,13 @@ def register(sub):
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
     p.add_argument(
+        "--onboard",
+        choices=ONBOARD_MODES,
+        default="watch",
+        help="watch (default): download the fence the vehicle holds at start and check it as a "
+        "layer of its own (alerts, and --enforce, before the vehicle's own breach); off: not",
+    )
+    p.add_argument(
         "--mavlink-traffic",
         action="store_true",
         help="also treat other MAVLink systems on the link as traffic (ADS-B always is)",
@@ -123,6 +136,7 @@ def run(args) -> int:
         mavlink_traffic=args.mavlink_traffic,
         braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
         reroute_clearance_m=args.reroute_clearance,
+        onboard=args.onboard,
     )
     args.key = signing_key(args)
     if args.log:
@@ -165,6 +179,13 @@ def _echo(event):
         out_console.print(
             f"{event['time']:.1f} {event['previous']} -> {event['level']} {event.get('fence') or ''} "
             f"({event['reason']}, {event.get('distance_m')} m)"
+        )
+    elif event["event"] == "onboard_fence":
+        kinds = ", ".join(f"{n} {what}" for what, n in event["fences"].items())
+        out_console.print(
+            f"{event['time']:.1f} onboard fence: {event['items']} items ({kinds}), "
+            f"{event['forbidden_beyond_m2']} m² forbidden beyond the full-resolution fences",
+            soft_wrap=True,
         )
     elif event["event"] != "telemetry_resumed":
         out_console.print(

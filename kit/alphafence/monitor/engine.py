@@ -12,6 +12,7 @@ from alphafence.geo.frame import short_distance_m
 from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
 from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
 from alphafence.monitor.options import REROUTE, MonitorOptions
 from alphafence.monitor.state import Assessment, Level, StateMachine, assess
 from alphafence.monitor.traffic import Traffic
@@ -77,6 +78,7 @@ class Engine:
         self.gps_degraded = False
         self.rerouting = False  # a re-route is being planned or flown (the runner's task)
         self.handing_back = False  # the next commanded mode change returns control
+        self.onboard: OnboardLayer | None = None  # the fence the vehicle holds (load_onboard)
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
@@ -87,9 +89,11 @@ class Engine:
         after a stale spell is ``telemetry_resumed``; a mode change that is not the monitor's
         own is the pilot taking over (``pilot_mode_change``, then alert only for
         ``backoff_s``); then the position is checked against every fence along the track
-        (``checks`` counts these), its level passes the hysteresis and a change of level is a
-        ``level`` event followed by the action it calls for (``action`` or
-        ``action_withheld``, with ``enforce``); last, other aircraft in conflict
+        (``checks`` counts these) and against the vehicle's own fence (:meth:`load_onboard`),
+        the worse level passes the hysteresis and a change of level is a ``level`` event
+        (when the vehicle's fence raised it: ``onboard`` and ``items`` name its item, and
+        ``onboard_only`` says no full-resolution fence is there) followed by the action it
+        calls for (``action`` or ``action_withheld``, with ``enforce``); last, other aircraft in conflict
         (``traffic_conflict``, ``traffic_clear``).
 
         Parameters
@@ -140,9 +144,17 @@ class Engine:
         a = assess(check, speed, self.options.horizon_s, self.options.braking)
         if self.options.reroute:
             a = self._reroute_assessment(a, check)
+        if self.onboard is None:
+            d = Decision(a, full_level=a.level)
+        else:  # the vehicle's own fence, as a layer of its own
+            d = self.onboard.decide(
+                a, self.fences, float(x), float(y), s.alt_m, s.ve, s.vn, lookahead, self.options
+            )
+            a = d.assessment
         previous = self.sm.level
         level, changed = self.sm.update(a.level, s.t)
         if changed:
+            f = d.onboard
             events.append(
                 new_event(
                     "level",
@@ -150,16 +162,31 @@ class Engine:
                     s,
                     level=level.name,
                     previous=previous.name,
-                    fence=self._site(a.fence),
+                    fence=self._site(a.fence) if f is None else d.site or f.name,
                     distance_m=rounded(a.distance_m),
                     time_to_breach_s=rounded(a.time_to_breach_s),
                     stopping_m=rounded(a.stopping_m),
                     reason=a.reason,
+                    onboard_only=d.onboard_only,
+                    **({} if f is None else {"onboard": f.short_name, "items": [f.first, f.last]}),
                 )
             )
-            events += self._act(s, level)
+            events += self._act(s, level, onboard_only=d.onboard_only)
         events += self._traffic(s, float(x), float(y))
         return events
+
+    def load_onboard(self, items, t=None, **fields) -> list:
+        """The vehicle's fence (its items, as downloaded) becomes the onboard layer, checked
+        beside the full-resolution fences from the next step on; returns the events
+        (``onboard_fence``, ``onboard_none``, ``onboard_failed``: see
+        :func:`~alphafence.monitor.onboard.load_layer`)."""
+        self.onboard, events = load_layer(self.onboard, items, self.fences, t, self.last, **fields)
+        return events
+
+    def onboard_unreadable(self, error, t=None, **fields) -> list:
+        """The vehicle's fence could not be read: an ``onboard_failed`` event; the onboard
+        layer in use (if any) is kept."""
+        return unreadable(self.onboard, error, t, self.last, **fields)
 
     def aircraft(self, key, t, lat, lon, alt_amsl_m, ve, vn, vu=0.0, callsign=""):
         """Another aircraft's report (ADS-B or another MAVLink system) for the dynamic fences."""
@@ -326,10 +353,12 @@ class Engine:
             events.append(new_event("reroute_cancelled", s.t, s, reason="pilot changed mode"))
         return events
 
-    def _act(self, s, level):
+    def _act(self, s, level, onboard_only=False):
         o = self.options
         if level == Level.IMMINENT:
             action = o.imminent_action
+            if onboard_only and action == REROUTE:  # the planner knows only the real fences
+                action = REROUTE_FALLBACK
         elif level == Level.BREACH:
             action = o.breach_action
         else:

@@ -75,10 +75,15 @@ def alert_text(event) -> str | None:
     --------
     >>> alert_text({"event": "level", "level": "BREACH", "fence": "prison/way/1"})
     'AF BREACH prison/way/1'
+    >>> alert_text({"event": "level", "level": "IMMINENT", "time_to_breach_s": 3.2,
+    ...             "onboard_only": True, "onboard": "excl circle 5 #46"})
+    'AF IMMINENT ONBOARD ONLY excl circle 5 #46 3s'
     """
     kind = event["event"]
     if kind == "level":
         text = f"AF {event['level']} {event.get('fence') or ''}"
+        if event.get("onboard_only"):  # only the vehicle's own fence: its item, in short
+            text = f"AF {event['level']} ONBOARD ONLY {event.get('onboard') or ''}"
         if event.get("time_to_breach_s") is not None and event["level"] in ("WARNING", "IMMINENT"):
             text += f" {event['time_to_breach_s']:.0f}s"
         return text[:50]
@@ -92,4 +97,8 @@ def alert_text(event) -> str | None:
         return f"AF REROUTE {n} wp {event.get('length_m') or 0:.0f} m"[:50]
     if kind in ("reroute_failed", "reroute_done", "reroute_cancelled"):
         return f"AF {kind}"
+    if kind == "onboard_failed":
+        return "AF onboard fence unreadable"
+    if kind == "onboard_none":
+        return "AF no onboard fence"
     return None

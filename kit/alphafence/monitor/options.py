@@ -13,6 +13,7 @@ from alphafence.errors import InputError
 from alphafence.monitor.predict import Braking
 from alphafence.monitor.traffic import TrafficOptions
 
+ONBOARD_MODES = ("watch", "off")  # the vehicle's own fence: watched as a layer, or not
 REROUTE = "reroute"  # fly around the fence with the route planner (IMMINENT only)
 ACTIONS = ("none", "brake", "rtl", "land", REROUTE)
 
@@ -28,8 +29,9 @@ class MonitorOptions:
     Raises
     ------
     InputError
-        For a re-route asked for where only a stop will do (a breach or a failsafe), or a
-        re-route clearance that is not a number >= 0.
+        For a re-route asked for where only a stop will do (a breach or a failsafe), a
+        re-route clearance that is not a number >= 0, or an onboard mode that is neither
+        ``"watch"`` nor ``"off"``.
     """
 
     horizon_s: float = 15.0
@@ -50,11 +52,17 @@ class MonitorOptions:
     on_link_lost: str = "none"
     # --imminent-action reroute: how far the re-route keeps from every keep-out fence
     reroute_clearance_m: float = 20.0
+    # "watch": download the vehicle's own fence and check it as a layer of its own; "off"
+    onboard: str = "watch"
 
     def __post_init__(self):
         for name in ("breach_action", "on_glitch", "on_stale", "on_link_lost"):
             if getattr(self, name) == REROUTE:
                 raise InputError(name, f"{REROUTE}: {NOT_REROUTE}")
+        if self.onboard not in ONBOARD_MODES:
+            raise InputError(
+                "onboard", f"{self.onboard!r}: must be one of {', '.join(ONBOARD_MODES)}"
+            )
         c = self.reroute_clearance_m
         if not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
             raise InputError("reroute_clearance_m", f"{c}: must be a number of metres >= 0")

@@ -150,6 +150,10 @@ class Monitor:
             asyncio.create_task(self._follow(name, feed), name=name)
             for name, feed in self.feeds.items()
         ]
+        if self.engine.options.onboard == "watch":  # the checks start on the fences meanwhile
+            self.tasks.append(
+                asyncio.create_task(self.reload_onboard("start"), name="onboard:start")
+            )
         try:
             while not stop.is_set():
                 with contextlib.suppress(asyncio.TimeoutError):
@@ -214,6 +218,42 @@ class Monitor:
                 exc = task.exception()
                 error = "" if exc is None else f"{type(exc).__name__}: {exc}"
                 events.append(new_event("telemetry_task_ended", task=task.get_name(), error=error))
+        return events
+
+    async def reload_onboard(self, cause: str = "upload") -> list:
+        """Download the vehicle's fence and check against it from now on, as a layer of its
+        own beside the full-resolution fences (the runner does it at start; call it after
+        every upload the monitor makes).
+
+        Parameters
+        ----------
+        cause : str
+            Why (``"start"``, ``"upload"``, ...): the events' ``cause``.
+
+        Returns
+        -------
+        list of dict
+            The events, already handled: ``onboard_fence`` (``items``, ``fences``,
+            ``seconds``), ``onboard_none`` (the vehicle holds no fence) or ``onboard_failed``
+            (the download failed or brought no valid fence: the layer in use is kept). Never
+            raises but for cancellation.
+        """
+        from alphafence.errors import VehicleError
+        from alphafence.vehicle.fence_transfer import download_fence
+
+        t0 = time.monotonic()
+        try:
+            items = await download_fence(self.vehicle)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # a failed download is an event: the monitor goes on
+            error = str(exc) if isinstance(exc, VehicleError) else f"{type(exc).__name__}: {exc}"
+            events = self.engine.onboard_unreadable(error, cause=cause)
+        else:
+            seconds = round(time.monotonic() - t0, 3)
+            events = self.engine.load_onboard(items, cause=cause, seconds=seconds)
+        for event in events:
+            self.handle(event)
         return events
 
     def handle(self, event: dict) -> None:
