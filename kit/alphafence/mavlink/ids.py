@@ -43,6 +43,14 @@ MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
 # -- MAV_MODE_FLAG ----------------------------------------------------------------------
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 
+# -- MAV_RESULT (COMMAND_ACK) ------------------------------------------------------------
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
+MAV_RESULT_DENIED = 2
+MAV_RESULT_UNSUPPORTED = 3
+MAV_RESULT_FAILED = 4
+MAV_RESULT_IN_PROGRESS = 5
+
 # -- COPTER_MODE (ArduPilot's custom_mode numbers for Copter) ---------------------------
 COPTER_MODE_GUIDED = 4
 COPTER_MODE_RTL = 6
