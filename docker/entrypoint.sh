@@ -8,6 +8,7 @@
 #   ALPHAFENCE_HORIZON        look-ahead seconds (default 15)
 #   ALPHAFENCE_BREACH_ACTION  rtl | land | brake | none (default rtl)
 #   ALPHAFENCE_IMMINENT_ACTION brake | reroute | rtl | land | none (default brake)
+#   ALPHAFENCE_ONBOARD        watch | off: check the vehicle's own fence as a layer (default watch)
 #   ALPHAFENCE_SIGNING_KEY    MAVLink 2 signing key file (read by alphafence itself)
 #   ALPHAFENCE_LOG            JSON-lines event log path
 # Extra arguments are passed on to `alphafence monitor`.
@@ -33,6 +34,7 @@ esac
 [ -z "${ALPHAFENCE_HORIZON:-}" ] || set -- "$@" --horizon "$ALPHAFENCE_HORIZON"
 [ -z "${ALPHAFENCE_BREACH_ACTION:-}" ] || set -- "$@" --breach-action "$ALPHAFENCE_BREACH_ACTION"
 [ -z "${ALPHAFENCE_IMMINENT_ACTION:-}" ] || set -- "$@" --imminent-action "$ALPHAFENCE_IMMINENT_ACTION"
+[ -z "${ALPHAFENCE_ONBOARD:-}" ] || set -- "$@" --onboard "$ALPHAFENCE_ONBOARD"
 [ -z "${ALPHAFENCE_LOG:-}" ] || set -- "$@" --log "$ALPHAFENCE_LOG"
 # ALPHAFENCE_TRUSTED_KEYS and ALPHAFENCE_SIGNING_KEY are read by alphafence itself
 exec alphafence monitor "$@"

@@ -38,6 +38,7 @@ def test_builds_the_monitor_command(env):
         "ALPHAFENCE_LOG": "/tmp/e.jsonl",
         "ALPHAFENCE_BREACH_ACTION": "land",
         "ALPHAFENCE_IMMINENT_ACTION": "reroute",
+        "ALPHAFENCE_ONBOARD": "off",
     }
     res = run(env, "--decel", "3")
     assert res.returncode == 0, res.stderr
@@ -56,6 +57,8 @@ def test_builds_the_monitor_command(env):
         "land",
         "--imminent-action",
         "reroute",
+        "--onboard",
+        "off",
         "--log",
         "/tmp/e.jsonl",
     ]
