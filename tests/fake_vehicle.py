@@ -25,6 +25,15 @@ AC_PolyFence_loader (mission type FENCE only):
 Capacity: 70 items and 560 bytes (a Copter): header 4 bytes, a polygon 2 + 8 per vertex, a
 circle 13, the return point 9, end marker 1 (alphafence.mavlink.storage's ``storage_bytes`` layout).
 
+Parameters, arming and reboots, as ArduPilot has them: PARAM_REQUEST_READ and PARAM_SET of the
+names in ``params`` are answered with PARAM_VALUE (integers as INT16, like BRD_SD_FENCE; other
+names get no answer); the heartbeat carries the safety-armed flag while ``armed``;
+MAV_CMD_REQUEST_MESSAGE(SYSTEM_TIME) is answered with the time since boot; and
+MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN (param1 1) is refused (FAILED) while armed, else acknowledged,
+after which the fake goes silent for ``reboot_seconds`` and boots again: its boot clock starts
+over and, with ``BRD_SD_FENCE`` above 0, its fence storage becomes that file's
+(min(kB * 1024, 65535) bytes, an item per 8 bytes), as AC_PolyFence_loader::init sizes it.
+
 Faults (``Faults``) are scripted and deterministic: the numbered or seeded-random loss of
 mission-protocol messages (only MISSION_* messages are numbered and subject to loss, so that
 heartbeats and MAVSDK's discovery traffic cannot shift the numbering), late (re-ordered)
@@ -253,8 +262,17 @@ class FakeVehicle:
         rerequest_interval: float = 1.0,
         port: int | None = None,
         signing_key: bytes | None = None,
+        params: Mapping[str, float] | None = None,
+        armed: bool = False,
+        reboot_seconds: float = 0.5,
+        uptime: float = 60.0,
     ):
         self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
+        self.params: dict[str, float] = dict(params or {})
+        self.armed = armed
+        self.reboot_seconds = reboot_seconds
+        self.reboots = 0  # boots after the first
+        self._boot_t0 = time.monotonic() - uptime  # SYSTEM_TIME's clock
         self.faults = faults or Faults()
         self.max_items = max_items
         self.storage_size = storage_size
@@ -436,13 +454,16 @@ class FakeVehicle:
         """1 Hz; every 0.1 s until the ground station is first heard, so that a test does not
         wait a second when MAVSDK starts listening just after the fake's first heartbeat."""
         while True:
+            armed = mav.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0
             self._send(
                 mav.MAVLink_heartbeat_message(
                     mav.MAV_TYPE_QUADROTOR,
                     mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                    mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED,
+                    mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                    | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
+                    | armed,
                     0,
-                    mav.MAV_STATE_STANDBY,
+                    mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY,
                     3,
                 )
             )
@@ -535,6 +556,17 @@ class FakeVehicle:
         ) or msg.command == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
         if msg.target_component not in (0, COMPONENT_ID):
             return
+        if msg.command == mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
+            self._reboot(msg, src)
+            return
+        if (
+            msg.command == mav.MAV_CMD_REQUEST_MESSAGE
+            and int(msg.param1) == mav.MAVLINK_MSG_ID_SYSTEM_TIME
+        ):
+            self._send(mav.MAVLink_command_ack_message(msg.command, 0, 0, 0, *src))
+            boot_ms = int((time.monotonic() - self._boot_t0) * 1000)
+            self._send(mav.MAVLink_system_time_message(int(time.time() * 1e6), boot_ms), boot_ms)
+            return
         result = mav.MAV_RESULT_ACCEPTED if wants_version else mav.MAV_RESULT_UNSUPPORTED
         self._send(mav.MAVLink_command_ack_message(msg.command, result, 0, 0, *src))
         if wants_version:
@@ -553,6 +585,65 @@ class FakeVehicle:
                     0x0123456789,
                 )
             )
+
+    # ---------------------------------------------------------------- parameters, reboot
+
+    def _param_value(self, name):
+        value = self.params[name]
+        kind = mav.MAV_PARAM_TYPE_INT16 if isinstance(value, int) else mav.MAV_PARAM_TYPE_REAL32
+        index = list(self.params).index(name)
+        self._send(
+            mav.MAVLink_param_value_message(
+                name.encode(), float(value), kind, len(self.params), index
+            ),
+            (name, value),
+        )
+
+    def _on_param_request_read(self, msg):
+        name = msg.param_id
+        if not name and 0 <= msg.param_index < len(self.params):
+            name = list(self.params)[msg.param_index]
+        if name in self.params:  # ArduPilot does not answer for a name it does not have
+            self._param_value(name)
+
+    def _on_param_set(self, msg):
+        name = msg.param_id
+        if name not in self.params:
+            return
+        old = self.params[name]
+        self.params[name] = int(round(msg.param_value)) if isinstance(old, int) else msg.param_value
+        self._param_value(name)
+
+    def _reboot(self, msg, src):
+        """GCS_MAVLINK::handle_preflight_reboot, then AP_Vehicle::reboot: refused while armed;
+        else acknowledged, silent 0.2 s later, and booted again after ``reboot_seconds``."""
+        if self.armed:
+            result = mav.MAV_RESULT_FAILED
+        elif int(msg.param1) != 1:
+            result = mav.MAV_RESULT_UNSUPPORTED
+        else:
+            result = mav.MAV_RESULT_ACCEPTED
+        self._send(mav.MAVLink_command_ack_message(msg.command, result, 0, 0, *src), result)
+        if result == mav.MAV_RESULT_ACCEPTED:
+            self._loop.call_later(0.2, self._go_down)
+
+    def _go_down(self):
+        self._note("reboot", "", "")
+        self.disconnected = True
+        self.upload = None
+        self._loop.call_later(self.reboot_seconds, self._boot)
+
+    def _boot(self):
+        kb = int(self.params.get("BRD_SD_FENCE", 0))
+        if kb > 0:  # AC_PolyFence_loader::init attaches fence.stg: max_items = size / 8
+            self.storage_size = min(kb * 1024, 0xFFFF)
+            self.max_items = self.storage_size // 8
+        self.reboots += 1
+        self._boot_t0 = time.monotonic()
+        self.disconnected = False
+        self._note("boot", "", (self.max_items, self.storage_size))
+
+    # ---------------------------------------------------------------- fence transfers
 
     def _on_mission_count(self, msg):
         if self._other_type(msg) or not self._mavlink2(msg):
@@ -729,4 +820,8 @@ def _detail(msg):
         return msg.count
     if name == "COMMAND_LONG":
         return (msg.command, msg.param1)
+    if name == "PARAM_SET":
+        return (msg.param_id, msg.param_value)
+    if name == "PARAM_REQUEST_READ":
+        return msg.param_id
     return getattr(msg, "seq", "")

@@ -1,4 +1,9 @@
-"""alphafence upload: compile (if needed), upload, verify by reading back, set fence parameters."""
+"""alphafence upload: compile (if needed), upload, verify by reading back, set fence parameters.
+
+With a file-backed storage profile (``--profile navio2``, ``sd-fence``) the vehicle's
+``BRD_SD_FENCE`` is read first: too small, and the upload stops before anything is sent, or
+with ``--reboot`` (disarmed only) it is set and the vehicle rebooted before the upload.
+"""
 
 from __future__ import annotations
 
@@ -12,13 +17,19 @@ from alphafence.cli.common import (
     signing_key,
     unsigned_hint,
 )
-from alphafence.cli.options import add_compile_options, bbox, compile_from_args
+from alphafence.cli.options import add_compile_options, bbox, compile_from_args, storage_profile
 from alphafence.cli.tables import compile_report
-from alphafence.errors import InputError
+from alphafence.errors import InputError, VehicleError
 from alphafence.formats.fence_geojson import read_fences
 from alphafence.formats.qgc_plan import read_plan_fence
 from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
+
+# MAVSDK's results for a fence the vehicle has no room for (too many items; too many bytes)
+NO_ROOM = ("TOO_MANY_MISSION_ITEMS", "PROTOCOL_ERROR")
+NOT_YET_REBOOTED = (
+    "BRD_SD_FENCE takes effect at boot: if it was set since the vehicle last booted, reboot it"
+)
 
 
 def register(sub):
@@ -53,6 +64,12 @@ def register(sub):
         "--params",
         choices=sorted(PARAM_PROFILES),
         help="also set and verify these fence parameters",
+    )
+    p.add_argument(
+        "--reboot",
+        action="store_true",
+        help="with --profile navio2 (or sd-fence): when the vehicle's BRD_SD_FENCE is too small, "
+        "set it and reboot the vehicle (only while disarmed), then upload",
     )
     p.add_argument("--dry-run", action="store_true", help="compile and check, but do not connect")
     add_trust_options(p)
@@ -91,6 +108,13 @@ def run(args) -> int:
     :class:`~alphafence.errors.VehicleError`, mapped by :func:`alphafence.cli.main`).
     """
     check_trust(args, args.fences)
+    profile = storage_profile(args)
+    if args.reboot and not profile.file_backed:
+        raise InputError(
+            "--reboot",
+            f"sets BRD_SD_FENCE for --profile navio2 or sd-fence; the {profile.name} profile's "
+            "storage needs no reboot",
+        )
     items, compiled = load_items(args)
     if compiled is not None:
         compile_report(compiled)
@@ -100,17 +124,24 @@ def run(args) -> int:
     if not args.connect:
         raise InputError("--connect", "needed unless --dry-run")
     args.key = signing_key(args)
-    return asyncio.run(_upload(args, items))
+    return asyncio.run(_upload(args, items, profile))
 
 
-async def _upload(args, items) -> int:
-    from alphafence.vehicle.fence_transfer import upload_fence
+async def _upload(args, items, profile) -> int:
+    from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
     from alphafence.vehicle.link import open_vehicle
     from alphafence.vehicle.params import apply_params
 
     with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
-            rep = await upload_fence(vehicle, items)
+            if profile.file_backed:
+                await _storage(args, vehicle, items, profile)
+            try:
+                rep = await upload_fence(vehicle, items, capacity=profile.items)
+            except FenceTransferError as exc:
+                if profile.file_backed and exc.result in NO_ROOM:
+                    raise VehicleError(f"{exc} | {NOT_YET_REBOOTED}") from None
+                raise
             out_console.print(
                 f"uploaded {rep.items} fence items and read them back identical ({rep.seconds:.2f} s)"
             )
@@ -121,3 +152,18 @@ async def _upload(args, items) -> int:
                     + ", ".join(f"{k}={v:g}" for k, v in got.values.items())
                 )
     return 0
+
+
+async def _storage(args, vehicle, items, profile):
+    """Check (and with ``--reboot``, set) the vehicle's BRD_SD_FENCE for ``items``."""
+    from alphafence.vehicle.sd_fence import StorageTooSmall, ensure_fence_storage
+
+    try:
+        got = await ensure_fence_storage(
+            vehicle, items, profile.sd_fence_kb, args.reboot, say=out_console.print
+        )
+    except StorageTooSmall as exc:
+        raise VehicleError(f"{exc}, or upload with --reboot") from None
+    if got.set_kb is None:
+        need = f"needs {got.need_kb} kB" if got.need_kb else "fits the board's own storage"
+        out_console.print(f"BRD_SD_FENCE is {got.have_kb} kB on the vehicle; this fence {need}")

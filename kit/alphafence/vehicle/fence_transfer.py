@@ -25,6 +25,7 @@ from alphafence.mavlink.items import (
     RETURN_POINT,
     FenceItem,
 )
+from alphafence.mavlink.storage import MAX_FILE_ITEMS
 
 # ArduPilot abandons a stalled upload 8 s after the last item it received, and until then answers
 # a download with MISSION_ACK(DENIED), which MAVSDK's download ignores (it times out instead).
@@ -123,21 +124,30 @@ FENCE_COMMANDS = {
     CIRCLE_INCLUSION: "inclusion circle",
     CIRCLE_EXCLUSION: "exclusion circle",
 }
-MAX_DOWNLOAD_ITEMS = 1000
-"""The most fence items a download may bring: a vehicle claiming more is refused before the
-items are checked one by one, so a faulty or hostile count cannot make the kit hold and check
-an unbounded list. ArduPilot's fence storage holds well under this (on an SD card: a few
-hundred)."""
+MAX_DOWNLOAD_ITEMS = MAX_FILE_ITEMS
+"""The most fence items a download may bring unless the caller knows the vehicle's storage:
+what the largest storage ArduPilot has holds (``BRD_SD_FENCE = 64``: 65535 bytes, 8191
+items). A vehicle claiming more is refused before the items are checked one by one, so a
+faulty or hostile count cannot make the kit hold and check an unbounded list."""
 
 
-def from_raw(raw):
+def from_raw(raw, max_items: int = MAX_DOWNLOAD_ITEMS):
     """The vehicle's items as FenceItems, after checking every one: what comes over the link
     is input like any file (a faulty or hostile vehicle, a corrupted link), so an item out of
     range, of another mission type, or a polygon whose vertex counts disagree is refused with
-    one line saying which item and what is wrong."""
-    if len(raw) > MAX_DOWNLOAD_ITEMS:
+    one line saying which item and what is wrong.
+
+    Parameters
+    ----------
+    raw : sequence
+        MAVSDK's ``mission_raw`` items.
+    max_items : int
+        More items than this are refused at once (the storage's capacity).
+    """
+    if len(raw) > max_items:
         raise FenceTransferError(
-            f"the vehicle sent {len(raw)} fence items (over {MAX_DOWNLOAD_ITEMS})"
+            f"the vehicle sent {len(raw)} fence items (over {max_items}, "
+            "more than its fence storage holds)"
         )
     items = []
     for i, r in enumerate(raw):
@@ -217,9 +227,21 @@ def _reason(exc) -> str:
     return REASONS.get(name, f"transfer failed ({name})")
 
 
-async def download_fence(vehicle):
-    """The fence the vehicle holds, as checked FenceItems ([] when it holds none). Raises
-    FenceTransferError when the download fails or what came is not a valid fence."""
+async def download_fence(vehicle, max_items: int = MAX_DOWNLOAD_ITEMS):
+    """The fence the vehicle holds, as checked FenceItems ([] when it holds none).
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    max_items : int
+        The most items the vehicle's storage holds (default: the largest ArduPilot has);
+        a download of more is refused.
+
+    Raises
+    ------
+    FenceTransferError
+        When the download fails or what came is not a valid fence.
+    """
     from mavsdk.plugins.mission_raw import MissionRawError
 
     try:
@@ -230,7 +252,7 @@ async def download_fence(vehicle):
         raise FenceTransferError(
             f"download failed: {_reason(exc)}", result=_result_name(exc)
         ) from None
-    return from_raw(_in_sequence(raw))
+    return from_raw(_in_sequence(raw), max_items)
 
 
 def _in_sequence(raw):
@@ -247,16 +269,31 @@ def _in_sequence(raw):
     return [by_seq[i] for i in range(len(by_seq))]
 
 
-async def upload_fence(vehicle, items) -> UploadReport:
-    """Upload, then download and compare. Raises FenceTransferError saying what failed and
-    what the vehicle now holds."""
+async def upload_fence(vehicle, items, capacity: int | None = None) -> UploadReport:
+    """Upload, then download and compare.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    items : sequence of FenceItem
+    capacity : int, optional
+        The most items the vehicle's storage holds (a profile's ``items``): a read-back of
+        more (and more than were sent) is refused before its items are checked; default: the
+        largest storage ArduPilot has.
+
+    Raises
+    ------
+    FenceTransferError
+        Saying what failed and what the vehicle now holds.
+    """
     from mavsdk.plugins.mission_raw import MissionRawError
 
+    bound = max(len(items), MAX_DOWNLOAD_ITEMS if capacity is None else capacity)
     t0 = time.monotonic()
     try:
         await vehicle.mission_raw.upload_geofence(to_raw(items))
     except MissionRawError as exc:
-        got, holds = await _what_it_holds(vehicle)
+        got, holds = await _what_it_holds(vehicle, bound)
         if got is not None and same_items(items, got) == []:
             # the vehicle stored the fence but its final MISSION_ACK was lost: the read-back,
             # which is what success means here, shows the fence sent
@@ -268,7 +305,7 @@ async def upload_fence(vehicle, items) -> UploadReport:
             holds,
             result=_result_name(exc),
         ) from None
-    got = await download_fence(vehicle)
+    got = await download_fence(vehicle, bound)
     seconds = time.monotonic() - t0
     diffs = same_items(items, got)
     if diffs:
@@ -280,7 +317,7 @@ async def upload_fence(vehicle, items) -> UploadReport:
     return UploadReport(len(items), seconds, True)
 
 
-async def _what_it_holds(vehicle):
+async def _what_it_holds(vehicle, max_items=MAX_DOWNLOAD_ITEMS):
     """After a failed upload: (items read back or None, what the vehicle holds in words).
 
     Keeps asking while the vehicle may still be busy with the abandoned upload (see
@@ -289,7 +326,7 @@ async def _what_it_holds(vehicle):
     deadline = time.monotonic() + VEHICLE_UPLOAD_TIMEOUT_S + 0.5
     while True:
         try:
-            got = await download_fence(vehicle)
+            got = await download_fence(vehicle, max_items)
         except FenceTransferError as exc:
             why = str(exc)
         else:

@@ -38,7 +38,7 @@ PROFILES = {
         "FENCE_ALT_MAX": 120.0,
     },
 }
-INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION"}
+INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "BRD_SD_FENCE"}
 
 
 class ParamError(VehicleError):
