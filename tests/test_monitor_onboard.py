@@ -209,3 +209,38 @@ def test_the_option_is_checked():
     assert MonitorOptions().onboard == "watch"
     with pytest.raises(InputError, match="onboard: 'on': must be one of watch, off"):
         MonitorOptions(onboard="on")
+
+
+def test_the_cli_passes_the_onboard_mode(tmp_path, monkeypatch, capsys):
+    import json
+    from types import SimpleNamespace
+
+    from alphafence.cli import main
+
+    seen = []
+
+    async def run_monitor(url, fences, options, *args, **kwargs):
+        seen.append(options.onboard)
+        return SimpleNamespace(engine=SimpleNamespace(checks=0))
+
+    monkeypatch.setattr("alphafence.monitor.runner.run_monitor", run_monitor)
+    feature = {
+        "type": "Feature",
+        "properties": {"site_id": "hospital/way/7", "kind": "keep_out"},
+        "geometry": shapely.geometry.mapping(FRAME.geom_to_wgs84(SQUARE)),
+    }
+    path = tmp_path / "fences.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": [feature]}))
+    argv = [
+        "monitor",
+        "--connect",
+        "udpin://127.0.0.1:1",
+        "--fences",
+        str(path),
+        "--allow-unsigned",
+    ]
+    assert main(argv) == 0 and main(argv + ["--onboard", "off"]) == 0
+    assert seen == ["watch", "off"]
+    with pytest.raises(SystemExit) as exit_:
+        main(argv + ["--onboard", "sometimes"])
+    assert exit_.value.code == 2 and "--onboard" in capsys.readouterr().err

@@ -150,6 +150,33 @@ class FenceSet:
             ahead = self._ahead(p, x, y, vx / speed, vy / speed, lookahead_m, inside_out)
         return Check(inside_out, inside_warn, outside_in, nearest, ahead)
 
+    def near(self, x, y, alt, tol_m) -> int | None:
+        """A fence in force at ``alt`` that forbids the point ``(x, y)`` or whose boundary is
+        within ``tol_m`` of it (a keep-out it is in or near, a keep-in it has left or is near
+        the edge of), or None. Warning layers forbid nothing.
+
+        Examples
+        --------
+        >>> from alphafence.formats.fence_geojson import FenceRecord
+        >>> frame = LocalFrame(14.5, 35.9)
+        >>> square = FenceRecord("x", "keep_out", frame.geom_to_wgs84(shapely.box(0, 0, 10, 10)))
+        >>> fences = FenceSet([square], frame=frame)
+        >>> fences.near(11.0, 5.0, 20.0, 2.0), fences.near(15.0, 5.0, 20.0, 2.0)
+        (0, None)
+        """
+        p = shapely.Point(x, y)
+        near = self.tree.query(p, predicate="dwithin", distance=tol_m)
+        near = near[self._in_alt(near, alt)] if near.size else near
+        for k in near:
+            if self.kind[k] == KEEP_OUT:
+                return int(k)
+            if self.kind[k] == KEEP_IN and shapely.distance(p, self.boundary[k]) <= tol_m:
+                return int(k)
+        for k in self._keep_in:
+            if self._in_alt(k, alt) and not self.local[k].contains(p):
+                return k
+        return None
+
     def _ahead(self, p, x, y, ux, uy, lookahead_m, skip):
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
         ray = shapely.LineString([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])

@@ -80,4 +80,5 @@ class Observer:
 
     def on_event(self, event: dict) -> None:
         """An event was put in the event log (the engine's, and the runner's own:
-        ``action_done``, ``alert_failed``, ``adsb_unavailable``, ``log_write_failed``, ...)."""
+        ``action_done``, ``alert_failed``, ``adsb_unavailable``, ``log_write_failed``,
+        ``onboard_fence``, ``onboard_failed``, ...)."""

@@ -21,7 +21,7 @@ import shapely
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.monitor.events import new_event
-from alphafence.monitor.fenceset import KEEP_IN, KEEP_OUT, FenceSet
+from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.state import Assessment, Level, assess
 from alphafence.onboard.decode import decode_fence
 
@@ -122,7 +122,7 @@ class OnboardLayer:
         px, py = x, y
         if check.breach_ahead == (a.fence, a.distance_m) and speed > 0:
             px, py = x + ve / speed * a.distance_m, y + vn / speed * a.distance_m
-        real = real_fence_near(fences, px, py, alt, SAME_FENCE_M)
+        real = fences.near(px, py, alt, SAME_FENCE_M)
         if real is not None:  # the onboard fence is the real fence there (to rounding)
             return Decision(a, fence, False, full.level, fences.records[real].site_id)
         reason = f"{a.reason} ({ONLY_WORDS})"
@@ -190,33 +190,6 @@ class Decision:
     onboard_only: bool = False
     full_level: Level = Level.CLEAR
     site: str | None = None
-
-
-def real_fence_near(fences: FenceSet, x, y, alt, tol_m) -> int | None:
-    """A full-resolution fence in force at ``alt`` that forbids the point ``(x, y)`` or whose
-    boundary lies within ``tol_m`` of it (a keep-out it is in or near, a keep-in it has left
-    or is near the edge of), or None.
-
-    Examples
-    --------
-    >>> from alphafence.geo.frame import LocalFrame
-    >>> frame = LocalFrame(14.5, 35.9)
-    >>> square = FenceRecord("x", "keep_out", frame.geom_to_wgs84(shapely.box(0, 0, 10, 10)))
-    >>> fences = FenceSet([square], frame=frame)
-    >>> real_fence_near(fences, 11.0, 5.0, 20.0, 2.0), real_fence_near(fences, 15.0, 5.0, 20.0, 2.0)
-    (0, None)
-    """
-    p = shapely.Point(x, y)
-    near = fences.tree.query(p, predicate="dwithin", distance=tol_m)
-    for k in near[fences._in_alt(near, alt)] if near.size else near:
-        if fences.kind[k] == KEEP_OUT:
-            return int(k)
-        if fences.kind[k] == KEEP_IN and shapely.distance(p, fences.boundary[k]) <= tol_m:
-            return int(k)
-    for k in fences._keep_in:
-        if fences.active[k] and fences._in_alt(k, alt) and not fences.local[k].contains(p):
-            return int(k)
-    return None
 
 
 def load_layer(previous, items, full: FenceSet, t=None, at=None, **fields):
