@@ -114,6 +114,31 @@ def _pareto(options):
     return out
 
 
+EXACT_MITRE_LIMIT = 100.0  # a spike's corner may reach this many pads out to keep its vertex
+
+
+def _vertices(poly) -> int:
+    return len(poly.exterior.coords) - 1
+
+
+def _offset(poly, pad, mitre_limit):
+    """``poly`` moved ``pad`` metres out (in, when negative) with mitred corners, its largest
+    part; None when nothing is left. A spike too sharp for ``mitre_limit`` is bevelled (one
+    vertex more) unless a mitre of up to :data:`EXACT_MITRE_LIMIT` pads keeps the fence's own
+    vertex count."""
+    found = None
+    for limit in (mitre_limit, EXACT_MITRE_LIMIT):
+        parts = outer_polygons(shapely.buffer(poly, pad, join_style="mitre", mitre_limit=limit))
+        if not len(parts):
+            return found
+        part = parts[int(np.argmax(shapely.area(parts)))]
+        if found is None or (part.is_valid and _vertices(part) < _vertices(found)):
+            found = part
+        if _vertices(found) <= _vertices(poly):
+            return found
+    return found
+
+
 def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
     """The ways one fence polygon can be stored, cheapest first.
 
@@ -150,11 +175,10 @@ def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
     (34, 15.0)
     """
     if inclusion:
-        inner = shapely.buffer(poly, -PAD_M, join_style="mitre")
-        base = outer_polygons(inner)
-        base = base[int(np.argmax(shapely.area(base)))] if len(base) else poly
+        base = _offset(poly, -PAD_M, 5.0)
+        base = poly if base is None else base
     else:
-        base = outer_polygons(shapely.buffer(poly, PAD_M, join_style="mitre", mitre_limit=10.0))[0]
+        base = _offset(poly, PAD_M, 10.0)
     area = poly.area
     opts = []
     if not inclusion:
