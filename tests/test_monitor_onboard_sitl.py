@@ -23,11 +23,11 @@ compiled), that it raised IMMINENT for the onboard fence (naming its item, and s
 braked, and that the copter stopped outside every onboard and every full-resolution fence,
 with breach_status 0 in every FENCE_STATUS, no RTL and no "fence breached" text.
 
-Measured (speedup 5, 2 runs; the test prints them): 44 onboard items (a polygon and 40
+Measured (speedup 5, 3 runs; the test prints them): 44 onboard items (a polygon and 40
 circles), forbidding 14.7 km² that no full-resolution keep-out does; the nearest keep-out
 (power/way/531608386) lies 445 m along the leg, the merged circle over it 200 m (245 m before
-it); IMMINENT (onboard_only, "onboard exclusion circle 1 (item 4)") 36.1-36.6 m before the
-circle at 10.0 m/s (stopping distance 36.8 m); the copter stopped 15.4-15.8 m short of the
+it); IMMINENT (onboard_only, "onboard exclusion circle 1 (item 4)") 36.1-36.7 m before the
+circle at 10.0 m/s (stopping distance 36.8 m); the copter stopped 15.4-16.0 m short of the
 circle, 261 m short of the real fence; no ArduPilot breach. About 30 s wall, SITL start
 included.
 """
