@@ -51,6 +51,7 @@ def main(argv=None) -> int:
         rows += build_bench.run(args.osm, args.optimize_sites, console)
     if args.only in (None, "compile"):
         rows += compile_bench.run(args.osm, build_bench.Row)
+        rows += compile_bench.navio2(args.osm, build_bench.Row)
     if args.only in (None, "upload"):
         rows += upload_bench.run(build_bench.Row)
     if args.only in (None, "monitor"):

@@ -9,7 +9,7 @@ from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.formats.rules import load_rules
-from alphafence.mavlink.storage import PROFILES, storage_bytes
+from alphafence.mavlink.storage import PROFILES, sd_fence_kb_needed, storage_bytes
 from alphafence.onboard.compile import compile_fences
 
 AIRPORT = "way/23541031"
@@ -48,5 +48,57 @@ def run(osm, Row):
             f"alpha fences {alpha_over / 1e6:.2f} km²",
             f"{ratio:.2f}x",
             ratio <= 2.0 and len(compiled.items) <= 70,
+        ),
+    ]
+
+
+def navio2(osm, Row):
+    """Issue 11 target: the Malta airport area (5 km around the aerodrome, every keep-out fence
+    in it) compiled for ``--profile navio2`` (BRD_SD_FENCE = 64 kB): its onboard overshoot
+    against the full-resolution alpha fences', at most 1.05x; the peer is the same area in a
+    Copter's 560 bytes. Overshoot as in :func:`run`: the stored shapes' area (a circle's
+    disc) minus the restricted areas they stand for, over the alpha fences' area minus the
+    same."""
+    import math
+
+    rules = load_rules()
+    db = read_database([osm], rules)
+    result = build_fences(db.features, rules, BuildOptions())
+    sites = {s.site_id: s for s in result.sites}
+    airport = next(s for s in result.sites if AIRPORT in s.sources)
+    area = airport.frame.geom_to_wgs84(airport.geometry.buffer(5000.0))
+    keep_out = [f for f in result.fences if f.kind == "keep_out"]
+    records = [FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m) for f in keep_out]
+    ratios = {}
+    for name in ("navio2", "copter"):
+        t = time.perf_counter()
+        compiled = compile_fences(records, area, PROFILES[name], distance_m=0.0)
+        seconds = time.perf_counter() - t
+        ids = {sid for p in compiled.pieces for sid in p.sources}
+        restricted = sum(sites[sid].geometry.area for sid in ids)
+        alpha_over = sum(f.area_m2 for f in keep_out if f.site_id in ids) - restricted
+        onboard = sum(
+            p.chosen.local.area if p.chosen.circle is None else math.pi * p.chosen.circle[2] ** 2
+            for p in compiled.pieces
+        )
+        ratios[name] = ((onboard - restricted) / alpha_over, compiled, seconds, len(ids))
+    ratio, compiled, seconds, n = ratios["navio2"]
+    as_own = sum(
+        p.chosen.kind == "polygon"
+        and not p.merged
+        and p.chosen.items == len(p.local.exterior.coords) - 1
+        for p in compiled.pieces
+    )
+    kb = sd_fence_kb_needed(compiled.items)
+    return [
+        Row(
+            f"compile Malta airport + 5 km, navio2: {n} fences -> {len(compiled.items)} items, "
+            f"{storage_bytes(compiled.items)} B (BRD_SD_FENCE >= {kb}), {as_own} stored as "
+            f"themselves, {len(compiled.merges)} merges ({seconds:.2f} s)",
+            f"overshoot {ratio:.3f}x alpha",
+            "<= 1.05x alpha",
+            f"copter 560 B: {ratios['copter'][0]:.2f}x",
+            f"{ratio:.3f}x",
+            ratio <= 1.05,
         ),
     ]
