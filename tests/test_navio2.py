@@ -344,3 +344,13 @@ def test_cli_refuses_sizes_and_flags_that_do_not_apply(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--sd-fence-kb" in err and "navio2" in err and "--reboot" in err
     assert main([*base, "--profile", "navio2", "--sd-fence-kb", "8", "--reboot"]) == 0
+
+
+def test_sitl_verb_takes_parameters(capsys):
+    from alphafence.cli.sitl import param_value
+
+    assert param_value("BRD_SD_FENCE=64") == ("BRD_SD_FENCE", 64)
+    assert param_value("FENCE_MARGIN=2.5") == ("FENCE_MARGIN", 2.5)
+    for bad in ("BRD_SD_FENCE", "brd_sd_fence=1", "BRD_SD_FENCE=x", "X=nan"):
+        assert main(["sitl", "--home", "egham", "--param", bad]) == 2
+    assert capsys.readouterr().err.count("--param") == 4

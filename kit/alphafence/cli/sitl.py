@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import math
+import re
 import sys
 
 from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
@@ -42,6 +44,15 @@ def register(sub):
         help="an extra defaults file loaded after the kit's (repeatable)",
     )
     p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        type=param_value,
+        metavar="NAME=VALUE",
+        help="set an ArduPilot parameter at start (repeatable), e.g. BRD_SD_FENCE=64 for the "
+        "fence in a file (fence.stg in SITL's working directory)",
+    )
+    p.add_argument(
         "--no-wait",
         action="store_true",
         help="print the connection URLs at once instead of after the position estimate",
@@ -51,6 +62,26 @@ def register(sub):
         "--keep-dir", action="store_true", help="keep SITL's temporary working directory"
     )
     p.set_defaults(func=run)
+
+
+def param_value(text: str) -> tuple:
+    """argparse type of ``--param``: ``NAME=VALUE`` -> ``(NAME, number)``.
+
+    Examples
+    --------
+    >>> param_value("BRD_SD_FENCE=64")
+    ('BRD_SD_FENCE', 64)
+    """
+    from alphafence.errors import InputError
+
+    name, _, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        raise InputError("--param", f"expected NAME=VALUE, got {text!r}") from None
+    if not (re.fullmatch(r"[A-Z][A-Z0-9_]{0,15}", name) and math.isfinite(number)):
+        raise InputError("--param", f"expected NAME=VALUE (an ArduPilot parameter), got {text!r}")
+    return name, int(number) if number.is_integer() and "." not in value else number
 
 
 def run(args) -> int:
@@ -73,6 +104,7 @@ def run(args) -> int:
         instance=args.instance,
         port=args.port,
         params=args.param_file,
+        param_values=dict(args.param),
         keep_dir=args.keep_dir,
     )
     if find_sitl_binary() is None:

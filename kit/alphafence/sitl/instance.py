@@ -13,6 +13,11 @@ ports are reserved so that several instances run at once (:mod:`alphafence.sitl.
 SITL exits when its parent process goes away, so the launching process stays its parent for
 the whole session; shutdown is by process id: SIGTERM, then SIGKILL after a timeout.
 
+A reboot (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN) makes SITL re-execute itself in place: the same
+process (still the launcher's child), working directory and loopback ports; what it saved is
+still there (``eeprom.bin``, and with ``BRD_SD_FENCE`` above 0 the fence in ``fence.stg``).
+Its heartbeats stop for a few seconds meanwhile (3.2 s at speedup 1, measured).
+
 Readiness (:meth:`SitlInstance.wait_ready`) listens on the instance's UDP port itself
 (:mod:`alphafence.sitl.readiness`) and closes it before returning, so MAVSDK or pymavlink can
 bind the port next. Only one program can bind the port at a time: don't wait for readiness
