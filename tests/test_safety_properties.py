@@ -10,19 +10,26 @@ from pathlib import Path
 
 import numpy as np
 import shapely
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from alphafence.build.fences import METHODS
 from alphafence.build.outputs import render
 from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.errors import InputError
+from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.formats.geojson import read_geojson_doc
 from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
 from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.formats.rules import parse_rules
 from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.items import POLYGON_INCLUSION
+from alphafence.mavlink.storage import PROFILES, storage_bytes
+from alphafence.onboard.compile import compile_fences
+from alphafence.onboard.corridor import flight_path
 
 from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
+from .test_compile import contained, fence_sets, onboard_geometry, validate_like_ardupilot
 
 RULES_DOC = {
     "defaults": {"point_radius_m": 15.0, "line_width_m": 6.0},
@@ -219,3 +226,70 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(
                     ), "no circle item contains the site plus margin"
                     continue
                 assert_contains(union, restricted, fence.margin_m, "plan/waypoints")
+
+
+# -- onboard fences: every profile, corridors of random paths -----------------------------
+
+
+@st.composite
+def paths(draw):
+    """A flight path of 1-5 positions among the fences (metres from their origin)."""
+    n = draw(st.integers(1, 5))
+    return [(draw(st.floats(-3500, 3500)), draw(st.floats(-3500, 3500))) for _ in range(n)]
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    fs=fence_sets(),
+    path_xy=paths(),
+    distance=st.sampled_from([0.0, 200.0, 1000.0, 5000.0]),
+    profile=st.sampled_from(sorted(PROFILES)),
+    max_items=st.sampled_from([None, 3, 6, 12, 30]),
+    keep_in=st.booleans(),
+)
+def test_onboard_fences_contain_their_fences_for_every_profile_and_corridor(
+    fs, path_xy, distance, profile, max_items, keep_in
+):
+    """Whatever the profile and the flight path: every fence within the distance of the path
+    is stored, and the onboard items (read in an independent frame, after merges and rounding)
+    contain it (keep-out) or stay inside it (keep-in); every other fence is left out."""
+    lon0, lat0, records = fs
+    frame = LocalFrame(lon0, lat0)
+    x, y = np.asarray(path_xy).T
+    lon, lat = frame.to_wgs84(x, y)
+    path = flight_path(np.column_stack([lon, lat]))
+    if keep_in:  # a keep-in fence from the build: the onboard one must stay inside it
+        ring = shapely.Point(0, 0).buffer(6000, quad_segs=3)
+        records = [*records, FenceRecord("zone/keep-in", "keep_in", frame.geom_to_wgs84(ring))]
+    prof = PROFILES[profile]
+    try:
+        result = compile_fences(records, path, prof, distance_m=distance, max_items=max_items)
+    except InputError as err:
+        assert "do not fit" in str(err)
+        event("does not fit")
+        return
+    event("merged" if result.merges else "stored" if result.pieces else "nothing near the path")
+    items = result.items
+    assert len(items) <= min(prof.items, max_items or prof.items)
+    assert storage_bytes(items) <= prof.bytes
+    validate_like_ardupilot(items)
+    verify = VerifyFrame(lon0, lat0)
+    polys, discs = onboard_geometry(items, verify)
+    path_v = verify.local(path)
+    inclusions = [
+        polygon_in(verify, np.asarray(pts))
+        for cmd, pts in group_polygons(items)[0]
+        if cmd == POLYGON_INCLUSION
+    ]
+    for rec in records:
+        local = shapely.make_valid(verify.local(rec.geometry))
+        d = local.distance(path_v)
+        if rec.site_id in result.dropped:
+            assert d > distance - 1.0, f"{rec.site_id} at {d:.1f} m left out"
+            continue
+        assert d <= distance + 1.0, f"{rec.site_id} at {d:.1f} m stored"
+        if rec.kind == "keep_in":
+            assert inclusions and all(local.covers(p) for p in inclusions), "keep-in grew"
+            continue
+        for part in shapely.get_parts(local):
+            assert contained(part, polys, discs), f"{rec.site_id} is not inside the onboard fences"

@@ -1,4 +1,4 @@
-"""alphafence compile: fences -> ArduPilot's fence storage for an operating area."""
+"""alphafence compile: fences -> ArduPilot's fence storage for a mission's flight path (or a box)."""
 
 from __future__ import annotations
 
@@ -16,13 +16,16 @@ def register(sub):
     p = sub.add_parser(
         "compile",
         help="compile fences into a vehicle's fence storage",
-        description="Pick the fences near an operating area and fit them, conservatively "
-        "simplified, into ArduPilot's fence storage.",
+        description="Pick the fences within --distance of a mission's flight path (or of a "
+        "box) and fit them, conservatively simplified, into ArduPilot's fence storage, "
+        "spending the bytes where the path runs close to a fence.",
     )
     p.add_argument("fences", metavar="FENCES.geojson", help="fences from 'alphafence build'")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument(
-        "--area", metavar="MISSION.plan", help="operating area: the mission's positions"
+        "--area",
+        metavar="MISSION.plan",
+        help="fly this mission: fences near its legs (the way back included)",
     )
     where.add_argument(
         "--bbox", type=bbox, metavar="MINLON,MINLAT,MAXLON,MAXLAT", help="operating area: a box"
@@ -39,13 +42,16 @@ def register(sub):
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
     )
     p.add_argument(
-        "--figure", metavar="PNG", help="draw the onboard fences over the full-resolution ones"
+        "--figure",
+        metavar="PNG",
+        help="draw the onboard fences over the full-resolution ones, the path and the corridor",
     )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    """Compile the fences for the area, write the onboard plan (and waypoint file); exit 0."""
+    """Compile the fences for the flight path or box, write the onboard plan (and waypoint
+    file); exit 0."""
     records = read_fences(args.fences)
     result = compile_from_args(args, records)
     out = {

@@ -243,10 +243,10 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--distance",
-        type=float,
+        type=non_negative("--distance", "metres"),
         default=2000.0,
         metavar="M",
-        help="fences within M metres of the area (default 2000)",
+        help="fences within M metres of the mission's flight path or of the box (default 2000)",
     )
     p.add_argument(
         "--keep-in", type=float, metavar="M", help="add an inclusion fence M metres around the area"
@@ -300,8 +300,10 @@ def storage_profile(args):
 
 
 def compile_from_args(args, records):
-    """Compile ``records`` for the operating area and storage :func:`add_compile_options` and
-    the verb's ``--area`` / ``--bbox`` describe.
+    """Compile ``records`` for where the vehicle flies and the storage that
+    :func:`add_compile_options` and the verb's ``--area`` / ``--bbox`` describe: the fences
+    within ``--distance`` of the mission's flight path (its legs in order, the way back
+    included), or of the box.
 
     Returns
     -------
@@ -309,10 +311,11 @@ def compile_from_args(args, records):
     """
     import shapely
 
-    from alphafence.onboard.compile import compile_fences, operating_area_from_plan
+    from alphafence.onboard.compile import compile_fences
+    from alphafence.onboard.corridor import flight_path_from_plan
 
     if getattr(args, "area", None):
-        area, _ = operating_area_from_plan(args.area)
+        area = flight_path_from_plan(args.area)
     else:
         area = shapely.box(*args.bbox)
     return compile_fences(

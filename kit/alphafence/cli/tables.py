@@ -45,8 +45,35 @@ def stats_table(cmp, opts) -> Table:
     return t
 
 
+def corridor_line(result) -> str:
+    """One line on the onboard fence's overshoot within the corridor of a compilation.
+
+    Parameters
+    ----------
+    result : alphafence.onboard.compile.CompileResult
+
+    Returns
+    -------
+    str
+        Empty when the compilation has no corridor.
+    """
+    c, o = result.corridor, result.overshoot
+    if c is None or o is None:
+        return ""
+    where = "the flight path" if c.of_path else "the area"
+    size = f"{c.area.area / 1e6:.2f} km²" if not c.area.is_empty else "no area"
+    if o.fenced_m2 <= 0:
+        return f"corridor within {c.distance_m:g} m of {where} ({size}): no fence in it"
+    return (
+        f"corridor within {c.distance_m:g} m of {where} ({size}): the onboard fence forbids "
+        f"{o.added_m2 / 1e4:.2f} ha there that the full-resolution fences allow, "
+        f"overshoot {o.ratio:.3f} of their {o.fenced_m2 / 1e4:.2f} ha"
+    )
+
+
 def compile_report(result) -> None:
-    """Print what a compilation stored, piece by piece, and notes on what it left out or merged.
+    """Print what a compilation stored, piece by piece, its overshoot within the corridor, and
+    notes on what it left out or merged.
 
     Parameters
     ----------
@@ -54,9 +81,9 @@ def compile_report(result) -> None:
     """
     t = Table(
         title=f"{len(result.items)} items, {result.bytes_used} of {result.profile.bytes} bytes "
-        f"({result.profile.name}); area added {result.loss_m2 / 1e4:.2f} ha"
+        f"({result.profile.name}); area added in the corridor {result.loss_m2 / 1e4:.2f} ha",
     )
-    for col in ("fence(s)", "kind", "stored as", "items", "bytes", "area lost m²"):
+    for col in ("fence(s)", "kind", "stored as", "items", "bytes", "lost in corridor m²"):
         t.add_column(col, justify="left" if col in ("fence(s)", "kind", "stored as") else "right")
     for p in result.pieces:
         o = p.chosen
@@ -78,6 +105,8 @@ def compile_report(result) -> None:
             f"{o.loss:.0f}",
         )
     out_console.print(t)
+    if corridor_line(result):
+        out_console.print(corridor_line(result), highlight=False)
     if result.dropped:
         err_console.print(
             f"[yellow]note:[/] {len(result.dropped)} fence(s) farther than the selection distance were left out"

@@ -3,12 +3,14 @@
 ArduPilot keeps fences in a few hundred bytes (Copter: 560 bytes, at most 70 items): a
 polygon costs 2 + 8 bytes a vertex (one item a vertex), a circle 13 bytes (one item), the
 return point 9, plus a 4-byte header and a 1-byte end marker. The compiler picks the fences
-near the operating area and chooses, per fence, a circle or a polygon of k vertices, each
+within the selection distance of the flight path (or of an operating box): the *corridor*
+(``onboard.corridor``), and chooses, per fence, a circle or a polygon of k vertices, each
 simplified *outward* (keep-out) or *inward* (keep-in) so the onboard fence still contains
-(or stays inside) the fence it stands for, to lose the least area within the budget
-(``onboard.options``). When even the cheapest choice does not fit, the nearest fences are
-merged (an alpha shape of the two; ``onboard.merge``). Coordinates are rounded to MAVLink's
-1e-7 degrees, and every emitted polygon is re-checked after rounding (``onboard.emit``).
+(or stays inside) the fence it stands for, to lose the least airspace in the corridor within
+the budget (``onboard.options``). When even the cheapest choice does not fit, neighbouring
+fences are merged, those whose merge costs least in the corridor first (an alpha shape of
+the two; ``onboard.merge``). Coordinates are rounded to MAVLink's 1e-7 degrees, and every
+emitted polygon is re-checked after rounding (``onboard.emit``).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from alphafence.errors import InputError
 from alphafence.geo.alpha import outer_polygons
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.storage import END_BYTES, HEADER_BYTES, RETURN_BYTES, Profile, storage_bytes
+from alphafence.onboard.corridor import Corridor, LossModel, Overshoot, overshoot
 from alphafence.onboard.emit import emit_items
 from alphafence.onboard.merge import fit_by_merging, merge_to_upgrade, upgrade
 from alphafence.onboard.options import Piece, piece_options
@@ -46,6 +49,11 @@ class CompileResult:
         The site ids of each merge made to fit the storage.
     return_point : tuple, optional
         ``(lon, lat)`` of the return point.
+    corridor : Corridor, optional
+        Where the vehicle flies (metric): the flight path or box, and the selection distance.
+    overshoot : Overshoot, optional
+        The onboard fence's overshoot within the corridor: airspace it forbids there that
+        the full-resolution fences allow, relative to what they forbid there.
     """
 
     items: list
@@ -55,6 +63,8 @@ class CompileResult:
     dropped: list = field(default_factory=list)  # fences far from the area (not compiled)
     merges: list = field(default_factory=list)  # [(sources...)] merged to fit
     return_point: tuple | None = None
+    corridor: Corridor | None = None
+    overshoot: Overshoot | None = None
 
     @property
     def bytes_used(self) -> int:
@@ -63,12 +73,16 @@ class CompileResult:
 
     @property
     def loss_m2(self) -> float:
-        """Square metres the onboard fence adds (keep-out) or gives up (keep-in) in all."""
+        """Square metres the onboard fence adds (keep-out) or gives up (keep-in), piece by
+        piece, as the compiler counts them: in the corridor (area outside it counts
+        ``corridor.LOSS_OUTSIDE`` as much)."""
         return sum(p.chosen.loss for p in self.pieces)
 
 
 def operating_area_from_plan(path):
-    """The operating area of a mission and its first position.
+    """The convex hull of a mission's positions and its first position (what the compiler
+    selected fences around before it followed the flight path,
+    :func:`alphafence.onboard.corridor.flight_path_from_plan`).
 
     Parameters
     ----------
@@ -97,24 +111,26 @@ def compile_fences(
     return_point=None,
     max_items=None,
 ) -> CompileResult:
-    """Fit the fences near an operating area into a vehicle's fence storage.
+    """Fit the fences near a flight path (or an operating area) into a vehicle's fence storage.
 
     Warning layers are left to the companion; keep-out and keep-in fences within
-    ``distance_m`` of ``area`` are each stored as the option that loses the least area
-    within the budget, merging the nearest keep-out fences when they do not fit otherwise.
+    ``distance_m`` of ``area`` (they reach into the corridor) are each stored as the option
+    that loses the least airspace in the corridor within the budget, merging neighbouring
+    keep-out fences when they do not fit otherwise.
 
     Parameters
     ----------
     records : list of FenceRecord
         The fences, as ``read_fences`` returns them.
     area : shapely geometry
-        The operating area (WGS84 lon, lat).
+        Where the vehicle flies (WGS84 lon, lat): a flight path (LineString or Point, e.g.
+        :func:`~alphafence.onboard.corridor.flight_path_from_plan`) or an area (Polygon).
     profile : Profile
         The vehicle's fence storage.
     distance_m : float
-        Fences farther than this from the area are left out.
+        Fences farther than this from ``area`` are left out; within it lies the corridor.
     keep_in_m : float, optional
-        Also store an inclusion fence this many metres around the area (kept generous:
+        Also store an inclusion fence this many metres around ``area`` (kept generous:
         simplified outward, at most 8 vertices where that loses nothing).
     return_point : tuple, optional
         ``(lon, lat)`` of the fence's return point.
@@ -137,17 +153,21 @@ def compile_fences(
     >>> from alphafence.mavlink.storage import PROFILES
     >>> square = shapely.box(14.500, 35.900, 14.501, 35.901)
     >>> fence = FenceRecord("hospital/way/1", "keep_out", square)
-    >>> result = compile_fences([fence], square.buffer(0.01), PROFILES["copter"])
+    >>> path = shapely.LineString([(14.49, 35.9), (14.51, 35.9)])
+    >>> result = compile_fences([fence], path, PROFILES["copter"])
     >>> len(result.items), result.bytes_used, result.pieces[0].chosen.label
     (4, 39, '4-gon')
+    >>> round(result.overshoot.ratio, 3)  # the 5 cm pad, and a square is no rectangle in metres
+    0.002
     """
     frame = LocalFrame.around(area)
     area_local = frame.geom_to_local(area)
+    corridor = Corridor.around(area_local, distance_m)
     if max_items is not None:
         profile = Profile(
             profile.name, min(profile.items, max_items), profile.bytes, profile.max_polygon_vertices
         )
-    pieces, dropped = [], []
+    pieces, dropped, full = [], [], ([], [])
     for rec in records:
         if rec.kind not in ("keep_out", "keep_in"):
             continue
@@ -158,6 +178,7 @@ def compile_fences(
         if shapely.distance(local, area_local) > distance_m:
             dropped.append(rec.site_id)
             continue
+        full[rec.kind == "keep_in"].append(local)
         circle = None
         if rec.circle is not None:
             x, y = frame.to_local(rec.circle[0], rec.circle[1])
@@ -166,6 +187,9 @@ def compile_fences(
             opts = piece_options(part, rec.kind == "keep_in", profile.max_polygon_vertices, circle)
             if opts:
                 pieces.append(Piece([rec.site_id], rec.kind == "keep_in", part, opts))
+    model = LossModel(corridor, full[0])
+    for p in pieces:
+        model.rescore(p)
     fixed_items, fixed_bytes = 0, HEADER_BYTES + END_BYTES
     if return_point is not None:
         fixed_items += 1
@@ -190,11 +214,25 @@ def compile_fences(
     budget_items = profile.items - fixed_items
     budget_bytes = profile.bytes - fixed_bytes
     merges = []
-    fit_by_merging(pieces, budget_items, budget_bytes, profile, merges)
+    fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model)
     upgrade(pieces, budget_items, budget_bytes)
-    merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges)
+    merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, model=model)
     items = emit_items(pieces, frame, return_point)
-    result = CompileResult(items, pieces, profile, frame, dropped, merges, return_point)
+    onboard = tuple(
+        [p.chosen.local for p in pieces if p.inclusion == kind and not (kind and p.grows)]
+        for kind in (False, True)
+    )
+    result = CompileResult(
+        items,
+        pieces,
+        profile,
+        frame,
+        dropped,
+        merges,
+        return_point,
+        corridor,
+        overshoot(corridor, onboard, full),
+    )
     used = storage_bytes(items)
     if len(items) > profile.items or used > profile.bytes:  # pragma: no cover - guarded above
         raise InputError(

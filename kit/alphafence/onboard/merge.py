@@ -3,6 +3,7 @@ cheapest options fit, then spending what is left where it saves the most area.""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -33,10 +34,12 @@ def _cheapest_circle(piece):
     return c
 
 
-def _best_merge(pieces, neighbours=4):
+def _best_merge(pieces, neighbours=4, model=None):
     """The pair of neighbouring keep-out pieces whose merge adds the least area, estimated
     as the larger of what their convex hull adds (large pieces stay polygons) and what
-    their common circle adds (small pieces end up as circles)."""
+    their common circle adds (small pieces end up as circles); in the corridor, with a
+    ``model``."""
+    area = shapely.area if model is None else model.corridor.weighted_area
     outs = [i for i, p in enumerate(pieces) if not p.inclusion]
     if len(outs) < 2:
         return None
@@ -55,20 +58,33 @@ def _best_merge(pieces, neighbours=4):
             [shapely.GeometryCollection([geoms[i], geoms[j]]) for i, j in zip(a, b)], dtype=object
         )
     )
-    hull_cost = shapely.area(both) - shapely.area(hulls[a]) - shapely.area(hulls[b])
+    hull_area = area(hulls)
+    hull_cost = area(both) - hull_area[a] - hull_area[b]
     # small pieces end up as circles: what their common circle adds counts too
     c = np.array([_cheapest_circle(pieces[i]) for i in outs])
     x, y, r = c[:, 0], c[:, 1], c[:, 2]
     d = np.hypot(x[a] - x[b], y[a] - y[b])
     big = np.maximum(r[a], r[b])
     R = np.where(d + np.minimum(r[a], r[b]) <= big, big, (d + r[a] + r[b]) / 2)
-    circle_cost = np.pi * (R**2 - r[a] ** 2 - r[b] ** 2)
+    if model is None:
+        circle_cost = np.pi * (R**2 - r[a] ** 2 - r[b] ** 2)
+    else:
+        own = area(shapely.buffer(shapely.points(x, y), r, quad_segs=8))
+        cx = np.where(R == big, np.where(r[a] >= r[b], x[a], x[b]), 0.0)
+        cy = np.where(R == big, np.where(r[a] >= r[b], y[a], y[b]), 0.0)
+        far = R > big
+        t = np.where(far, (R - r[a]) / np.maximum(d, 1e-12), 0.0)
+        cx = np.where(far, x[a] + (x[b] - x[a]) * t, cx)
+        cy = np.where(far, y[a] + (y[b] - y[a]) * t, cy)
+        common = area(shapely.buffer(shapely.points(cx, cy), R, quad_segs=8))
+        circle_cost = common - own[a] - own[b]
     cost = np.maximum(hull_cost, circle_cost)
     j = int(np.argmin(cost))
     return float(cost[j]), outs[a[j]], outs[b[j]]
 
 
-def _merge(pieces, a, b, profile, merges):
+def _merge(pieces, a, b, profile, merges, model=None):
+    pair_of = (pieces[a], pieces[b])
     pair = shapely.GeometryCollection([pieces[a].local, pieces[b].local])
     try:
         joined, _ = alpha_shape(shapely.union(pieces[a].local, pieces[b].local))
@@ -76,19 +92,27 @@ def _merge(pieces, a, b, profile, merges):
         joined = None
     if joined is None or joined.geom_type != "Polygon":  # not joined into one piece: the hull
         joined = shapely.convex_hull(pair)
+    required = shapely.union(*(p.local if p.required is None else p.required for p in pair_of))
+    options = piece_options(joined, False, profile.max_polygon_vertices)
+    gap = max(joined.area - required.area, 0.0)  # what the merge fills between the fences
+    for o in options:
+        o.loss += gap
     merged = Piece(
         pieces[a].sources + pieces[b].sources,
         False,
         joined,
-        piece_options(joined, False, profile.max_polygon_vertices),
+        options,
         merged=True,
+        required=required,
     )
+    if model is not None:
+        model.rescore(merged)
     merges.append(tuple(merged.sources))
     pieces[a] = merged
     del pieces[b]
 
 
-def fit_by_merging(pieces, budget_items, budget_bytes, profile, merges):
+def fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model=None):
     """Merge the cheapest pair of neighbouring keep-out pieces until every piece's cheapest
     option fits the budget.
 
@@ -102,6 +126,8 @@ def fit_by_merging(pieces, budget_items, budget_bytes, profile, merges):
         The vehicle's storage (its polygon vertex limit; its name for the message).
     merges : list
         The ``sources`` of every merge made are appended.
+    model : LossModel, optional
+        Counts area in the corridor; without it, everywhere alike.
 
     Raises
     ------
@@ -112,48 +138,106 @@ def fit_by_merging(pieces, budget_items, budget_bytes, profile, merges):
         items, nbytes = totals(pieces)
         if items <= budget_items and nbytes <= budget_bytes:
             return
-        best = _best_merge(pieces)
+        best = _best_merge(pieces, model=model)
         if best is None:
             raise InputError(
                 "compile",
                 f"the fences near the area do not fit a {profile.name} "
                 f"({items} items / {nbytes} bytes for {budget_items} / {budget_bytes})",
             )
-        _merge(pieces, best[1], best[2], profile, merges)
+        _merge(pieces, best[1], best[2], profile, merges, model)
 
 
-def merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, rounds=40):
-    """Merge two small neighbours when the storage it frees buys a larger saving elsewhere
-    (typically: two substations share a circle so the airport keeps its shape).
+def merge_to_upgrade(
+    pieces, budget_items, budget_bytes, profile, merges, rounds=40, model=None, lookahead=4
+):
+    """Merge small neighbours when the storage it frees buys a larger saving elsewhere
+    (typically: substations share a circle so the airport keeps its shape).
 
-    Each round tries the cheapest merge followed by :func:`upgrade`, and keeps it only when
-    the total area lost goes down. ``pieces`` and ``merges`` change in place.
+    Each round tries up to ``lookahead`` of the cheapest merges in a row, each followed by
+    :func:`upgrade` (one circle's 13 bytes rarely buy a better polygon; a few do), and keeps
+    the shortest run that lowers the total area lost. ``pieces`` and ``merges`` change in
+    place; ``model`` as for :func:`fit_by_merging`.
     """
     for _ in range(rounds):
-        best = _best_merge(pieces)
-        if best is None:
-            return
-        trial = [
-            Piece(p.sources, p.inclusion, p.local, p.options, p.choice, p.merged, p.outward)
-            for p in pieces
-        ]
+        if all(p.choice == len(p.options) - 1 for p in pieces):
+            return  # every piece has its best shape: a merge could only add area
         before = sum(p.chosen.loss for p in pieces)
+        trial = [dataclasses.replace(p) for p in pieces]
         trial_merges = []
-        _merge(trial, best[1], best[2], profile, trial_merges)
-        upgrade(trial, budget_items, budget_bytes)
-        after = sum(p.chosen.loss for p in trial)
-        if after >= before:
+        for _step in range(lookahead):
+            best = _best_merge(trial, model=model)
+            if best is None:
+                return
+            _merge(trial, best[1], best[2], profile, trial_merges, model)
+            upgrade(trial, budget_items, budget_bytes)
+            if sum(p.chosen.loss for p in trial) < before:
+                break
+        else:
             return
         pieces[:] = trial
         merges.extend(trial_merges)
 
 
-def upgrade(pieces, budget_items, budget_bytes):
-    """Greedy multiple-choice knapsack: spend the budget where it saves most area.
+DP_STATES = 250_000  # the exact allocation runs when its table is at most this large
+ITEM_MIN_BYTES = 8  # no fence item takes fewer bytes (a vertex 8, a circle 13, a return point 9)
 
-    Repeatedly moves the piece whose next better option saves the most area per share of
-    the budget it costs, while the budget allows; each piece's ``choice`` changes in place.
+
+def upgrade(pieces, budget_items, budget_bytes):
+    """Choose each piece's option so that together they lose the least area within the
+    budget (a multiple-choice knapsack); each piece's ``choice`` changes in place.
+
+    Small budgets (a board's own storage) are solved exactly by dynamic programming over the
+    bytes (and the items, when an item limit binds before the bytes do): the greedy choice
+    spends 13-byte steps on small fences and never affords the 70 bytes that turn an
+    airport's circle into a polygon. Large budgets (file storage) are filled greedily: the
+    piece whose next better option saves the most area per share of the budget first.
     """
+    if not _allocate(pieces, budget_items, budget_bytes):
+        _greedy(pieces, budget_items, budget_bytes)
+
+
+def _allocate(pieces, budget_items, budget_bytes):
+    """The exact allocation, when the table is small enough; False when it is not run (or
+    nothing fits, which the caller's merging rules out)."""
+    if not pieces:
+        return True
+    dense = any(o.items * ITEM_MIN_BYTES > o.bytes for p in pieces for o in p.options)
+    # the bytes bound the items unless the item limit is lower (or an item is under 8 bytes)
+    n_items = budget_items if dense or budget_items * ITEM_MIN_BYTES < budget_bytes else 0
+    if (budget_bytes + 1) * (n_items + 1) > DP_STATES:
+        return False
+    shape = (budget_bytes + 1, n_items + 1)
+    best = np.full(shape, np.inf)
+    best[0, 0] = 0.0
+    picks = []
+    for p in pieces:
+        new = np.full(shape, np.inf)
+        pick = np.full(shape, -1, dtype=np.int16)
+        for j, o in enumerate(p.options):
+            di = o.items if n_items else 0
+            if o.bytes > budget_bytes or di > n_items:
+                continue
+            cand = np.full(shape, np.inf)
+            cand[o.bytes :, di:] = best[: shape[0] - o.bytes, : shape[1] - di] + o.loss
+            better = cand < new
+            new[better] = cand[better]
+            pick[better] = j
+        best = new
+        picks.append(pick)
+    at = np.unravel_index(int(np.argmin(best)), shape)
+    if not np.isfinite(best[at]):
+        return False
+    b, i = int(at[0]), int(at[1])
+    for p, pick in zip(reversed(pieces), reversed(picks)):
+        j = int(pick[b, i])
+        p.choice = j
+        b -= p.options[j].bytes
+        i -= p.options[j].items if n_items else 0
+    return True
+
+
+def _greedy(pieces, budget_items, budget_bytes):
     while True:
         items, nbytes = totals(pieces)
         best = None

@@ -68,7 +68,8 @@ def fence_map(fences, sites, path, title="AlphaFence fences", note=None):
 
 def onboard_figure(records, result, path):
     """Draw the compiled onboard fences (blue, keep-in green) over the full-resolution fences
-    (red), in metres of the compile's frame, and save it as PNG.
+    (red), with the flight path (black) and its corridor (grey, dashed), in metres of the
+    compile's frame, and save it as PNG.
 
     Parameters
     ----------
@@ -79,8 +80,16 @@ def onboard_figure(records, result, path):
     path : str or Path
         The PNG to write.
     """
+    import shapely
+    from matplotlib.lines import Line2D
+
     fig, ax = subplots(figsize=(9, 9))
     frame = result.frame
+    corridor = result.corridor
+    if corridor is not None and not corridor.area.is_empty:
+        draw_polygons(
+            ax, corridor.area, edgecolor="#757575", facecolor="#9e9e9e14", lw=1.0, ls="--"
+        )
     dropped = set(result.dropped)
     for r in records:
         if r.kind in ("keep_out", "keep_in") and r.site_id not in dropped:
@@ -96,13 +105,40 @@ def onboard_figure(records, result, path):
         draw_polygons(
             ax, o.local, edgecolor="#2e7d32" if p.inclusion else "#1565c0", facecolor="none", lw=1.3
         )
+    handles = [
+        Line2D([], [], color="#c62828", label="full-resolution fence"),
+        Line2D([], [], color="#1565c0", lw=1.3, label="onboard fence"),
+    ]
+    if corridor is not None:
+        if corridor.of_path:
+            for line in shapely.get_parts(corridor.path):
+                xy = shapely.get_coordinates(line)
+                ax.plot(xy[:, 0], xy[:, 1], "-o", color="#212121", lw=1.2, ms=3)
+            handles.append(Line2D([], [], color="#212121", marker="o", ms=3, label="flight path"))
+        elif not corridor.area.is_empty:
+            draw_polygons(ax, corridor.path, edgecolor="#212121", facecolor="none", lw=1.0)
+            handles.append(Line2D([], [], color="#212121", label="operating area"))
+        if not corridor.area.is_empty:
+            handles.append(
+                Line2D(
+                    [], [], color="#757575", ls="--", label=f"corridor ({corridor.distance_m:g} m)"
+                )
+            )
+    ax.legend(handles=handles, loc="upper right", fontsize=8)
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
+    over = result.overshoot
+    note = (
+        f"\novershoot in the corridor {over.ratio:.3f} (airspace the onboard fence adds there, "
+        "relative to what the full-resolution fences forbid there)"
+        if over is not None and over.fenced_m2 > 0
+        else ""
+    )
     ax.set_title(
         f"Onboard fences: {len(result.items)} items, {result.bytes_used}/{result.profile.bytes} bytes "
-        f"(blue) over full-resolution fences (red)",
+        f"(blue) over full-resolution fences (red){note}",
         fontsize=10,
     )
     save_figure(fig, path)
