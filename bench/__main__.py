@@ -52,6 +52,7 @@ def main(argv=None) -> int:
     if args.only in (None, "compile"):
         rows += compile_bench.run(args.osm, build_bench.Row)
         rows += compile_bench.navio2(args.osm, build_bench.Row)
+        rows += compile_bench.corridor(args.osm, build_bench.Row)
     if args.only in (None, "upload"):
         rows += upload_bench.run(build_bench.Row)
     if args.only in (None, "monitor"):

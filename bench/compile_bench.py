@@ -52,6 +52,92 @@ def run(osm, Row):
     ]
 
 
+# issue 11: a mission round the airport area at 560 bytes, its fences chosen along its path
+MISSION = (  # (lon, lat): the SITL home north of the airport, its west end, its east end, home
+    (14.48600, 35.89098),
+    (14.44000, 35.85000),
+    (14.53000, 35.84500),
+    (14.48600, 35.89098),
+)
+CORRIDOR_DISTANCES = (1000.0, 2000.0)  # --distance; 2000 is the default
+
+
+def corridor(osm, Row):
+    """Onboard overshoot within the corridor of a mission round the Malta airport, at a
+    Copter's 560 bytes, against the full-resolution alpha fences, for each distance.
+
+    The mission's legs run from the SITL home north of the airport to its west end, across
+    to its east end and back home, each the route planner's (20 m clearance) around the
+    fences. Within the corridor (the airspace within ``--distance`` of that path) the onboard
+    fence's overshoot is its area outside the restricted areas, relative to the alpha fences'
+    area outside them (both contain the restricted areas): 1x means the onboard fence is as
+    tight there as the alpha fences. The peer is the former selection, by the convex hull of
+    the mission's positions, on the same budget, measured in the same corridor.
+    """
+    import numpy as np
+    import shapely
+
+    from alphafence.onboard.corridor import Corridor, flight_path
+    from alphafence.route.planner import FenceRoadmap
+
+    rules = load_rules()
+    db = read_database([osm], rules)
+    built = build_fences(db.features, rules, BuildOptions())
+    sites = {s.site_id: s for s in built.sites}
+    keep_out = [f for f in built.fences if f.kind == "keep_out"]
+    records = [FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m) for f in keep_out]
+    roadmap = FenceRoadmap(records, 20.0, MISSION)
+    legs = [roadmap.route(a, b)[1] for a, b in zip(MISSION, MISSION[1:])]
+    route = np.concatenate([legs[0]] + [leg[1:] for leg in legs[1:]])
+    path = flight_path(route)
+    hull = shapely.MultiPoint(route).convex_hull
+
+    def over(compiled, frame, area):
+        """(onboard, alpha) area outside the restricted areas within ``area``, m²."""
+        ids = {sid for p in compiled.pieces for sid in p.sources}
+        restricted = shapely.union_all(
+            [frame.geom_to_local(sites[s].frame.geom_to_wgs84(sites[s].geometry)) for s in ids]
+        )
+        alpha = shapely.union_all(
+            [frame.geom_to_local(f.geometry) for f in keep_out if f.site_id in ids]
+        )
+        onboard = shapely.union_all(
+            [
+                frame.geom_to_local(compiled.frame.geom_to_wgs84(p.chosen.local))
+                for p in compiled.pieces
+            ]
+        )
+        r = restricted.intersection(area).area
+        return onboard.intersection(area).area - r, alpha.intersection(area).area - r, len(ids)
+
+    rows = []
+    for distance in CORRIDOR_DISTANCES:
+        t = time.perf_counter()
+        compiled = compile_fences(records, path, PROFILES["copter"], distance_m=distance)
+        seconds = time.perf_counter() - t
+        frame = compiled.frame
+        area = Corridor.around(frame.geom_to_local(path), distance).area
+        onboard_over, alpha_over, n = over(compiled, frame, area)
+        by_hull = compile_fences(records, hull, PROFILES["copter"], distance_m=distance)
+        hull_over, hull_alpha, _ = over(by_hull, frame, area)
+        ratio = onboard_over / alpha_over
+        rows.append(
+            Row(
+                f"compile a mission round Malta airport ({len(route)} waypoints, "
+                f"{shapely.length(compiled.corridor.path) / 1e3:.1f} km), --distance "
+                f"{distance:g}: {n} fences -> {len(compiled.items)} items, "
+                f"{storage_bytes(compiled.items)} B, {len(compiled.merges)} merges "
+                f"({seconds:.2f} s)",
+                f"overshoot in corridor {onboard_over / 1e6:.3f} km² = {ratio:.2f}x alpha",
+                "<= 2x alpha, <= 70 items",
+                f"alpha {alpha_over / 1e6:.3f} km²; hull selection {hull_over / hull_alpha:.2f}x",
+                f"{ratio:.2f}x",
+                ratio <= 2.0 and len(compiled.items) <= 70,
+            )
+        )
+    return rows
+
+
 def navio2(osm, Row):
     """Issue 11 target: the Malta airport area (5 km around the aerodrome, every keep-out fence
     in it) compiled for ``--profile navio2`` (BRD_SD_FENCE = 64 kB): its onboard overshoot
