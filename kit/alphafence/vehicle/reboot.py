@@ -3,7 +3,8 @@
 The reboot is a COMMAND_LONG ``MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN`` with param1 = 1 (the
 autopilot alone: MAVSDK's own reboot also asks for the companion computer, which on a Navio2
 is the Pi this runs on). ArduPilot refuses it while armed and otherwise acknowledges it,
-then restarts (SITL re-executes itself: same process, same working directory, new sockets).
+then restarts: SITL re-executes itself (same process and working directory, new sockets);
+on Linux boards (the Navio2) the process exits and its service must start it again.
 
 That the vehicle came back *rebooted* is read from the vehicle itself: SYSTEM_TIME's
 ``time_boot_ms``, asked for at each heartbeat, falls below what it was before the command.
