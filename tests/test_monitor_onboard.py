@@ -207,7 +207,7 @@ def test_the_option_is_checked():
     from alphafence.errors import InputError
 
     assert MonitorOptions().onboard == "watch"
-    with pytest.raises(InputError, match="onboard: 'on': must be one of watch, off"):
+    with pytest.raises(InputError, match="onboard: 'on': must be one of watch, rolling, off"):
         MonitorOptions(onboard="on")
 
 

@@ -13,7 +13,7 @@ from alphafence.cli.common import (
     out_console,
     signing_key,
 )
-from alphafence.cli.options import non_negative, positive
+from alphafence.cli.options import non_negative, positive, sd_fence_kb, storage_profile
 from alphafence.errors import InputError
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import (
@@ -22,6 +22,7 @@ from alphafence.monitor.options import (
     ONBOARD_MODES,
     REROUTE,
     MonitorOptions,
+    RollingOptions,
 )
 from alphafence.monitor.predict import Braking
 
@@ -81,8 +82,11 @@ def register(sub):
         choices=ONBOARD_MODES,
         default="watch",
         help="watch (default): download the fence the vehicle holds at start and check it as a "
-        "layer of its own (alerts, and --enforce, before the vehicle's own breach); off: not",
+        "layer of its own (alerts, and --enforce, before the vehicle's own breach); rolling: "
+        "also keep the vehicle's fence equal to the fences within its reach, compiled for "
+        "--profile and re-uploaded (verified) in flight; off: not",
     )
+    _add_rolling_options(p)
     p.add_argument(
         "--mavlink-traffic",
         action="store_true",
@@ -108,6 +112,62 @@ def register(sub):
     p.set_defaults(func=run)
 
 
+def _add_rolling_options(p):
+    """The options of ``--onboard rolling``: the storage compiled for and the reach."""
+    from alphafence.mavlink.storage import PROFILES
+
+    g = p.add_argument_group("rolling onboard fence (--onboard rolling)")
+    g.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        help="the vehicle's fence storage (default copter: 70 items, 560 bytes)",
+    )
+    g.add_argument(
+        "--sd-fence-kb",
+        type=sd_fence_kb,
+        metavar="N",
+        help="with --profile navio2: the vehicle's BRD_SD_FENCE, 1-64 kB (default 64)",
+    )
+    g.add_argument(
+        "--speed-limit",
+        type=positive("--speed-limit", "m/s"),
+        metavar="M/S",
+        help="the fastest the vehicle flies (its WPNAV_SPEED, LOIT_SPEED; default 10)",
+    )
+    g.add_argument(
+        "--reach-time",
+        type=positive("--reach-time", "seconds"),
+        metavar="S",
+        help="the fence holds every fence the vehicle can reach in S seconds at the speed "
+        "limit, and stop (default 30)",
+    )
+
+
+def _rolling_options(args) -> RollingOptions:
+    """``RollingOptions`` from the rolling flags (refused without ``--onboard rolling``)."""
+    given = [
+        flag
+        for flag, value in (
+            ("--profile", args.profile),
+            ("--sd-fence-kb", args.sd_fence_kb),
+            ("--speed-limit", args.speed_limit),
+            ("--reach-time", args.reach_time),
+        )
+        if value is not None
+    ]
+    if args.onboard != "rolling":
+        if given:
+            raise InputError(given[0], "sizes the rolling onboard fence: add --onboard rolling")
+        return RollingOptions()
+    args.profile = args.profile or "copter"
+    extra = {}
+    if args.speed_limit is not None:
+        extra["speed_mps"] = args.speed_limit
+    if args.reach_time is not None:
+        extra["lookahead_s"] = args.reach_time
+    return RollingOptions(profile=storage_profile(args), **extra)
+
+
 def _not_reroute(flag):
     """An argparse type for actions that cannot be a re-route (breach and failsafes)."""
 
@@ -123,8 +183,6 @@ def _not_reroute(flag):
 
 def run(args) -> int:
     """Monitor the flight until Ctrl-C or SIGTERM; exit 0, or 3 when the link fails."""
-    check_trust(args, args.fences)
-    fences = FenceSet.from_geojson(args.fences)
     options = MonitorOptions(
         horizon_s=args.horizon,
         enforce=args.enforce,
@@ -137,7 +195,10 @@ def run(args) -> int:
         braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
         reroute_clearance_m=args.reroute_clearance,
         onboard=args.onboard,
+        rolling=_rolling_options(args),
     )
+    check_trust(args, args.fences)
+    fences = FenceSet.from_geojson(args.fences)
     args.key = signing_key(args)
     if args.log:
         from alphafence.monitor.eventlog import check_log_path
@@ -185,6 +246,13 @@ def _echo(event):
         out_console.print(
             f"{event['time']:.1f} onboard fence: {event['items']} items ({kinds}), "
             f"{event['forbidden_beyond_m2']} m² forbidden beyond the full-resolution fences",
+            soft_wrap=True,
+        )
+    elif event["event"] == "onboard_upload":
+        out_console.print(
+            f"{event['time']:.1f} onboard fence uploaded ({event['reason']}): {event['items']} "
+            f"items, {event['bytes']} B, {event['fences']} fences within {event['radius_m']} m, "
+            f"verified in {event['seconds']} s",
             soft_wrap=True,
         )
     elif event["event"] != "telemetry_resumed":

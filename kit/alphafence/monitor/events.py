@@ -78,6 +78,8 @@ def alert_text(event) -> str | None:
     >>> alert_text({"event": "level", "level": "IMMINENT", "time_to_breach_s": 3.2,
     ...             "onboard_only": True, "onboard": "excl circle 5 #46"})
     'AF IMMINENT ONBOARD ONLY excl circle 5 #46 3s'
+    >>> alert_text({"event": "onboard_upload_failed", "stage": "upload"})
+    'AF onboard upload failed: old fence kept'
     """
     kind = event["event"]
     if kind == "level":
@@ -101,4 +103,8 @@ def alert_text(event) -> str | None:
         return "AF onboard fence unreadable"
     if kind == "onboard_none":
         return "AF no onboard fence"
+    if kind == "onboard_upload_failed":
+        return f"AF onboard {event.get('stage', 'upload')} failed: old fence kept"[:50]
+    if kind == "onboard_behind":
+        return "AF onboard fence behind the vehicle's reach"
     return None

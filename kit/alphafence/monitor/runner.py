@@ -71,6 +71,9 @@ class Monitor:
         Actions and alerts to the vehicle.
     reroute : RerouteFlight
         Re-routes (``--imminent-action reroute``).
+    rolling : RollingFence or None
+        The rolling onboard fence (``--onboard rolling``): each new position may start a
+        re-upload (:mod:`alphafence.monitor.rolling`).
     """
 
     def __init__(self, vehicle, fences, options, log: EventLog, rate_hz=10.0, observers=()):
@@ -89,6 +92,13 @@ class Monitor:
         self.reroute = RerouteFlight(
             vehicle, self.engine, self.commands, log, self.latest, self.handle, self._spawn
         )
+        self.rolling = None  # --onboard rolling: alphafence.monitor.rolling.RollingFence
+        if options.onboard == "rolling":
+            from alphafence.monitor.rolling import RollingFence
+
+            self.rolling = RollingFence(
+                vehicle, fences, options.rolling, options.braking, self.handle, self.reload_onboard
+            )
         self.feeds = self._feeds()
         for observer in observers:
             self.add_observer(observer)
@@ -150,10 +160,11 @@ class Monitor:
             asyncio.create_task(self._follow(name, feed), name=name)
             for name, feed in self.feeds.items()
         ]
-        if self.engine.options.onboard == "watch":  # the checks start on the fences meanwhile
-            self.tasks.append(
-                asyncio.create_task(self.reload_onboard("start"), name="onboard:start")
-            )
+        if self.engine.options.watch_onboard:  # the checks start on the fences meanwhile
+            start = asyncio.create_task(self.reload_onboard("start"), name="onboard:start")
+            self.tasks.append(start)
+            if self.rolling is not None:  # one fence transfer at a time
+                self.rolling.after = start
         try:
             while not stop.is_set():
                 with contextlib.suppress(asyncio.TimeoutError):
@@ -164,6 +175,8 @@ class Monitor:
                     sample = latest_sample(self.latest)
                     if sample is not None:
                         events += self._step(sample)
+                        if self.rolling is not None:  # a re-upload, when due, as a task
+                            self.rolling.consider(sample)
                 events += self.engine.tick(time.monotonic())
                 if time.monotonic() - self._clock_t > CLOCK_S:  # ED-269 time windows
                     self._clock_t = time.monotonic()
@@ -172,9 +185,10 @@ class Monitor:
                 for e in events:
                     self.handle(e)
         finally:
-            for t in self.tasks + list(self.pending):
+            rolling = [self.rolling.task] if self.rolling and self.rolling.task else []
+            for t in self.tasks + list(self.pending) + rolling:
                 t.cancel()
-            for t in self.tasks + list(self.pending):
+            for t in self.tasks + list(self.pending) + rolling:
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await t
 
