@@ -1,0 +1,164 @@
+"""Recorded flights: a trace of what the monitor was fed, written, read back and replayed.
+
+A trace is JSON lines: a header (``{"trace": ...}``: where it was recorded, at what SITL
+speedup, and the fence the vehicle held, as its items) and then one :class:`Sample` per line,
+as the monitor's engine stepped on it. :func:`replay` feeds a trace to an :class:`Engine` of
+its own, the vehicle's fence loaded as its onboard layer first, as the runner does at start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+
+from alphafence.errors import InputError
+from alphafence.mavlink.items import FenceItem
+from alphafence.monitor.engine import Engine, Sample
+from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.observe import Observer, Step
+from alphafence.monitor.options import MonitorOptions
+
+TRACE_FORMAT = "alphafence-trace-1"
+MAX_TRACE_BYTES = 20_000_000
+
+
+@dataclass
+class Trace:
+    """A recorded flight.
+
+    Attributes
+    ----------
+    recorded : str
+        Where and how it was recorded (e.g. "ArduPilot SITL copter, speedup 5, ...").
+    speedup : float
+        The simulation's speedup: the samples' times are wall seconds, each ``speedup``
+        seconds of flight.
+    onboard_items : list of FenceItem
+        The fence the vehicle held (as downloaded by the monitor at start).
+    samples : list of Sample
+        What the engine stepped on, in order.
+    """
+
+    recorded: str
+    speedup: float = 1.0
+    onboard_items: list = field(default_factory=list)
+    samples: list = field(default_factory=list)
+
+    def to_text(self) -> str:
+        """The trace as JSON lines (the header first)."""
+        header = {
+            "trace": TRACE_FORMAT,
+            "recorded": self.recorded,
+            "speedup": self.speedup,
+            "onboard_items": [dataclasses.astuple(i) for i in self.onboard_items],
+        }
+        lines = [json.dumps(header)]
+        lines += [json.dumps(_rounded(dataclasses.asdict(s))) for s in self.samples]
+        return "\n".join(lines) + "\n"
+
+    @classmethod
+    def from_text(cls, text: str, source: str = "trace") -> Trace:
+        """Read a trace written by :meth:`to_text`; InputError names ``source`` and the line."""
+        lines = [line for line in text.splitlines() if line.strip()]
+        if not lines:
+            raise InputError(source, "empty trace")
+        header = _line(lines[0], source, 1)
+        if not isinstance(header, dict) or header.get("trace") != TRACE_FORMAT:
+            raise InputError(source, f"line 1: not an AlphaFence trace ({TRACE_FORMAT})")
+        try:
+            items = [
+                FenceItem(int(c), float(p), float(x), float(y))
+                for c, p, x, y in header.get("onboard_items", [])
+            ]
+            samples = [Sample(**_line(line, source, n)) for n, line in enumerate(lines[1:], 2)]
+        except (TypeError, ValueError) as exc:
+            raise InputError(source, f"malformed sample or item: {exc}") from None
+        recorded = str(header.get("recorded", ""))
+        return cls(recorded, float(header.get("speedup", 1.0)), items, samples)
+
+    @classmethod
+    def read(cls, path) -> Trace:
+        """Read a trace file (at most 20 MB)."""
+        try:
+            with open(path, "rb") as fh:
+                data = fh.read(MAX_TRACE_BYTES + 1)
+        except OSError as exc:
+            raise InputError(str(path), f"cannot read ({exc.strerror})") from None
+        if len(data) > MAX_TRACE_BYTES:
+            raise InputError(str(path), f"a trace over {MAX_TRACE_BYTES // 10**6} MB")
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            raise InputError(str(path), "not UTF-8") from None
+        return cls.from_text(text, str(path))
+
+
+def _rounded(sample: dict) -> dict:
+    """A sample's floats to what telemetry resolves: 1e-8 degrees, 0.1 ms, 1 mm, 1 mm/s."""
+    places = {"lat": 8, "lon": 8, "t": 4}
+    return {k: round(v, places.get(k, 3)) if isinstance(v, float) else v for k, v in sample.items()}
+
+
+def _line(line, source, n):
+    try:
+        return json.loads(line)
+    except json.JSONDecodeError as exc:
+        raise InputError(source, f"line {n}: not JSON ({exc.msg})") from None
+
+
+class Recorder(Observer):
+    """An observer that keeps every sample the engine stepped on (for a :class:`Trace`)."""
+
+    def __init__(self):
+        self.samples: list = []
+
+    def on_step(self, step: Step) -> None:
+        """Keep the step's sample."""
+        self.samples.append(step.sample)
+
+
+def replay(trace: Trace, fences: FenceSet, options: MonitorOptions | None = None, **fields):
+    """Feed a recorded flight to a fresh engine: the vehicle's fence first (as the onboard
+    layer, when the options watch it and the trace holds one), then every sample.
+
+    Parameters
+    ----------
+    trace : Trace
+    fences : FenceSet
+        The full-resolution fences.
+    options : MonitorOptions, optional
+        Durations are wall seconds (scale them for the trace's speedup, see
+        :func:`speedup_options`).
+    **fields
+        Added to every event (e.g. ``replay=True``).
+
+    Returns
+    -------
+    list of dict
+        Every event the engine decided, in order.
+    """
+    engine = Engine(fences, options)
+    events = []
+    t0 = trace.samples[0].t if trace.samples else None
+    if engine.options.onboard == "watch" and trace.onboard_items:
+        events += engine.load_onboard(trace.onboard_items, t=t0, cause="start")
+    for s in trace.samples:
+        events += engine.step(s)
+    return [{**e, **fields} for e in events]
+
+
+def speedup_options(speedup: float, **kw) -> MonitorOptions:
+    """MonitorOptions for a simulation run ``speedup`` times faster than real time.
+
+    The engine's own durations are wall seconds (telemetry arrival times) while speeds and
+    the braking model are the vehicle's, so the wall-clock ones are scaled: unscaled, at
+    speedup 5, 10 m/s is 50 m/s per wall second, within arrival jitter of the GPS-glitch
+    speed, and the back-off after a pilot's mode change lasts 75 s of flight.
+    """
+    o = MonitorOptions(**kw)
+    o.hold_s /= speedup
+    o.backoff_s /= speedup
+    o.stale_s /= speedup
+    o.max_speed_mps *= speedup
+    return o
