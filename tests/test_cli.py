@@ -177,7 +177,7 @@ def test_bad_options(capsys):
 def test_console_script_runs_the_demo(tmp_path):
     exe = os.path.join(os.path.dirname(sys.executable), "alphafence")
     res = subprocess.run(
-        [exe, "demo", "-o", str(tmp_path)], capture_output=True, text=True, timeout=300
+        [exe, "demo", "-o", str(tmp_path), "--replay"], capture_output=True, text=True, timeout=300
     )
     assert res.returncode == 0, res.stderr
     for name in ("fences.geojson", "fences.plan", "fences.waypoints", "fences.png", "compare.png"):

@@ -1,9 +1,18 @@
-"""alphafence demo: the main job on the shipped synthetic demo scene."""
+"""alphafence demo: the main job on the shipped synthetic demo scene.
+
+Build the fences (and compare the methods), compile them into a copter's 560 bytes, and, when
+an ArduPilot SITL binary is found, upload them to SITL and fly at a fence with the enforcing
+monitor running; without SITL, replay a flight recorded from SITL through the monitor.
+"""
 
 from __future__ import annotations
 
+import asyncio
+import signal
 from importlib import resources
 from pathlib import Path
+
+import shapely
 
 from alphafence.build.compare import compare_methods, telling_sites
 from alphafence.build.fences import METHODS
@@ -11,13 +20,21 @@ from alphafence.build.outputs import build_meta, render
 from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.cli.common import out_console
 from alphafence.cli.tables import stats_table
+from alphafence.formats import qgc_plan
 from alphafence.formats.atomic import write_all
 from alphafence.formats.database import read_database
+from alphafence.formats.fence_geojson import read_fences
 from alphafence.formats.rules import load_rules
+from alphafence.mavlink.storage import PROFILES
+from alphafence.onboard.compile import compile_fences
+from alphafence.onboard.decode import decode_fence
 from alphafence.plots.compare import comparison_figure
 from alphafence.plots.fences import fence_map
+from alphafence.plots.flight import flight_figure
 
 NOTE = "Synthetic demo scene authored by the AlphaFence project (not real places)."
+HOME = (-0.5500, 51.4300)  # lon, lat: the scene's take-off point (the egham SITL home)
+SPEEDUP = 5.0
 
 
 def scene_path() -> Path:
@@ -25,12 +42,19 @@ def scene_path() -> Path:
     return Path(str(resources.files("alphafence").joinpath("data/demo-scene.geojson")))
 
 
+def trace_path() -> Path:
+    """The shipped trace of the demo's flight, recorded from ArduPilot SITL."""
+    return Path(str(resources.files("alphafence").joinpath("data/demo-flight.trace.jsonl")))
+
+
 def register(sub):
     """Add the ``demo`` verb to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "demo",
-        help="build fences for the shipped synthetic demo scene",
-        description="Run the main job on the synthetic demo scene and compare the methods.",
+        help="build fences for the shipped synthetic demo scene and fly at one (SITL or replay)",
+        description="Run the main job on the synthetic demo scene: build and compare fences, "
+        "compile them for a copter and, with ArduPilot SITL, upload them and fly at a fence "
+        "with the enforcing monitor (without SITL: replay a flight recorded from SITL).",
     )
     p.add_argument(
         "-o",
@@ -39,12 +63,55 @@ def register(sub):
         metavar="DIR",
         help="where to write (default demo-out)",
     )
+    p.add_argument(
+        "--replay",
+        action="store_true",
+        help="replay the recorded SITL flight even when a SITL binary is found",
+    )
+    p.add_argument(
+        "--speedup",
+        type=float,
+        default=SPEEDUP,
+        metavar="N",
+        help=f"SITL speedup for the flight (default {SPEEDUP:g})",
+    )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    """Build, draw and compare fences for the demo scene into ``--output-dir``; exit 0."""
+    """Build, draw and compare fences for the demo scene, compile them, and fly (or replay)
+    the demo flight, all into ``--output-dir``; exit 0."""
     out = Path(args.output_dir)
+    fences_path = _build(out)
+    records = read_fences(fences_path)
+    compiled = compile_fences(records, _area(records), PROFILES["copter"])
+    plan_path = out / "onboard.plan"
+    write_all(
+        {
+            plan_path: qgc_plan.dumps(
+                qgc_plan.plan_document(compiled.items, breach_return=compiled.return_point)
+            )
+        }
+    )
+    out_console.print(
+        f"compiled for a copter: {len(compiled.items)} items in {compiled.bytes_used}/"
+        f"{compiled.profile.bytes} bytes -> {plan_path}"
+    )
+    from alphafence.sitl.find import find_sitl_binary
+
+    binary = None if args.replay else find_sitl_binary()
+    if binary is None:
+        why = "--replay" if args.replay else "no ArduPilot SITL binary found"
+        out_console.print(
+            f"{why}: replaying a flight recorded from SITL through the monitor "
+            "(`alphafence sitl --find` says how to get a binary)",
+            soft_wrap=True,
+        )
+        return _replay(out, fences_path, records)
+    return _fly(out, fences_path, records, compiled.items, binary, args.speedup)
+
+
+def _build(out: Path) -> Path:
     scene = scene_path()
     rules = load_rules()
     db = read_database([scene], rules)
@@ -73,4 +140,122 @@ def run(args) -> int:
         "wrote "
         + ", ".join(str(p) for p in [*paths.values(), out / "fences.png", out / "compare.png"])
     )
+    return paths["geojson"]
+
+
+def _area(records):
+    """The operating area: the box around every fence of the scene."""
+    return shapely.box(*shapely.GeometryCollection([r.geometry for r in records]).bounds)
+
+
+def _fly(out, fences_path, records, items, binary, speedup) -> int:
+    from alphafence.monitor.demo_flight import fly_at_fence
+
+    flight = asyncio.run(
+        _stopped_by_sigterm(
+            fly_at_fence(
+                fences_path,
+                items,
+                HOME,
+                speedup=speedup,
+                say=lambda line: out_console.print(line, soft_wrap=True),
+                echo=_echo,
+                binary=binary,
+            )
+        )
+    )
+    if flight is None:
+        out_console.print("stopped (SIGTERM): SITL stopped, no flight written")
+        return 143
+    trace = flight.trace
+    _write_flight(out, records, trace, flight.events, trace.recorded, "SITL flight")
     return 0
+
+
+async def _stopped_by_sigterm(flight):
+    """Await ``flight``; SIGTERM cancels it (SITL is stopped on the way out, as on Ctrl-C)
+    and gives None."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    terminated = []
+    loop.add_signal_handler(signal.SIGTERM, lambda: (terminated.append(1), task.cancel()))
+    try:
+        return await flight
+    except asyncio.CancelledError:
+        if not terminated:
+            raise
+        return None
+    finally:
+        loop.remove_signal_handler(signal.SIGTERM)
+
+
+def _replay(out, fences_path, records) -> int:
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.monitor.replay import Trace, replay, speedup_options
+
+    trace = Trace.read(trace_path())
+    options = speedup_options(trace.speedup, enforce=True)
+    out_console.print(f"replay of {trace.recorded}", soft_wrap=True)
+    events = replay(trace, FenceSet.from_geojson(fences_path), options, replay=True)
+    for e in events:
+        _echo(e, prefix="replay ")
+    _write_flight(out, records, trace, events, f"REPLAY of {trace.recorded}", "replay")
+    return 0
+
+
+def _write_flight(out, records, trace, events, title, what):
+    import json
+
+    track = [(s.lon, s.lat) for s in trace.samples]
+    flight_figure(
+        records,
+        decode_fence(trace.onboard_items) if trace.onboard_items else [],
+        track,
+        events,
+        out / "flight.png",
+        title=_wrap(f"AlphaFence demo: {title}"),
+        note=NOTE,
+    )
+    write_all(
+        {
+            out / "events.jsonl": "".join(json.dumps(e) + "\n" for e in events),
+            out / "flight.trace.jsonl": trace.to_text(),
+        }
+    )
+    levels = [e["level"] for e in events if e["event"] == "level"]
+    out_console.print(
+        f"{what}: {len(trace.samples)} positions, alert levels {' -> '.join(levels) or 'none'}; "
+        f"wrote {out / 'flight.png'}, {out / 'events.jsonl'}, {out / 'flight.trace.jsonl'}",
+        soft_wrap=True,
+    )
+
+
+def _wrap(title, width=80):
+    words, lines = title.split(), [""]
+    for w in words:
+        if lines[-1] and len(lines[-1]) + len(w) + 1 > width:
+            lines.append("")
+        lines[-1] = f"{lines[-1]} {w}".strip()
+    return "\n".join(lines)
+
+
+def _echo(event, prefix=""):
+    kind = event["event"]
+    if kind == "level":
+        where = event.get("fence") or ""
+        if event.get("onboard_only"):
+            where += " (onboard fence only)"
+        out_console.print(
+            f"{prefix}monitor: {event['previous']} -> {event['level']} {where} "
+            f"({event['reason']}, {event.get('distance_m')} m)",
+            soft_wrap=True,
+        )
+    elif kind == "onboard_fence":
+        kinds = ", ".join(f"{n} {what}" for what, n in event["fences"].items())
+        out_console.print(
+            f"{prefix}monitor: the vehicle's fence loaded: {event['items']} items ({kinds})",
+            soft_wrap=True,
+        )
+    elif kind in ("action", "action_done", "action_failed", "onboard_failed"):
+        detail = event.get("action") or event.get("error") or ""
+        out_console.print(f"{prefix}monitor: {kind} {detail}", soft_wrap=True)
