@@ -14,8 +14,8 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from datetime import datetime, timezone
 from dataclasses import dataclass
+from datetime import datetime, timezone
 
 import numpy as np
 import shapely
