@@ -260,6 +260,19 @@ async def test_a_rolling_upload_is_verified_an_event_and_the_onboard_layer_follo
     assert alerts == ["AF no onboard fence"]  # the start: SITL and the fake hold none
 
 
+async def test_no_fence_within_the_radius_sends_nothing():
+    async with FakeVehicle() as fake:
+
+        async def body(monitor):
+            assert await asyncio.wait_for(monitor.rolling.consider(sample_at(0, -900)), 30)
+            assert monitor.rolling.coverage is not None and monitor.rolling.uploads == 0
+
+        events, _ = await monitor_on(fake, body)
+        assert fake.fence_writes == 0
+    (kept,) = kinds(events, "onboard_kept")
+    assert kept["items"] == 0 and kept["fences"] == 0
+
+
 async def test_a_failed_re_upload_keeps_the_old_fence_and_is_an_event_and_an_alert():
     """(d) of issue 11: the vehicle refuses an item mid-upload; ArduPilot (and the fake)
     keep the fence they had; the monitor says so, alerts, keeps checking against the old fence

@@ -14,7 +14,8 @@ the last item of an upload arrives, and keeps it when an upload fails).
 does it on the event loop: the compile in a worker thread, the upload and read-back as a task
 of its own, every upload an event (``onboard_upload`` or ``onboard_upload_failed``, alerted),
 and the monitor's onboard layer reloaded after each one. A compile that makes the fence the
-vehicle already holds sends nothing (``onboard_kept``).
+vehicle already holds, or no fence at all (none within the radius), sends nothing
+(``onboard_kept``).
 """
 
 from __future__ import annotations
@@ -258,8 +259,9 @@ class RollingFence:
             return self._failed(t0, "compile", str(exc), None, fields)
         fields.update(items=len(compiled.items), bytes=compiled.bytes_used)
         fields.update(merges=len(compiled.merges), compile_s=rounded(time.monotonic() - t0, 3))
-        if self.held is not None and same_items(compiled.items, self.held) == []:
-            self.coverage = target  # the vehicle holds this very fence: nothing to send
+        same = self.held is not None and same_items(compiled.items, self.held) == []
+        if same or not compiled.items:  # nothing to send: it holds this very fence, or no
+            self.coverage = target  # fence is within the radius (what it holds is farther)
             self.handle(new_event("onboard_kept", None, None, **fields))
             return True
         if self.after is not None:  # the monitor's first download: one transfer at a time
