@@ -17,6 +17,7 @@ from bench import (
     compile_bench,
     monitor_bench,
     monitor_cpu_bench,
+    rolling_bench,
     route_bench,
     soak_bench,
     upload_bench,
@@ -34,7 +35,7 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--only",
-        choices=["build", "compile", "upload", "monitor", "route", "soak"],
+        choices=["build", "compile", "upload", "monitor", "rolling", "route", "soak"],
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
     )
     p.add_argument(
@@ -58,6 +59,9 @@ def main(argv=None) -> int:
     if args.only in (None, "monitor"):
         rows += monitor_bench.run(args.osm, build_bench.Row)
         rows += monitor_cpu_bench.run(args.osm, build_bench.Row)
+    if args.only in (None, "rolling"):
+        rows += rolling_bench.overshoot(args.osm, build_bench.Row)
+        rows += rolling_bench.in_flight(args.osm, build_bench.Row)
     if args.only in (None, "route"):
         rows += route_bench.run(args.osm, build_bench.Row)
     if args.only == "soak":
