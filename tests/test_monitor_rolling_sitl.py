@@ -215,3 +215,117 @@ async def test_the_rolling_fence_holds_every_fence_within_reach_along_a_malta_le
         f"containment checks, all held; {results['checks']} monitor checks; flight "
         f"{results['t_end'] - results['t_goto']:.1f} s wall"
     )
+
+
+# -- what the vehicle holds during a re-upload -------------------------------------------
+
+PAUSE_AT = 35  # of 69 items: the upload stops here for PAUSE_S (ArduPilot waits 8 s)
+PAUSE_S = 4.0
+
+
+def _exclusion(frame, xy):
+    """(command, vertex count, lat e7, lon e7) of one exclusion polygon at metric ``xy``."""
+    from alphafence.geo.coords import to_e7
+    from alphafence.mavlink import ids
+
+    lon, lat = frame.to_wgs84(np.array([p[0] for p in xy]), np.array([p[1] for p in xy]))
+    cmd = ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+    return [(cmd, len(xy), to_e7(b), to_e7(a)) for a, b in zip(lon, lat)]
+
+
+class RawLink:
+    """A pymavlink link to SITL that uploads fences item by item (and can stop halfway) and
+    keeps every FENCE_STATUS with its arrival time."""
+
+    def __init__(self, url):
+        from pymavlink import mavutil
+
+        self.c = mavutil.mavlink_connection(url, source_system=255, dialect="ardupilotmega")
+        assert self.c.wait_heartbeat(timeout=30) is not None
+        self.status = []  # (time, breach_status)
+
+    def pump(self, done, timeout):
+        """Read messages until ``done(message)`` (returned) or ``timeout`` (None)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            m = self.c.recv_match(blocking=True, timeout=0.1)
+            if m is None:
+                continue
+            if m.get_type() == "FENCE_STATUS":
+                self.status.append((time.monotonic(), m.breach_status))
+            if done(m):
+                return m
+        return None
+
+    def upload(self, items, pause_at=None):
+        """Upload, answering each request; before sending item ``pause_at``, wait PAUSE_S.
+        Returns (MAV_MISSION_RESULT, {"pause", "resume", "last", "ack": times})."""
+        from alphafence.mavlink import ids
+
+        fence = ids.MAV_MISSION_TYPE_FENCE
+        self.c.mav.mission_count_send(1, 1, len(items), fence)
+        marks = {}
+        kinds = ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK")
+        while True:
+            m = self.pump(lambda m: m.get_type() in kinds and m.mission_type == fence, 10)
+            assert m is not None, "the vehicle stopped asking for items"
+            if m.get_type() == "MISSION_ACK":
+                marks["ack"] = time.monotonic()
+                return m.type, marks
+            if m.seq == pause_at and "pause" not in marks:
+                marks["pause"] = time.monotonic()
+                self.pump(lambda m: False, PAUSE_S)
+                marks["resume"] = time.monotonic()
+            cmd, n, lat, lon = items[m.seq]
+            if m.seq == len(items) - 1:
+                marks["last"] = time.monotonic()
+            self.c.mav.mission_item_int_send(
+                1, 1, m.seq, 0, cmd, 0, 1, n, 0, 0, 0, lat, lon, 0, fence
+            )
+
+
+def _hold_during_upload(url):
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from alphafence.mavlink import ids
+
+    frame = LocalFrame(*START)
+    old = _exclusion(frame, [(-100, -100), (100, -100), (100, 100), (-100, 100)])  # home in it
+    ring = np.linspace(0, 2 * math.pi, 69, endpoint=False)
+    new = _exclusion(frame, [(300 * math.cos(a), -1100 + 300 * math.sin(a)) for a in ring])
+    link = RawLink(url)
+    for name, value in (("FENCE_TYPE", 4), ("FENCE_ACTION", 0), ("FENCE_ENABLE", 1)):
+        link.c.mav.param_set_send(1, 1, name.encode(), value, mav.MAV_PARAM_TYPE_INT8)
+        assert link.pump(lambda m, n=name: m.get_type() == "PARAM_VALUE" and m.param_id == n, 5)
+    link.c.mav.command_long_send(
+        1, 1, ids.MAV_CMD_SET_MESSAGE_INTERVAL, 0, ids.MAVLINK_MSG_ID_FENCE_STATUS, 50_000,
+        0, 0, 0, 0, 0,
+    )  # fmt: skip
+    result, _ = link.upload(old)
+    assert result == mav.MAV_MISSION_ACCEPTED
+    assert link.pump(lambda m: link.status and link.status[-1][1] == 1, 10), "no breach at home"
+    result, marks = link.upload(new, pause_at=PAUSE_AT)
+    assert result == mav.MAV_MISSION_ACCEPTED
+    assert link.pump(lambda m: link.status[-1][1] == 0, 5), "the new fence never took over"
+    return link.status, marks
+
+
+async def test_the_vehicle_keeps_its_fence_until_the_last_item_of_a_re_upload(sitl_factory):
+    """Home inside the old fence's exclusion square (FENCE_STATUS: breach); a re-upload of a
+    69-item fence far away stops for 4 s after 35 items: the old fence stays in force (every
+    FENCE_STATUS meanwhile a breach), and the new one takes over when the last item arrives
+    (the first FENCE_STATUS without a breach within 0.5 s of it; SITL sends them at about
+    5 Hz)."""
+    sitl = await sitl_factory(home=f"{START[1]},{START[0]},80,0", speedup=1)
+    status, marks = await asyncio.wait_for(
+        asyncio.to_thread(_hold_during_upload, sitl.pymavlink_url), 90
+    )
+    during = [b for t, b in status if marks["pause"] <= t <= marks["last"]]
+    assert len(during) >= 10 and set(during) == {1}, during  # the old fence, all along
+    first_clear = next(t for t, b in status if t >= marks["last"] and b == 0)
+    assert first_clear - marks["last"] < 0.5, first_clear - marks["last"]
+    print(
+        f"\n{len(during)} FENCE_STATUS during the re-upload ({PAUSE_S:g} s stopped after "
+        f"{PAUSE_AT} of 69 items), all breach (the old fence); the ACK {1e3 * (marks['ack'] - marks['last']):.0f} ms "
+        f"after the last item, the first status of the new fence {1e3 * (first_clear - marks['last']):.0f} ms after it"
+    )
