@@ -271,3 +271,34 @@ def test_operating_area_from_a_mission(tmp_path):
         == 0
     )
     assert json.loads(out.read_text())["geoFence"]["polygons"]
+
+
+def test_a_needle_spike_stays_clear_of_every_option():
+    """A zero-width spike (a polygon that runs out along a line and back, as the property test
+    found): GEOS bevels the padded spike through its tip, so the tip would sit on the onboard
+    fence's edge and rounding could cut it off; every option must stand clear of it."""
+    from alphafence.onboard.options import PAD_M, piece_options
+
+    needle = shapely.Polygon(
+        [
+            (-1042.3519843136253, 97.9095958535494),
+            (-1296.4487106397955, 97.90959585354915),
+            (-1296.4487106397955, 97.90959585354915),
+            (-1296.4487106397955, 97.90959585354915),
+            (-1296.4487107403434, 97.91159585354586),
+            (-1307.1337232185426, 115.60792937228356),
+            (-1336.2837426193657, 95.3461008968039),
+            (-1355.667327891366, 52.501446135073124),
+            (-1285.2971064179528, -17.976458330811642),
+            (-1240.2906754678288, -31.318704757442546),
+            (-1304.3711860623264, 81.96803382013795),
+            (-1176.443930191033, -11.595365142902155),
+            (-1115.6138304274286, -19.3807073379472),
+            (-1029.3930620288234, 29.99032445790397),
+            (-1097.434007255783, 97.90959585354857),
+        ]
+    )  # found by hypothesis: the edge into the first vertex runs out to it and back
+    assert needle.is_valid
+    for opt in piece_options(needle, False, 255):
+        assert opt.local.covers(needle)
+        assert shapely.distance(opt.local.exterior, needle.exterior) >= 0.9 * PAD_M, opt.label
