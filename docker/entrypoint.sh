@@ -8,7 +8,8 @@
 #   ALPHAFENCE_HORIZON        look-ahead seconds (default 15)
 #   ALPHAFENCE_BREACH_ACTION  rtl | land | brake | none (default rtl)
 #   ALPHAFENCE_IMMINENT_ACTION brake | reroute | rtl | land | none (default brake)
-#   ALPHAFENCE_ONBOARD        watch | off: check the vehicle's own fence as a layer (default watch)
+#   ALPHAFENCE_ONBOARD        watch | off | rolling: check the vehicle's own fence as a layer (default
+#                             watch); rolling also keeps it equal to the fences within reach (copter profile)
 #   ALPHAFENCE_SIGNING_KEY    MAVLink 2 signing key file (read by alphafence itself)
 #   ALPHAFENCE_LOG            JSON-lines event log path
 # Extra arguments are passed on to `alphafence monitor`.
