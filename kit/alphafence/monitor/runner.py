@@ -36,6 +36,7 @@ from alphafence.monitor.reroute_flight import RerouteFlight
 
 TICK_S = 0.1  # the checker wakes at least this often (stale telemetry, time windows)
 CLOCK_S = 1.0  # fences' time windows and ended telemetry streams are looked at this often
+ROLLING_FINISH_S = 20.0  # a fence transfer under way at shutdown may take this long to end
 
 
 class Monitor:
@@ -185,12 +186,26 @@ class Monitor:
                 for e in events:
                     self.handle(e)
         finally:
-            rolling = [self.rolling.task] if self.rolling and self.rolling.task else []
-            for t in self.tasks + list(self.pending) + rolling:
+            for t in self.tasks + list(self.pending):
                 t.cancel()
-            for t in self.tasks + list(self.pending) + rolling:
+            for t in self.tasks + list(self.pending):
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await t
+            await self._finish_rolling()
+
+    async def _finish_rolling(self):
+        """Let a fence transfer under way end before the monitor stops: MAVSDK cannot be
+        interrupted mid-transfer (its call runs on in a worker thread that the event loop's
+        shutdown would wait for), and then the vehicle holds a verified fence or the failure
+        is logged. Bounded by :data:`ROLLING_FINISH_S`."""
+        task = self.rolling.task if self.rolling is not None else None
+        if task is None or task.done():
+            return
+        with contextlib.suppress(asyncio.CancelledError, asyncio.TimeoutError, Exception):
+            await asyncio.wait_for(asyncio.shield(task), ROLLING_FINISH_S)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await task
 
     async def _follow(self, name, feed):
         """Deliver every value of ``feed`` (then tell the observers); a feed that fails is its
