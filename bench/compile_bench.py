@@ -15,7 +15,9 @@ from alphafence.onboard.compile import compile_fences
 AIRPORT = "way/23541031"
 
 
-def run(osm, Row):
+def airport_case(osm):
+    """Malta's alpha fences, its sites by id, the airport's 5 km area, its keep-out fences and
+    their records: what every compile row measures on."""
     rules = load_rules()
     db = read_database([osm], rules)
     result = build_fences(db.features, rules, BuildOptions())
@@ -24,6 +26,11 @@ def run(osm, Row):
     area = airport.frame.geom_to_wgs84(airport.geometry.buffer(5000.0))
     keep_out = [f for f in result.fences if f.kind == "keep_out"]
     records = [FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m) for f in keep_out]
+    return result, sites, area, keep_out, records
+
+
+def run(osm, Row):
+    result, sites, area, keep_out, records = airport_case(osm)
     t = time.perf_counter()
     compiled = compile_fences(records, area, PROFILES["copter"], distance_m=0.0)
     seconds = time.perf_counter() - t
@@ -147,14 +154,7 @@ def navio2(osm, Row):
     same."""
     import math
 
-    rules = load_rules()
-    db = read_database([osm], rules)
-    result = build_fences(db.features, rules, BuildOptions())
-    sites = {s.site_id: s for s in result.sites}
-    airport = next(s for s in result.sites if AIRPORT in s.sources)
-    area = airport.frame.geom_to_wgs84(airport.geometry.buffer(5000.0))
-    keep_out = [f for f in result.fences if f.kind == "keep_out"]
-    records = [FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m) for f in keep_out]
+    result, sites, area, keep_out, records = airport_case(osm)
     ratios = {}
     for name in ("navio2", "copter"):
         t = time.perf_counter()

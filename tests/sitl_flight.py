@@ -14,6 +14,7 @@ import shapely
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.ids import MAV_CMD_SET_MESSAGE_INTERVAL
 from alphafence.mavlink.ids import MAVLINK_MSG_ID_FENCE_STATUS as FENCE_STATUS_ID
+from alphafence.monitor.replay import speedup_options  # noqa: F401 (the flights' options)
 
 # The exclusion square every fenced flight uses, metres east (x) / north (y) of home, and the
 # altitude they fly at.
@@ -182,21 +183,6 @@ async def retry(what, call, timeout):
             if time.monotonic() > deadline:
                 pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
             await asyncio.sleep(1.0)
-
-
-def speedup_options(speedup: float, **kw):
-    """MonitorOptions for SITL at ``speedup``: the engine's own durations are wall seconds
-    (telemetry arrival times) while speeds and the braking model are the vehicle's, so the
-    wall-clock ones are scaled. Unscaled, at speedup 5, 10 m/s is 50 m/s per wall second,
-    within arrival jitter of ``max_speed_mps``, and ``backoff_s`` lasts 75 s of flight."""
-    from alphafence.monitor.options import MonitorOptions
-
-    o = MonitorOptions(**kw)
-    o.hold_s /= speedup
-    o.backoff_s /= speedup
-    o.stale_s /= speedup
-    o.max_speed_mps *= speedup
-    return o
 
 
 async def fence_and_telemetry(vehicle, direct, log, items, poll=0.05):
