@@ -59,7 +59,7 @@ def one_line(exc) -> str:
         (Faults(item_fields={2: {"param1": 0.0}}), "item 2: polygon vertex count 0"),
         (
             Faults(item_fields={3: {"param1": 9.0}}),
-            "item 0: a polygon of 8 vertices does not have 8",
+            "item 3: a polygon of 8 vertices starting at item 0 is broken by",
         ),
         (Faults(item_fields={8: {"param1": math.nan}}), "item 8: parameter 1 is nan"),
         (Faults(item_fields={8: {"param1": -5.0}}), "item 8: circle radius -5"),

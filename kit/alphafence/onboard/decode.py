@@ -167,6 +167,10 @@ def decode_fence(items, source: str = "the vehicle's fence") -> list:
     alphafence.errors.InputError: the vehicle's fence: item 0: a polygon of 3 vertices has only 2 items
     """
     items = list(items)
+    for i, item in enumerate(items):  # each item on its own first, then how they group
+        command, param1, _, _ = _fields(item, i, source)
+        if command in POLYGONS:
+            _vertex_count(param1, i, source)
     fences, counts, i = [], {}, 0
     while i < len(items):
         command, param1, lon, lat = _fields(items[i], i, source)

@@ -13,19 +13,14 @@ import math
 import time
 from dataclasses import dataclass
 
-from alphafence.errors import VehicleError
-from alphafence.geo.coords import from_e7, to_e7, valid_lonlat
+from alphafence.errors import InputError, VehicleError
+from alphafence.geo.coords import from_e7, to_e7
 from alphafence.mavlink import ids
 from alphafence.mavlink.items import (
-    CIRCLE_EXCLUSION,
-    CIRCLE_INCLUSION,
-    MAX_POLYGON_VERTICES,
-    POLYGON_EXCLUSION,
-    POLYGON_INCLUSION,
-    RETURN_POINT,
     FenceItem,
 )
 from alphafence.mavlink.storage import MAX_FILE_ITEMS
+from alphafence.onboard.decode import decode_fence
 
 # ArduPilot abandons a stalled upload 8 s after the last item it received, and until then answers
 # a download with MISSION_ACK(DENIED), which MAVSDK's download ignores (it times out instead).
@@ -117,13 +112,6 @@ def to_raw(items):
     ]
 
 
-FENCE_COMMANDS = {
-    RETURN_POINT: "return point",
-    POLYGON_INCLUSION: "inclusion polygon vertex",
-    POLYGON_EXCLUSION: "exclusion polygon vertex",
-    CIRCLE_INCLUSION: "inclusion circle",
-    CIRCLE_EXCLUSION: "exclusion circle",
-}
 MAX_DOWNLOAD_ITEMS = MAX_FILE_ITEMS
 """The most fence items a download may bring unless the caller knows the vehicle's storage:
 what the largest storage ArduPilot has holds (``BRD_SD_FENCE = 64``: 65535 bytes, 8191
@@ -149,56 +137,32 @@ def from_raw(raw, max_items: int = MAX_DOWNLOAD_ITEMS):
             f"the vehicle sent {len(raw)} fence items (over {max_items}, "
             "more than its fence storage holds)"
         )
-    items = []
-    for i, r in enumerate(raw):
-        items.append(_checked_item(i, r))
-    _check_polygons(items)
+    items = [_raw_item(i, r) for i, r in enumerate(raw)]
+    try:  # positions, commands, radii, vertex counts, polygons: checked where items are decoded
+        decode_fence(items, INVALID)
+    except InputError as exc:
+        raise FenceTransferError(str(exc)) from None
     return items
 
 
-def _bad(i, what):
-    return FenceTransferError(f"the vehicle sent an invalid fence: item {i}: {what}")
+INVALID = "the vehicle sent an invalid fence"
 
 
-def _checked_item(i, r):
+def _raw_item(i, r):
+    """One MAVSDK raw item as a FenceItem: numeric fields, of the fence mission type."""
     try:
         command, mission_type = int(r.command), int(r.mission_type)
         x, y, param1 = int(r.x), int(r.y), float(r.param1)
     except (TypeError, ValueError, OverflowError):
-        raise _bad(i, "a field is not a number") from None
+        raise FenceTransferError(f"{INVALID}: item {i}: a field is not a number") from None
     if mission_type != ids.MAV_MISSION_TYPE_FENCE:
-        raise _bad(
-            i, f"mission type {mission_type}, not a fence item ({ids.MAV_MISSION_TYPE_FENCE})"
+        raise FenceTransferError(
+            f"{INVALID}: item {i}: mission type {mission_type}, not a fence item "
+            f"({ids.MAV_MISSION_TYPE_FENCE})"
         )
-    if command not in FENCE_COMMANDS:
-        raise _bad(i, f"command {command} is not a fence item")
-    lat, lon = from_e7(x), from_e7(y)
-    if not valid_lonlat(lon, lat):
-        raise _bad(i, f"position {lat:.7f}, {lon:.7f} is out of range")
     if not math.isfinite(param1):
-        raise _bad(i, f"parameter 1 is {param1}")
-    if command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION) and not 0 < param1 <= 1e7:
-        raise _bad(i, f"circle radius {param1:g} m")
-    if command in (POLYGON_INCLUSION, POLYGON_EXCLUSION) and not (
-        param1 == int(param1) and 3 <= param1 <= MAX_POLYGON_VERTICES
-    ):
-        raise _bad(i, f"polygon vertex count {param1:g} (3 to {MAX_POLYGON_VERTICES})")
-    return FenceItem(command, param1, lon, lat)
-
-
-def _check_polygons(items):
-    """Each polygon is ``n`` consecutive vertices of one command, each saying ``n``."""
-    i = 0
-    while i < len(items):
-        it = items[i]
-        if it.command not in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
-            i += 1
-            continue
-        n = int(it.param1)
-        group = items[i : i + n]
-        if len(group) < n or any((g.command, g.param1) != (it.command, it.param1) for g in group):
-            raise _bad(i, f"a polygon of {n} vertices does not have {n} matching items")
-        i += n
+        raise FenceTransferError(f"{INVALID}: item {i}: parameter 1 is {param1}")
+    return FenceItem(command, param1, from_e7(y), from_e7(x))
 
 
 def same_items(sent, got) -> list:
