@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 
-.PHONY: install demo test sitl-test bench soak fuzz fuzz-atheris lint clean
+.PHONY: install demo test sitl-test navio2-test bench soak fuzz fuzz-atheris lint clean
 
 install: $(STAMP)
 
@@ -24,6 +24,11 @@ test: $(STAMP)
 sitl-test: $(STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
 	$(BIN)/pytest -q -m sitl
+
+# a Navio2's OS (Debian armhf) under qemu-user, as root: the README's install, the companion's
+# unit tests and a flight against x86 SITL; not part of `make test` (see tests/navio2/run.sh)
+navio2-test: $(STAMP)
+	bash tests/navio2/run.sh
 
 bench: $(STAMP)
 	$(BIN)/python -m bench --osm $(MALTA)

@@ -1,0 +1,241 @@
+#!/usr/bin/env bash
+# `make navio2-test`: the companion on a Navio2's OS, Debian armhf (32-bit Raspberry Pi OS), run
+# under qemu-user on this x86 machine. Needs root (debootstrap, chroot, mounts). Phases, each timed:
+#   userland  debootstrap a Debian SUITE armhf userland ONCE, cached outside the repository in
+#             ${ALPHAFENCE_CACHE:-~/.cache/alphafence}/navio2/SUITE-armhf (complete when its
+#             stamp file is there; rebuilt when it is missing)
+#   install   a fresh overlay over that userland (the cache stays pristine), the kit's source at
+#             /root/alphafence, then the README's `<!-- navio2-install: SUITE -->` blocks, run as
+#             they are written, as root, with a clean environment (env -i): the host's pip and CA
+#             settings stay out (only the machine's extra CA certificates, if it has any, go into
+#             the userland's system trust store, as a Pi behind such a proxy would need)
+#   tests     the unit tests of the companion's code under qemu (SELECTION below)
+#   flight    x86 ArduPilot SITL; the armhf monitor started as the systemd unit starts it
+#             (docker/alphafence-monitor.service: its user, ExecStart and environment, plus
+#             enforce and the SITL port) on SITL's second MAVLink link over loopback; a flight
+#             from the host at a keep-out fence (tests/navio2/flight.py)
+# Environment: NAVIO2_SUITE (trixie | bookworm; default trixie), NAVIO2_PHASES (default
+# "install tests flight"), NAVIO2_TESTS (pytest arguments instead of SELECTION),
+# ALPHAFENCE_FUZZ_EXAMPLES (default 20 here), NAVIO2_KEEP=1 (keep this run's overlay).
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+SUITE=${NAVIO2_SUITE:-trixie}
+PHASES=${NAVIO2_PHASES:-install tests flight}
+CACHE=${ALPHAFENCE_CACHE:-$HOME/.cache/alphafence}/navio2
+BASE=$CACHE/$SUITE-armhf
+STAMP=$BASE/.alphafence-userland
+RUN=$CACHE/$SUITE-run
+ROOTFS=$RUN/root
+MIRROR=${NAVIO2_MIRROR:-http://deb.debian.org/debian}
+HOSTPY=$ROOT/.venv/bin/python
+FUZZ=${ALPHAFENCE_FUZZ_EXAMPLES:-20}
+
+# The companion's code and what it stands on: the monitor (engine, state, prediction, onboard
+# layer and its decoding, event log, observers, replay, traffic, time windows, rolling fence),
+# the vehicle link against tests/fake_vehicle.py (upload faults, hostile vehicle input), signing
+# and signed bundles, MAVLink ids, geo (outward simplification), every format reader (OSM
+# included), the layout rules, the entrypoint and the README's install blocks.
+SELECTION=(
+    tests/test_monitor_engine.py tests/test_monitor_core.py tests/test_monitor_onboard.py
+    tests/test_monitor_onboard_decode.py tests/test_monitor_onboard_runner.py
+    tests/test_monitor_eventlog.py tests/test_monitor_observer.py tests/test_monitor_replay.py
+    tests/test_monitor_traffic.py tests/test_monitor_timewindows.py tests/test_monitor_rolling.py
+    tests/test_upload_faults.py tests/test_fuzz_vehicle_input.py tests/test_signing.py
+    tests/test_bundle.py tests/test_mavlink_ids.py tests/test_outward.py tests/test_readers.py
+    tests/test_layout.py tests/test_docker_entrypoint.py tests/test_navio2_install.py
+)
+
+USERLAND_PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
+declare -A SECONDS_OF=()
+MOUNTS=()
+FAILED=""
+
+say() { printf '\n== navio2-test [%s]: %s\n' "$SUITE" "$*"; }
+die() { echo "navio2-test: $*" >&2; exit 1; }
+
+# a command in the userland, as root, with nothing of the host's environment but these
+in_userland() {
+    env -i PATH=$USERLAND_PATH HOME=/root LANG=C.UTF-8 TERM=dumb \
+        DEBIAN_FRONTEND=noninteractive "$@"
+}
+
+mount_in() {  # mount_in <mount args...> <target>: remembered for the cleanup
+    mount "$@"
+    MOUNTS+=("${@: -1}")
+}
+
+cleanup() {
+    local i
+    for ((i = ${#MOUNTS[@]} - 1; i >= 0; i--)); do
+        umount "${MOUNTS[i]}" 2>/dev/null || umount -l "${MOUNTS[i]}" 2>/dev/null || true
+    done
+    MOUNTS=()
+    if [ "${NAVIO2_KEEP:-0}" != 1 ] && [ -d "$RUN" ]; then
+        rm -rf "$RUN"
+    fi
+}
+trap cleanup EXIT
+
+timed() {  # timed <phase> <function>: runs it, remembers its wall seconds
+    local phase=$1 t0=$SECONDS status=0
+    shift
+    "$@" || status=$?
+    SECONDS_OF[$phase]=$((SECONDS - t0))
+    if [ $status -ne 0 ]; then
+        FAILED="$FAILED $phase"
+        echo "navio2-test: phase $phase failed (exit $status) after ${SECONDS_OF[$phase]} s" >&2
+    fi
+    return $status
+}
+
+# -- host: debootstrap, qemu-user-static, binfmt_misc ------------------------------------------
+host_setup() {
+    [ "$(id -u)" = 0 ] || die "run as root (debootstrap, chroot and mounts need it)"
+    [ -x "$HOSTPY" ] || die "no $HOSTPY: run make install first"
+    local missing=()
+    command -v debootstrap >/dev/null || missing+=(debootstrap)
+    [ -e /usr/bin/qemu-arm-static ] || missing+=(qemu-user-static)
+    command -v update-binfmts >/dev/null || missing+=(binfmt-support)
+    if [ ${#missing[@]} -gt 0 ]; then
+        say "installing ${missing[*]} from Debian"
+        apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+    fi
+    if [ ! -e /proc/sys/fs/binfmt_misc/status ]; then
+        mount -t binfmt_misc binfmt_misc /proc/sys/fs/binfmt_misc
+    fi
+    [ -e /proc/sys/fs/binfmt_misc/qemu-arm ] || update-binfmts --enable qemu-arm
+    grep -q '^enabled' /proc/sys/fs/binfmt_misc/qemu-arm 2>/dev/null ||
+        die "qemu-arm is not registered in binfmt_misc (update-binfmts --enable qemu-arm)"
+    # F: the interpreter is opened at registration, so it works inside a chroot
+    grep -q '^flags:.*F' /proc/sys/fs/binfmt_misc/qemu-arm ||
+        die "qemu-arm's binfmt entry lacks the F flag; reinstall qemu-user-static"
+}
+
+# -- userland: Debian armhf, built once -------------------------------------------------------
+userland() {
+    if [ -f "$STAMP" ]; then
+        echo "reusing $BASE ($(head -1 "$STAMP"))"
+        return 0
+    fi
+    say "debootstrap $SUITE armhf into $BASE (once; about 10 minutes under qemu)"
+    rm -rf "$BASE.partial"
+    mkdir -p "$CACHE"
+    # sudo and ca-certificates come with Raspberry Pi OS; the rest is the README's to install
+    debootstrap --arch=armhf --variant=minbase --include=ca-certificates,sudo \
+        "$SUITE" "$BASE.partial" "$MIRROR"
+    rm -rf "$BASE"
+    mv "$BASE.partial" "$BASE"
+    printf 'debian %s armhf, debootstrap %s, %s\n' "$SUITE" "$MIRROR" "$(date -u +%FT%TZ)" \
+        >"$STAMP"
+}
+
+# -- install: the README's blocks in a fresh overlay ------------------------------------------
+mount_userland() {  # mount_userland fresh|reuse (reuse: a kept run's overlay, NAVIO2_KEEP=1)
+    if [ "$1" = fresh ]; then
+        cleanup
+    fi
+    mkdir -p "$RUN/upper" "$RUN/work" "$ROOTFS" "$CACHE/apt-archives-$SUITE" "$CACHE/pip-cache"
+    if ! mount_in -t overlay overlay \
+        -o "lowerdir=$BASE,upperdir=$RUN/upper,workdir=$RUN/work" "$ROOTFS" 2>/dev/null; then
+        echo "(no overlayfs here: copying the userland)"
+        if [ "$1" = fresh ]; then
+            rmdir "$ROOTFS"
+            cp -a "$BASE" "$ROOTFS"
+        fi
+    fi
+    mount_in -t proc proc "$ROOTFS/proc"
+    mount_in --rbind /sys "$ROOTFS/sys"
+    mount_in --make-rslave "$ROOTFS/sys"
+    mount_in --rbind /dev "$ROOTFS/dev"
+    mount_in --make-rslave "$ROOTFS/dev"
+    # downloads kept between runs: Debian's .debs and pip's wheel cache
+    mount_in --bind "$CACHE/apt-archives-$SUITE" "$ROOTFS/var/cache/apt/archives"
+    mkdir -p "$ROOTFS/root/.cache/pip"
+    mount_in --bind "$CACHE/pip-cache" "$ROOTFS/root/.cache/pip"
+    cp -L /etc/resolv.conf "$ROOTFS/etc/resolv.conf"
+    cp -L /etc/hosts "$ROOTFS/etc/hosts"
+}
+
+copy_source() {  # the kit as a user's clone: tracked and new files of the work tree
+    local dest=$ROOTFS/root/alphafence
+    rm -rf "$dest"
+    mkdir -p "$dest"
+    (cd "$ROOT" && git ls-files -z --cached --others --exclude-standard |
+        xargs -0 -I{} sh -c 'test -e "{}" && printf "%s\0" "{}"' |
+        tar --null -T - -cf -) | tar -xf - -C "$dest"
+}
+
+install_kit() {
+    mount_userland fresh
+    copy_source
+    local cas=(/usr/local/share/ca-certificates/*.crt)
+    if [ -e "${cas[0]}" ]; then
+        cp "${cas[@]}" "$ROOTFS/usr/local/share/ca-certificates/"
+        in_userland chroot "$ROOTFS" update-ca-certificates >/dev/null
+    fi
+    "$HOSTPY" -m tests.navio2.readme blocks "$SUITE" >"$ROOTFS/root/navio2-install.sh"
+    say "the README's install steps for $SUITE, in the armhf userland:"
+    sed 's/^/    /' "$ROOTFS/root/navio2-install.sh"
+    in_userland chroot "$ROOTFS" bash -euxo pipefail /root/navio2-install.sh
+    in_userland chroot "$ROOTFS" sh -c '
+        uname -m; python3 --version
+        /opt/alphafence/bin/alphafence --version
+        /opt/alphafence/bin/python -c "import alphafence.vehicle.link, pymavlink; print(\"pymavlink\", pymavlink.__version__ if hasattr(pymavlink, \"__version__\") else \"\")"
+        /opt/alphafence/bin/pip list --format=freeze 2>/dev/null | grep -i -E "^(alphafence|pymavlink|fastcrc|numpy|shapely|pyproj|scipy|osmium|matplotlib|cryptography|rich|lxml)=" || true'
+}
+
+# -- tests under qemu -------------------------------------------------------------------------
+run_tests() {
+    # the test tools are not part of the user's install: Debian's, from apt
+    in_userland chroot "$ROOTFS" apt-get install -y -qq \
+        python3-pytest python3-hypothesis python3-pytest-asyncio >/dev/null
+    local args=("${SELECTION[@]}")
+    [ -z "${NAVIO2_TESTS:-}" ] || read -r -a args <<<"$NAVIO2_TESTS"
+    say "unit tests under qemu: ${#args[@]} arguments, ALPHAFENCE_FUZZ_EXAMPLES=$FUZZ"
+    # CI=1: conftest's hypothesis profile (no deadline, fixed seed): qemu is 10-20x slower
+    in_userland CI=1 ALPHAFENCE_FUZZ_EXAMPLES="$FUZZ" chroot "$ROOTFS" sh -c \
+        'cd /root/alphafence && exec /opt/alphafence/bin/python -m pytest -q -p no:cacheprovider -m "not sitl" "$@"' \
+        pytest "${args[@]}" 2>&1 | tee "$RUN/tests.log"
+    return "${PIPESTATUS[0]}"
+}
+
+# -- the flight: x86 SITL, the armhf monitor, a scripted approach -------------------------------
+flight() {
+    say "flight: x86 SITL, armhf monitor as the systemd unit runs it, GUIDED at a keep-out fence"
+    (cd "$ROOT" && "$HOSTPY" -m tests.navio2.flight --rootfs "$ROOTFS" --out "$RUN/flight")
+}
+
+summary() {
+    local phase
+    say "summary"
+    for phase in userland install tests flight; do
+        [ -n "${SECONDS_OF[$phase]:-}" ] || continue
+        printf '  %-9s %5d s  %s\n' "$phase" "${SECONDS_OF[$phase]}" \
+            "$([[ " $FAILED " == *" $phase "* ]] && echo FAILED || echo ok)"
+    done
+    if [ -f "$RUN/tests.log" ]; then
+        printf '  tests:    %s\n' "$(grep -E '(passed|failed|error)' "$RUN/tests.log" | tail -1)"
+    fi
+    [ -z "$FAILED" ] || { echo "navio2-test: FAILED:$FAILED"; return 1; }
+    echo "navio2-test: all phases passed"
+}
+
+main() {
+    host_setup
+    timed userland userland || { summary; exit 1; }
+    if [[ " $PHASES " == *" install "* ]]; then
+        timed install install_kit || { summary; exit 1; }
+    else
+        [ -d "$RUN/upper/opt/alphafence" ] || [ -d "$ROOTFS/opt/alphafence" ] ||
+            die "no kept install at $RUN (run once with NAVIO2_KEEP=1)"
+        NAVIO2_KEEP=1
+        mount_userland reuse
+    fi
+    if [[ " $PHASES " == *" tests "* ]]; then timed tests run_tests || true; fi
+    if [[ " $PHASES " == *" flight "* ]]; then timed flight flight || true; fi
+    summary
+}
+
+main "$@"
