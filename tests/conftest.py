@@ -55,3 +55,17 @@ def write_json(tmp_path):
         return path
 
     return write
+
+
+@pytest.fixture(params=["pymavlink", "mavsdk"])
+def link(request, monkeypatch):
+    """Each vehicle link in turn (``$ALPHAFENCE_LINK``, which ``open_vehicle`` follows); a link
+    that is not installed here (MAVSDK 4 on 32-bit ARM) is skipped."""
+    from alphafence.vehicle.link import NoLinkError, choose_link
+
+    try:
+        choose_link(request.param)
+    except NoLinkError as exc:
+        pytest.skip(str(exc))
+    monkeypatch.setenv("ALPHAFENCE_LINK", request.param)
+    return request.param

@@ -147,21 +147,21 @@ def test_link_accepts_only_fresh_messages_signed_with_its_key():
     assert len(got) == 2 and link.mav.signing.timestamp >= ts + 10**9
 
 
-# -- the signed link end to end (MAVSDK -> bridge -> fake vehicle) -----------------------
+# -- the signed link end to end, on each link (MAVSDK -> bridge, or pymavlink's own signing) --
 
 
-async def test_signed_upload_succeeds_and_is_signed_on_the_wire():
+async def test_signed_upload_succeeds_and_is_signed_on_the_wire(link):
     async with FakeVehicle(fence=PREVIOUS, signing_key=KEY) as fake:
         async with open_vehicle(fake.url, 10, signing_key=KEY) as vehicle:
             await upload_fence(vehicle, NEW)
-            stats = vehicle.bridge.link.stats
+            stats = vehicle.link_stats()
         assert [it.lat for it in fake.fence] == [it.lat for it in NEW]
         assert fake._mav.signing.goodsig_count > 0  # the fake checked our signatures
         assert fake.dropped == 0
         assert stats.unsigned == stats.bad_signature == 0
 
 
-async def test_wrong_key_is_refused_and_the_fence_is_unchanged():
+async def test_wrong_key_is_refused_and_the_fence_is_unchanged(link):
     async with FakeVehicle(fence=PREVIOUS, signing_key=KEY) as fake:
         with pytest.raises(LinkError, match="signed with another key"):
             async with open_vehicle(fake.url, 3, signing_key=OTHER):
@@ -170,7 +170,7 @@ async def test_wrong_key_is_refused_and_the_fence_is_unchanged():
         assert [it.lat for it in fake.fence] == [it.lat for it in PREVIOUS]
 
 
-async def test_missing_key_upload_fails_and_the_fence_is_unchanged():
+async def test_missing_key_upload_fails_and_the_fence_is_unchanged(link):
     async with FakeVehicle(fence=PREVIOUS, signing_key=KEY, upload_timeout=2.0) as fake:
         async with open_vehicle(fake.url, 10) as vehicle:  # MAVSDK sees the signed heartbeats
             with pytest.raises(FenceTransferError) as err:
@@ -181,7 +181,7 @@ async def test_missing_key_upload_fails_and_the_fence_is_unchanged():
         assert [it.lat for it in fake.fence] == [it.lat for it in PREVIOUS]
 
 
-async def test_key_given_but_vehicle_does_not_sign():
+async def test_key_given_but_vehicle_does_not_sign(link):
     async with FakeVehicle(fence=PREVIOUS) as fake:
         with pytest.raises(LinkError, match="does not sign its messages"):
             async with open_vehicle(fake.url, 2, signing_key=KEY):

@@ -1,5 +1,6 @@
 """What the monitor sends to the vehicle: actions (brake, RTL, land, the re-route's gotos and
-the mission's resumption), alerts (STATUSTEXT to the ground station) and COMMAND_LONGs.
+the mission's resumption) and alerts (STATUSTEXT to the ground station), through whichever
+vehicle link is open (:class:`~alphafence.vehicle.base.Vehicle`).
 
 Commands go out one at a time (:meth:`Commands.send`), each finishing even when the task that
 sent it is cancelled: a brake or RTL is never overtaken by a re-route's goto. A command or
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 
-from alphafence.mavlink.commands import command_long_json
+from alphafence.mavlink import ids
 from alphafence.monitor.events import new_event
 
 SEVERE_LEVELS = ("IMMINENT", "BREACH")  # their alerts are CRITICAL, the others WARNING
@@ -22,7 +23,7 @@ class Commands:
     Parameters
     ----------
     vehicle : Vehicle
-        The MAVSDK connection (``action``, ``mission_raw``, ``system``).
+        The vehicle link (``action``, ``mission_raw``, ``send_status_text``).
     log : EventLog
         Where ``action_done``, ``action_failed`` and ``alert_failed`` go.
     spawn : callable
@@ -36,9 +37,9 @@ class Commands:
         self._lock = asyncio.Lock()
 
     async def send(self, call, *args):
-        """``await call(*args)`` (a MAVSDK command) after any command still under way, in a
-        task of its own: cancelling the caller does not cut it off halfway (MAVSDK's goto is a
-        mode change followed by DO_REPOSITION), and the next command waits for it.
+        """``await call(*args)`` (a vehicle command) after any command still under way, in a
+        task of its own: cancelling the caller does not cut it off halfway (a goto is a mode change
+        followed by a position target), and the next command waits for it.
 
         Returns
         -------
@@ -89,43 +90,12 @@ class Commands:
     async def alert(self, text: str, event: dict) -> None:
         """Send ``text`` to the ground station as a STATUSTEXT, CRITICAL for an IMMINENT or
         BREACH ``event``, else WARNING; ``alert_failed`` if it cannot be sent."""
-        from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
-        from mavsdk.plugins.server_utility import StatusTextType
-
         severity = (
-            StatusTextType.CRITICAL
+            ids.MAV_SEVERITY_CRITICAL
             if event.get("level") in SEVERE_LEVELS
-            else StatusTextType.WARNING
+            else ids.MAV_SEVERITY_WARNING
         )
         try:
-            await ServerUtilityAsync(self.vehicle.system).send_status_text(severity, text)
+            await self.vehicle.send_status_text(severity, text)
         except Exception as exc:  # an alert that cannot be sent is logged, never fatal
             self.log.put(new_event("alert_failed", text=text, error=str(exc)))
-
-
-async def command_long(direct, target_system: int, command: int, *params, target_component=1):
-    """Send a COMMAND_LONG through MAVSDK's ``mavlink_direct`` and wait for its ack.
-
-    Parameters
-    ----------
-    direct : MavlinkDirectAsync
-        The link's mavlink_direct plugin.
-    target_system : int
-        The vehicle's system id.
-    command : int
-        A ``MAV_CMD`` from :mod:`alphafence.mavlink.ids`.
-    *params : float
-        param1, param2, ... (the rest are zero).
-    target_component : int
-        The autopilot's component id (1).
-
-    Returns
-    -------
-    MavlinkMessage
-        The COMMAND_ACK (its ``fields_json`` holds the ``result``).
-    """
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
-    fields = command_long_json(target_system, target_component, command, *params)
-    message = MavlinkMessage("COMMAND_LONG", 0, 0, target_system, target_component, fields)
-    return await direct.send_command(message)

@@ -212,8 +212,6 @@ async def fly_at_fence(fences_path, items, home, speedup=5.0, say=print, echo=No
 
 
 async def _fly(vehicle, sitl, leg, milestones, say):
-    from mavsdk.plugins.action import ActionError
-
     await milestones.loaded.wait()
     await vehicle.action.set_takeoff_altitude(ALTITUDE_M)
     deadline = time.monotonic() + ARM_TIMEOUT_S
@@ -221,7 +219,7 @@ async def _fly(vehicle, sitl, leg, milestones, say):
         try:
             await vehicle.action.arm()
             break
-        except ActionError as exc:
+        except Exception as exc:  # either link's refusal (pre-arm checks)
             if time.monotonic() > deadline:
                 raise SitlError(f"arming refused for {ARM_TIMEOUT_S:g} s: {exc}") from None
             await asyncio.sleep(1.0)  # ArduPilot's pre-arm checks: ask again

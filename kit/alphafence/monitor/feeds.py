@@ -1,11 +1,11 @@
-"""Where the monitor's inputs come from: one async generator per MAVSDK stream.
+"""Where the monitor's inputs come from: one async generator per stream of the vehicle link.
 
 A feed yields values as they arrive and does nothing else with them; the runner follows each
 in a task of its own and hands every value, with its arrival time, to where it belongs (a
 :class:`Feed`'s ``deliver``: the latest telemetry, the engine's traffic, the re-route's goals).
 
 * the telemetry streams (:data:`TELEMETRY`: position, velocity, flight mode, armed, GPS):
-  MAVSDK's own ``subscribe_*`` generators, as they are; :func:`latest_sample` makes the
+  the link's ``subscribe_*`` generators (MAVSDK's names, on either link), as they are; :func:`latest_sample` makes the
   engine's input of their latest values;
 * :func:`adsb` - ADSB_VEHICLE reports (forwarded by ArduPilot from its ADS-B receiver);
 * :func:`other_systems` - other MAVLink systems' GLOBAL_POSITION_INT, as traffic too;
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import math
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
@@ -28,6 +27,7 @@ from dataclasses import dataclass
 from alphafence.geo.coords import from_e7_float
 from alphafence.mavlink import ids
 from alphafence.monitor.engine import Sample
+from alphafence.vehicle.values import fields_of
 
 TELEMETRY = {
     "position": "subscribe_position",
@@ -36,7 +36,7 @@ TELEMETRY = {
     "armed": "subscribe_armed",
     "gps": "subscribe_gps_info",
 }
-"""The telemetry streams whose latest value the monitor keeps: key -> MAVSDK's method."""
+"""The telemetry streams whose latest value the monitor keeps: key -> the link's method."""
 
 
 @dataclass
@@ -78,7 +78,7 @@ def latest_sample(latest: dict) -> Sample | None:
     Parameters
     ----------
     latest : dict
-        ``{key: (arrival time, MAVSDK value) or None}`` for every key of :data:`TELEMETRY`.
+        ``{key: (arrival time, value) or None}`` for every key of :data:`TELEMETRY`.
 
     Returns
     -------
@@ -109,21 +109,7 @@ def latest_sample(latest: dict) -> Sample | None:
     )
 
 
-async def own_system_id(system) -> int:
-    """The vehicle's MAVLink system id (ArduPilot's default SYSID_THISMAV, 1, if unknown)."""
-    try:
-        return int(await system.get_system_id())
-    except Exception:
-        return 1
-
-
-def _direct(system):
-    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-
-    return MavlinkDirectAsync(system)
-
-
-async def adsb(system):
+async def adsb(vehicle):
     """ADSB_VEHICLE reports (forwarded by ArduPilot from its ADS-B receiver).
 
     Yields
@@ -132,13 +118,13 @@ async def adsb(system):
         Each usable report as :meth:`Engine.aircraft <alphafence.monitor.engine.Engine.aircraft>`
         keyword arguments (without ``t``).
     """
-    async for message in _direct(system).subscribe_message("ADSB_VEHICLE"):
-        report = parse_adsb(message.fields_json)
+    async for message in vehicle.messages("ADSB_VEHICLE"):
+        report = parse_adsb(message.fields)
         if report is not None:
             yield report
 
 
-async def other_systems(system):
+async def other_systems(vehicle):
     """Other MAVLink systems on the link (other drones, a chase aircraft) as traffic.
 
     Every GLOBAL_POSITION_INT on the link, the vehicle's own at the telemetry rate included,
@@ -149,16 +135,16 @@ async def other_systems(system):
     dict
         Each usable report of another system, as :func:`parse_global_position` makes it.
     """
-    own = await own_system_id(system)
-    async for message in _direct(system).subscribe_message("GLOBAL_POSITION_INT"):
+    own = await vehicle.system_id()
+    async for message in vehicle.messages("GLOBAL_POSITION_INT"):
         if message.system_id in (own, 0):
             continue
-        report = parse_global_position(message.system_id, message.fields_json)
+        report = parse_global_position(message.system_id, message.fields)
         if report is not None:
             yield report
 
 
-async def guided_targets(system, hz: float):
+async def guided_targets(vehicle, hz: float):
     """The vehicle's GUIDED target, which ArduPilot sends only when asked (this asks for it at
     ``hz``) and only while it flies to a position in GUIDED.
 
@@ -167,23 +153,16 @@ async def guided_targets(system, hz: float):
     tuple
         ``(lon, lat)`` of each POSITION_TARGET_GLOBAL_INT from the vehicle that carries one.
     """
-    from alphafence.monitor.commands import command_long
     from alphafence.monitor.reroute import parse_position_target
 
-    own = await own_system_id(system)
-    direct = _direct(system)
-    stream = direct.subscribe_message("POSITION_TARGET_GLOBAL_INT")
-    await command_long(
-        direct,
-        own,
-        ids.MAV_CMD_SET_MESSAGE_INTERVAL,
-        ids.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT,
-        1e6 / hz,
+    own = await vehicle.system_id()
+    await vehicle.command_long(
+        ids.MAV_CMD_SET_MESSAGE_INTERVAL, ids.MAVLINK_MSG_ID_POSITION_TARGET_GLOBAL_INT, 1e6 / hz
     )
-    async for message in stream:
+    async for message in vehicle.messages("POSITION_TARGET_GLOBAL_INT"):
         if message.system_id not in (own, 0):
             continue
-        target = parse_position_target(message.fields_json)
+        target = parse_position_target(message.fields)
         if target is not None:
             yield target
 
@@ -223,13 +202,13 @@ def _num(fields, key, default=None) -> float:
 
 
 def parse_adsb(fields_json):
-    """An ADSB_VEHICLE message's fields (MAVSDK mavlink_direct JSON) -> Engine.aircraft kwargs,
+    """An ADSB_VEHICLE message's fields (a dict, or JSON text) -> Engine.aircraft kwargs,
     or None when it carries no usable position (missing, out of range, not finite).
 
     Parameters
     ----------
-    fields_json : str
-        The message's fields as JSON.
+    fields_json : dict or str
+        The message's fields, or them as JSON.
 
     Returns
     -------
@@ -238,7 +217,7 @@ def parse_adsb(fields_json):
         (m/s) and ``callsign``.
     """
     try:
-        f = json.loads(fields_json)
+        f = fields_of(fields_json)
         lat, lon = from_e7_float(_num(f, "lat")), from_e7_float(_num(f, "lon"))
         alt = _num(f, "altitude") / 1000.0
         speed = _num(f, "hor_velocity", 0) / 100.0
@@ -271,11 +250,11 @@ def parse_global_position(system_id, fields_json):
     ----------
     system_id : int
         The sender: the report's key is ``mavlink/<system_id>``, its callsign ``MAV<id>``.
-    fields_json : str
-        The message's fields as JSON.
+    fields_json : dict or str
+        The message's fields, or them as JSON.
     """
     try:
-        f = json.loads(fields_json)
+        f = fields_of(fields_json)
         lat, lon = from_e7_float(_num(f, "lat")), from_e7_float(_num(f, "lon"))
         out = {
             "key": f"mavlink/{int(system_id)}",

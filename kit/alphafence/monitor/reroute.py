@@ -24,7 +24,6 @@ limits or time windows: a re-route never relies on flying over a zone or on its 
 from __future__ import annotations
 
 import asyncio
-import json
 import math
 from dataclasses import dataclass
 
@@ -37,6 +36,7 @@ from alphafence.geo.frame import EARTH_RADIUS_M
 from alphafence.mavlink import ids
 from alphafence.monitor.predict import Braking
 from alphafence.route.roadmap import NoRoute
+from alphafence.vehicle.values import fields_of
 
 GOAL_SEARCH_M = 5000.0  # how far along the track to look for the far side of a fence
 GOAL_PAD_M = 1.0  # the goal lies this much beyond the clearance (the vehicle hovers there)
@@ -92,14 +92,14 @@ def planning_lead_m(speed_mps: float, braking: Braking) -> float:
     return v * braking.reaction_s + v * v / (2.0 * braking.decel_mps2)
 
 
-def parse_position_target(fields_json):
-    """POSITION_TARGET_GLOBAL_INT fields (MAVSDK mavlink_direct JSON) -> (lon, lat), or None
+def parse_position_target(fields):
+    """POSITION_TARGET_GLOBAL_INT fields (a dict, or JSON text) -> (lon, lat), or None
     when the message carries no horizontal position."""
     try:
-        f = json.loads(fields_json)
+        f = fields_of(fields)
         lat, lon = from_e7_float(f["lat_int"]), from_e7_float(f["lon_int"])
         mask = int(f.get("type_mask", 0))
-    except (ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError, AttributeError):
         return None
     if (
         mask & ids.POSITION_TARGET_TYPEMASK_X_IGNORE

@@ -83,7 +83,7 @@ class RerouteFlight:
         vehicle = self.vehicle
         return {
             "target": Feed(
-                lambda: guided_targets(vehicle.system, self.TARGET_HZ),
+                lambda: guided_targets(vehicle, self.TARGET_HZ),
                 self.on_target,
                 "reroute_target_unavailable",
             ),

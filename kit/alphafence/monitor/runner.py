@@ -45,7 +45,7 @@ class Monitor:
     Parameters
     ----------
     vehicle : Vehicle
-        The MAVSDK connection (``telemetry``, ``action``, ``mission_raw``, ``system``).
+        The vehicle link (:class:`~alphafence.vehicle.base.Vehicle`).
     fences : FenceSet
         Every fence.
     options : MonitorOptions
@@ -130,12 +130,12 @@ class Monitor:
 
         vehicle = self.vehicle
         feeds = {f"telemetry:{key}": telemetry_feed(vehicle, key, keep(key)) for key in TELEMETRY}
-        feeds["adsb"] = Feed(lambda: adsb(vehicle.system), traffic, "adsb_unavailable")
+        feeds["adsb"] = Feed(lambda: adsb(vehicle), traffic, "adsb_unavailable")
         if self.engine.options.mavlink_traffic:
             # every GLOBAL_POSITION_INT on the link crosses into Python: opt-in, for links
             # that carry other aircraft
             feeds["traffic"] = Feed(
-                lambda: other_systems(vehicle.system), traffic, "traffic_link_unavailable"
+                lambda: other_systems(vehicle), traffic, "traffic_link_unavailable"
             )
         if self.engine.options.reroute:
             feeds.update({f"reroute:{k}": f for k, f in self.reroute.feeds().items()})

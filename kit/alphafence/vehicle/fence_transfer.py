@@ -1,6 +1,7 @@
 """Upload fences with the MAVLink mission protocol (fence type), read them back, compare.
 
-Through MAVSDK's mission_raw plugin (raw MISSION_ITEM_INT items of mission type FENCE).
+Through the vehicle link's fence transfer (MAVSDK's mission_raw plugin, or the pymavlink link's
+own mission protocol: MISSION_ITEM_INT items of mission type FENCE).
 Success is claimed only when the fence downloaded after the upload matches what was sent,
 item by item, to the 1e-7 degree. On failure the message says what the vehicle holds:
 ArduPilot keeps its previous fence when an upload fails, and the kit checks that too.
@@ -21,6 +22,7 @@ from alphafence.mavlink.items import (
 )
 from alphafence.mavlink.storage import MAX_FILE_ITEMS
 from alphafence.onboard.decode import decode_fence
+from alphafence.vehicle.values import TransferFailed
 
 # ArduPilot abandons a stalled upload 8 s after the last item it received, and until then answers
 # a download with MISSION_ACK(DENIED), which MAVSDK's download ignores (it times out instead).
@@ -28,7 +30,7 @@ from alphafence.onboard.decode import decode_fence
 # those 8 s before it can say what it holds.
 VEHICLE_UPLOAD_TIMEOUT_S = 8.0
 
-# MAVSDK's MissionRawResult names -> plain words
+# MAVSDK's MissionRawResult names (both links report these) -> plain words
 REASONS = {
     "TOO_MANY_MISSION_ITEMS": "the vehicle has no room for that many fence items",
     "TIMEOUT": "the vehicle stopped answering during the transfer",
@@ -48,6 +50,7 @@ REASONS = {
     # MISSION_ACK(INVALID_SEQUENCE), and MAVSDK ends the upload there
     "INVALID_SEQUENCE": "the transfer got out of step (a message was repeated or came late)",
     "NO_MISSION_AVAILABLE": "there were no fence items to send",
+    "COUNT_TOO_LARGE": "the vehicle announced more fence items than its storage holds",
 }
 
 
@@ -87,31 +90,6 @@ class UploadReport:
     verified: bool
 
 
-def to_raw(items):
-    """FenceItems as MAVSDK ``mission_raw`` items (MISSION_ITEM_INT of mission type FENCE,
-    frame GLOBAL, positions in 1e-7 degrees)."""
-    from mavsdk.plugins.mission_raw import MissionItem
-
-    return [
-        MissionItem(
-            seq=i,
-            frame=ids.MAV_FRAME_GLOBAL,
-            command=it.command,
-            current=0,
-            autocontinue=1,
-            param1=float(it.param1),
-            param2=0.0,
-            param3=0.0,
-            param4=0.0,
-            x=to_e7(it.lat),
-            y=to_e7(it.lon),
-            z=0.0,
-            mission_type=ids.MAV_MISSION_TYPE_FENCE,
-        )
-        for i, it in enumerate(items)
-    ]
-
-
 MAX_DOWNLOAD_ITEMS = MAX_FILE_ITEMS
 """The most fence items a download may bring unless the caller knows the vehicle's storage:
 what the largest storage ArduPilot has holds (``BRD_SD_FENCE = 64``: 65535 bytes, 8191
@@ -133,10 +111,7 @@ def from_raw(raw, max_items: int = MAX_DOWNLOAD_ITEMS):
         More items than this are refused at once (the storage's capacity).
     """
     if len(raw) > max_items:
-        raise FenceTransferError(
-            f"the vehicle sent {len(raw)} fence items (over {max_items}, "
-            "more than its fence storage holds)"
-        )
+        raise FenceTransferError(_too_many(len(raw), max_items))
     items = [_raw_item(i, r) for i, r in enumerate(raw)]
     try:  # positions, commands, radii, vertex counts, polygons: checked where items are decoded
         decode_fence(items, INVALID)
@@ -146,6 +121,10 @@ def from_raw(raw, max_items: int = MAX_DOWNLOAD_ITEMS):
 
 
 INVALID = "the vehicle sent an invalid fence"
+
+
+def _too_many(n, max_items) -> str:
+    return f"the vehicle sent {n} fence items (over {max_items}, more than its fence storage holds)"
 
 
 def _raw_item(i, r):
@@ -182,8 +161,7 @@ def same_items(sent, got) -> list:
 
 
 def _result_name(exc) -> str:
-    result = getattr(exc, "result", None)
-    return str(getattr(result, "name", result))
+    return str(exc.result)
 
 
 def _reason(exc) -> str:
@@ -206,13 +184,11 @@ async def download_fence(vehicle, max_items: int = MAX_DOWNLOAD_ITEMS):
     FenceTransferError
         When the download fails or what came is not a valid fence.
     """
-    from mavsdk.plugins.mission_raw import MissionRawError
-
     try:
-        raw = await vehicle.mission_raw.download_geofence()
-    except MissionRawError as exc:
-        if getattr(exc.result, "name", "") == "NO_MISSION_AVAILABLE":
-            return []
+        raw = await vehicle.download_geofence(max_items)
+    except TransferFailed as exc:
+        if exc.result == "COUNT_TOO_LARGE":  # refused before any item was asked for
+            raise FenceTransferError(_too_many(exc.detail, max_items)) from None
         raise FenceTransferError(
             f"download failed: {_reason(exc)}", result=_result_name(exc)
         ) from None
@@ -250,13 +226,11 @@ async def upload_fence(vehicle, items, capacity: int | None = None) -> UploadRep
     FenceTransferError
         Saying what failed and what the vehicle now holds.
     """
-    from mavsdk.plugins.mission_raw import MissionRawError
-
     bound = max(len(items), MAX_DOWNLOAD_ITEMS if capacity is None else capacity)
     t0 = time.monotonic()
     try:
-        await vehicle.mission_raw.upload_geofence(to_raw(items))
-    except MissionRawError as exc:
+        await vehicle.upload_geofence(items)
+    except TransferFailed as exc:
         got, holds = await _what_it_holds(vehicle, bound)
         if got is not None and same_items(items, got) == []:
             # the vehicle stored the fence but its final MISSION_ACK was lost: the read-back,
@@ -307,6 +281,6 @@ async def _what_it_holds(vehicle, max_items=MAX_DOWNLOAD_ITEMS):
 
 async def _connected(vehicle) -> bool:
     try:
-        return bool(await vehicle.system.is_connected())
+        return bool(await vehicle.is_connected())
     except Exception:  # no way to tell: keep asking until the deadline
         return True

@@ -1,18 +1,65 @@
-"""Open a MAVSDK link to the autopilot, and collect the vehicle's STATUSTEXT messages (its
-own words for why a transfer failed)."""
+"""Open a link to the autopilot, whichever link this machine has, and collect the vehicle's
+STATUSTEXT messages (its own words for why a transfer failed).
+
+Two links offer the same :class:`Vehicle`:
+
+* ``mavsdk``: MAVSDK 4's native binding (``mavsdk.asyncio``; wheels for x86-64 and arm64);
+  signed links through the loopback :class:`~alphafence.vehicle.bridge.SigningBridge`;
+* ``pymavlink``: :mod:`alphafence.vehicle.pymavlink_link`, pure Python on asyncio, wherever
+  pymavlink installs (a Navio2's 32-bit Raspberry Pi OS included); it signs by itself.
+
+``auto`` (the default, or ``$ALPHAFENCE_LINK``) takes :data:`PREFERRED` when it is installed,
+else the other; with neither, one line says what to install.
+"""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import time
-from collections import deque
+import importlib.util
+import json
+import os
 
-from alphafence.errors import VehicleError
+from alphafence.vehicle.base import LinkError, NoLinkError, Vehicle
+
+__all__ = ["LinkError", "NoLinkError", "Vehicle", "choose_link", "open_vehicle"]
+
+LINKS = ("auto", "pymavlink", "mavsdk")
+PREFERRED = ("mavsdk", "pymavlink")  # auto's order
+INSTALL = {
+    "pymavlink": "pip install pymavlink (the 'companion' extra; pure Python, any platform)",
+    "mavsdk": "pip install mavsdk (MAVSDK 4: wheels for x86-64 and arm64 only, none for "
+    "32-bit ARM such as a Navio2's Raspberry Pi OS)",
+}
 
 
-class LinkError(VehicleError):
-    """The vehicle could not be reached, or went away."""
+def _installed(kind: str) -> bool:
+    name = "mavsdk.asyncio" if kind == "mavsdk" else "pymavlink.dialects.v20.ardupilotmega"
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):  # a parent package missing
+        return False
+
+
+def choose_link(link: str | None = None) -> str:
+    """The link to use: ``link``, else ``$ALPHAFENCE_LINK``, else ``auto``, resolved.
+
+    Raises
+    ------
+    NoLinkError
+        One line naming what to install.
+    """
+    link = (link or os.environ.get("ALPHAFENCE_LINK") or "auto").strip().lower()
+    if link not in LINKS:
+        raise NoLinkError(f"unknown vehicle link {link!r} (one of {', '.join(LINKS)})")
+    if link != "auto":
+        if not _installed(link):
+            raise NoLinkError(f"the {link} vehicle link is not installed: {INSTALL[link]}")
+        return link
+    for kind in PREFERRED:
+        if _installed(kind):
+            return kind
+    raise NoLinkError(f"no vehicle link is installed: {INSTALL['pymavlink']}")
 
 
 _QUIET = False
@@ -31,11 +78,32 @@ def quiet_mavsdk():
 
 
 @contextlib.asynccontextmanager
-async def open_vehicle(url: str, timeout: float = 10.0, signing_key: bytes | None = None):
+async def open_vehicle(
+    url: str, timeout: float = 10.0, signing_key: bytes | None = None, link: str | None = None
+):
     """``async with open_vehicle("udpin://127.0.0.1:14550") as vehicle`` -> Vehicle.
 
-    With ``signing_key`` (32 bytes) every message to the vehicle is signed and every message
-    from it must be signed with that key, through a loopback :class:`SigningBridge`."""
+    Parameters
+    ----------
+    url : str
+        ``udpin://HOST:PORT``, ``udpout://HOST:PORT``, ``tcpout://HOST:PORT`` (MAVSDK's
+        forms; the MAVSDK link also takes ``serial://``).
+    timeout : float
+        Seconds to wait for the autopilot's heartbeat.
+    signing_key : bytes, optional
+        32 bytes: every message to the vehicle is signed and every message from it must be.
+    link : str, optional
+        ``auto``, ``pymavlink`` or ``mavsdk`` (see :func:`choose_link`).
+    """
+    if choose_link(link) == "pymavlink":
+        from alphafence.vehicle.pymavlink_link import PymavlinkVehicle
+
+        vehicle = await PymavlinkVehicle(url, signing_key).connect(timeout)
+        try:
+            yield vehicle
+        finally:
+            await vehicle.close()
+        return
     if signing_key is None:
         async with _open_mavsdk(url, url, timeout) as vehicle:
             yield vehicle
@@ -75,7 +143,7 @@ async def _open_mavsdk(url: str, shown_url: str, timeout: float, bridge=None):
             if bridge is not None and bridge.diagnosis():
                 why += f" ({bridge.diagnosis()})"
             raise LinkError(why)
-        vehicle = Vehicle(system, shown_url)
+        vehicle = MavsdkVehicle(system, shown_url)
         await vehicle.start()
         try:
             yield vehicle
@@ -83,58 +151,138 @@ async def _open_mavsdk(url: str, shown_url: str, timeout: float, bridge=None):
             await vehicle.close()
 
 
-class Vehicle:
-    """A connected autopilot: MAVSDK's plugins for it, and the STATUSTEXTs it sent.
+class MavsdkVehicle(Vehicle):
+    """The MAVSDK link: MAVSDK's plugins, and the kit's methods built on them.
 
     Parameters
     ----------
     system : mavsdk System
         The autopilot MAVSDK discovered.
     url : str
-        The connection as the operator gave it (for messages).
-
-    Attributes
-    ----------
-    mission_raw, action, param, telemetry
-        MAVSDK's plugins.
-    texts : deque
-        ``(monotonic time, text)`` of the last 50 STATUSTEXTs.
-    bridge : SigningBridge or None
-        The loopback signing bridge of a signed link.
+        The connection as the operator gave it.
     """
+
+    kind = "mavsdk"
 
     def __init__(self, system, url):
         from mavsdk.asyncio.plugins.action import ActionAsync
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
         from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
-        self.url = url
+        super().__init__(url)
         self.system = system
         self.mission_raw = MissionRawAsync(system)
         self.action = ActionAsync(system)
         self.param = ParamAsync(system)
         self.telemetry = TelemetryAsync(system)
-        self.texts: deque = deque(maxlen=50)  # (monotonic time, text)
-        self.bridge = None  # the SigningBridge of a signed link
-        self._task = None
+        self.direct = MavlinkDirectAsync(system)
 
-    async def start(self):
-        """Start collecting the vehicle's STATUSTEXTs."""
-        self._task = asyncio.create_task(self._collect_texts())
+    async def messages(self, name: str):
+        """Every ``name`` message on the link, from any system, as a
+        :class:`~alphafence.vehicle.values.Message` (fields that are not JSON: skipped)."""
+        from alphafence.vehicle.values import Message
 
-    async def close(self):
-        """Stop collecting STATUSTEXTs."""
-        if self._task:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self._task
+        async for m in self.direct.subscribe_message(name):
+            try:
+                fields = json.loads(m.fields_json)
+            except ValueError:
+                continue
+            if isinstance(fields, dict):
+                yield Message(name, m.system_id, m.component_id, fields)
 
-    async def _collect_texts(self):
-        async for st in self.telemetry.subscribe_status_text():
-            self.texts.append((time.monotonic(), st.text))
+    def _command(self, command, params, target_component):
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
-    async def texts_since(self, t0: float, settle: float = 0.3):
-        """STATUSTEXTs received after ``t0`` (waits briefly: they trail the ACK by a few ms)."""
-        await asyncio.sleep(settle)
-        return [text for t, text in self.texts if t >= t0]
+        from alphafence.mavlink.commands import command_long_json
+
+        sysid = self._sysid
+        fields = command_long_json(sysid, target_component, command, *params)
+        return MavlinkMessage("COMMAND_LONG", 0, 0, sysid, target_component, fields)
+
+    async def command_long(self, command: int, *params, target_component=1) -> int:
+        """Send a COMMAND_LONG and return its COMMAND_ACK's ``result``."""
+        self._sysid = await self.system_id()
+        ack = await self.direct.send_command(self._command(command, params, target_component))
+        return int(json.loads(ack.fields_json or "{}").get("result", -1))
+
+    def send_command_long(self, command: int, *params, target_component=1) -> None:
+        """Send a COMMAND_LONG without waiting for its answer (after a :meth:`system_id`)."""
+        task = asyncio.ensure_future(
+            self.direct.send_message(self._command(command, params, target_component))
+        )
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())
+
+    _sysid = 1
+
+    async def system_id(self) -> int:
+        """The vehicle's MAVLink system id (ArduPilot's default, 1, if MAVSDK cannot say)."""
+        try:
+            self._sysid = int(await self.system.get_system_id())
+        except Exception:
+            pass
+        return self._sysid
+
+    async def send_status_text(self, severity: int, text: str) -> None:
+        """A STATUSTEXT to the ground station (``MAV_SEVERITY``: CRITICAL or WARNING)."""
+        from mavsdk.asyncio.plugins.server_utility import ServerUtilityAsync
+        from mavsdk.plugins.server_utility import StatusTextType
+
+        from alphafence.mavlink import ids
+
+        kind = (
+            StatusTextType.CRITICAL
+            if severity <= ids.MAV_SEVERITY_CRITICAL
+            else (StatusTextType.WARNING)
+        )
+        await ServerUtilityAsync(self.system).send_status_text(kind, text)
+
+    async def upload_geofence(self, items) -> None:
+        """Upload ``items`` (FenceItems) as the fence; TransferFailed on failure."""
+        from mavsdk.plugins.mission_raw import MissionItem, MissionRawError
+
+        from alphafence.geo.coords import to_e7
+        from alphafence.mavlink import ids
+        from alphafence.vehicle.values import TransferFailed
+
+        raw = [
+            MissionItem(i, ids.MAV_FRAME_GLOBAL, it.command, 0, 1, float(it.param1), 0.0, 0.0,
+                        0.0, to_e7(it.lat), to_e7(it.lon), 0.0, ids.MAV_MISSION_TYPE_FENCE)
+            for i, it in enumerate(items)
+        ]  # fmt: skip
+        try:
+            await self.mission_raw.upload_geofence(raw)
+        except MissionRawError as exc:
+            raise TransferFailed(_result(exc)) from None
+
+    async def download_geofence(self, max_items: int | None = None) -> list:
+        """The fence's raw items ([] when there is none); TransferFailed on failure."""
+        from mavsdk.plugins.mission_raw import MissionRawError
+
+        from alphafence.vehicle.values import TransferFailed
+
+        try:
+            return list(await self.mission_raw.download_geofence())
+        except MissionRawError as exc:
+            if _result(exc) == "NO_MISSION_AVAILABLE":
+                return []
+            raise TransferFailed(_result(exc)) from None
+
+    async def is_connected(self) -> bool:
+        """Whether MAVSDK still hears the vehicle."""
+        return bool(await self.system.is_connected())
+
+    def link_diagnosis(self) -> str:
+        """Why the vehicle may be silent ('' when nothing points to a reason)."""
+        return self.bridge.diagnosis() if self.bridge is not None else ""
+
+    def link_stats(self):
+        """The signing bridge's counts (:class:`~alphafence.vehicle.bridge.LinkStats`), or
+        None without a bridge."""
+        return self.bridge.link.stats if self.bridge is not None else None
+
+
+def _result(exc) -> str:
+    result = getattr(exc, "result", None)
+    return str(getattr(result, "name", result))

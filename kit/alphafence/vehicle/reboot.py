@@ -17,13 +17,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import time
 from dataclasses import dataclass
 
 from alphafence.errors import VehicleError
 from alphafence.mavlink import ids
-from alphafence.mavlink.commands import command_long_json
 
 HEARTBEAT_GAP_S = 2.5  # ArduPilot beats at 1 Hz: this long without one, it went away
 AUTOPILOT_COMPONENT = 1
@@ -82,20 +80,16 @@ async def is_armed(vehicle, timeout: float = 5.0) -> bool:
 class _Messages:
     """The autopilot's HEARTBEAT and SYSTEM_TIME messages, queued as they arrive."""
 
-    def __init__(self, direct, sysid: int):
-        self.direct = direct
+    def __init__(self, vehicle, sysid: int):
+        self.vehicle = vehicle
         self.sysid = sysid
         self.queue: asyncio.Queue = asyncio.Queue()
         self.tasks = [asyncio.create_task(self._pump(n)) for n in ("HEARTBEAT", "SYSTEM_TIME")]
 
     async def _pump(self, name):
-        async for m in self.direct.subscribe_message(name):
+        async for m in self.vehicle.messages(name):
             if m.system_id == self.sysid and m.component_id == AUTOPILOT_COMPONENT:
-                try:
-                    fields = json.loads(m.fields_json)
-                except ValueError:
-                    continue
-                self.queue.put_nowait((time.monotonic(), name, fields))
+                self.queue.put_nowait((time.monotonic(), name, m.fields))
 
     async def next(self, deadline: float):
         """The next message, or None at ``deadline`` (monotonic seconds)."""
@@ -106,18 +100,7 @@ class _Messages:
 
     def ask_time(self) -> None:
         """Ask for SYSTEM_TIME (REQUEST_MESSAGE), without waiting for the acknowledgement."""
-        from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
-        fields = command_long_json(
-            self.sysid,
-            AUTOPILOT_COMPONENT,
-            ids.MAV_CMD_REQUEST_MESSAGE,
-            ids.MAVLINK_MSG_ID_SYSTEM_TIME,
-        )
-        message = MavlinkMessage("COMMAND_LONG", 0, 0, self.sysid, AUTOPILOT_COMPONENT, fields)
-        task = asyncio.ensure_future(self.direct.send_message(message))
-        task.add_done_callback(lambda t: t.cancelled() or t.exception())
-        self.tasks.append(task)
+        self.vehicle.send_command_long(ids.MAV_CMD_REQUEST_MESSAGE, ids.MAVLINK_MSG_ID_SYSTEM_TIME)
 
     async def close(self):
         for task in self.tasks:
@@ -163,28 +146,15 @@ async def reboot_vehicle(vehicle, timeout: float = 60.0) -> RebootReport:
         When the vehicle is armed (nothing is sent), refuses the command, does not restart,
         or does not come back within ``timeout``.
     """
-    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
     if await is_armed(vehicle):
         raise RebootError("the vehicle is armed: it is rebooted only while disarmed")
-    try:
-        sysid = int(await vehicle.system.get_system_id())
-    except Exception:
-        sysid = 1
-    direct = MavlinkDirectAsync(vehicle.system)
-    messages = _Messages(direct, sysid)
+    sysid = await vehicle.system_id()
+    messages = _Messages(vehicle, sysid)
     try:
         before = await _boot_ms(messages, 5.0)
-        fields = command_long_json(
-            sysid, AUTOPILOT_COMPONENT, ids.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1
-        )
         t0 = time.monotonic()
         try:
-            ack = await direct.send_command(
-                MavlinkMessage("COMMAND_LONG", 0, 0, sysid, AUTOPILOT_COMPONENT, fields)
-            )
-            result = int(json.loads(ack.fields_json).get("result", -1))
+            result = await vehicle.command_long(ids.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1)
         except Exception as exc:
             raise RebootError(
                 f"the vehicle did not acknowledge the reboot command ({exc})"

@@ -1,0 +1,243 @@
+"""The pymavlink link's telemetry, actions, parameters and mission, under MAVSDK's names.
+
+Each class offers the methods of MAVSDK's plugin of the same name that the kit calls, with the
+same arguments and values of the same attribute names (:mod:`alphafence.vehicle.values`), as
+ArduPilot serves them: modes set with MAV_CMD_DO_SET_MODE (BRAKE for a copter's hold), a goto as
+GUIDED plus SET_POSITION_TARGET_GLOBAL_INT, parameters with PARAM_REQUEST_READ / PARAM_SET and
+their PARAM_VALUE, AUTO's progress from MISSION_CURRENT.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+from alphafence.errors import VehicleError
+from alphafence.geo.coords import from_e7, to_e7
+from alphafence.mavlink import ids
+from alphafence.vehicle.values import (
+    GpsInfo,
+    MissionProgress,
+    Position,
+    StatusText,
+    VelocityNed,
+    flight_mode,
+    mode_set,
+)
+
+PARAM_RETRY_S = 1.0
+PARAM_TRIES = 3
+POSITION_ONLY = (
+    ids.POSITION_TARGET_TYPEMASK_VX_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_VY_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_VZ_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_AX_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_AY_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+    | ids.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+)
+
+
+class CommandRefused(VehicleError):
+    """The vehicle answered a command with something other than ACCEPTED."""
+
+
+def _result_name(result: int) -> str:
+    names = {
+        v: k for k, v in vars(ids).items() if k.startswith("MAV_RESULT_") and isinstance(v, int)
+    }
+    return names.get(result, f"MAV_RESULT {result}")
+
+
+async def _command(vehicle, command, *params):
+    result = await vehicle.command_long(command, *params)
+    if result != ids.MAV_RESULT_ACCEPTED:
+        raise CommandRefused(f"command {command} refused ({_result_name(result)})")
+
+
+class Telemetry:
+    """``subscribe_*`` streams of the autopilot's own messages, and their rates."""
+
+    def __init__(self, vehicle):
+        self.v = vehicle
+
+    async def _own(self, name):
+        async for msg in self.v.bus.stream(name):
+            if self.v.from_autopilot(msg):
+                yield msg
+
+    async def subscribe_position(self):
+        """GLOBAL_POSITION_INT as :class:`~alphafence.vehicle.values.Position`."""
+        async for m in self._own("GLOBAL_POSITION_INT"):
+            yield Position(from_e7(m.lat), from_e7(m.lon), m.alt / 1000.0, m.relative_alt / 1000.0)
+
+    async def subscribe_velocity_ned(self):
+        """GLOBAL_POSITION_INT's velocity as :class:`~alphafence.vehicle.values.VelocityNed`."""
+        async for m in self._own("GLOBAL_POSITION_INT"):
+            yield VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0)
+
+    async def subscribe_flight_mode(self):
+        """Each HEARTBEAT's mode as :class:`~alphafence.vehicle.values.FlightMode`."""
+        async for m in self._own("HEARTBEAT"):
+            yield flight_mode(m.type, m.custom_mode)
+
+    async def subscribe_armed(self):
+        """Each HEARTBEAT's safety-armed flag."""
+        async for m in self._own("HEARTBEAT"):
+            yield bool(m.base_mode & ids.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    async def subscribe_gps_info(self):
+        """GPS_RAW_INT as :class:`~alphafence.vehicle.values.GpsInfo`."""
+        async for m in self._own("GPS_RAW_INT"):
+            yield GpsInfo(int(m.satellites_visible), int(m.fix_type))
+
+    async def subscribe_status_text(self):
+        """The autopilot's STATUSTEXTs as :class:`~alphafence.vehicle.values.StatusText`."""
+        async for m in self.v.status_texts():
+            yield StatusText(int(m.severity), str(m.text))
+
+    async def _rate(self, message_id, hz):
+        await _command(self.v, ids.MAV_CMD_SET_MESSAGE_INTERVAL, message_id, 1e6 / hz)
+
+    async def set_rate_position(self, hz: float):
+        """GLOBAL_POSITION_INT at ``hz`` (CommandRefused when the vehicle says no)."""
+        await self._rate(ids.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, hz)
+
+    async def set_rate_velocity_ned(self, hz: float):
+        """Velocity comes with the position: the same message's rate."""
+        await self._rate(ids.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, hz)
+
+
+class Action:
+    """Mode changes and commands, as ArduPilot takes them."""
+
+    def __init__(self, vehicle):
+        self.v = vehicle
+        self.takeoff_altitude_m = 2.5  # MAVSDK's default
+
+    async def set_mode(self, custom_mode: int):
+        """MAV_CMD_DO_SET_MODE with ArduPilot's ``custom_mode`` number."""
+        await _command(
+            self.v, ids.MAV_CMD_DO_SET_MODE, ids.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode
+        )
+
+    async def hold(self):
+        """Stop where it is: BRAKE (copter), LOITER (plane), HOLD (rover)."""
+        await self.set_mode(mode_set(self.v.mav_type).hold)
+
+    async def return_to_launch(self):
+        """RTL."""
+        await self.set_mode(mode_set(self.v.mav_type).rtl)
+
+    async def land(self):
+        """LAND (a plane: QLAND; a rover cannot)."""
+        land = mode_set(self.v.mav_type).land
+        if land is None:
+            raise CommandRefused("this vehicle has no land mode")
+        await self.set_mode(land)
+
+    async def goto_location(self, lat, lon, alt_amsl_m, yaw_deg=math.nan):
+        """GUIDED, then fly to ``(lat, lon)`` at ``alt_amsl_m`` (the heading is kept)."""
+        await self.set_mode(mode_set(self.v.mav_type).guided)
+        sysid, compid = self.v.target
+        self.v.link.send(
+            self.v.link.mav.set_position_target_global_int_encode(
+                0, sysid, compid, ids.MAV_FRAME_GLOBAL_INT, POSITION_ONLY,
+                to_e7(lat), to_e7(lon), float(alt_amsl_m), 0, 0, 0, 0, 0, 0, 0, 0,
+            )
+        )  # fmt: skip
+
+    async def arm(self):
+        """Arm (CommandRefused when a pre-arm check fails)."""
+        await _command(self.v, ids.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+
+    async def set_takeoff_altitude(self, alt_m: float):
+        """The height above home :meth:`takeoff` climbs to."""
+        self.takeoff_altitude_m = float(alt_m)
+
+    async def takeoff(self):
+        """GUIDED, then MAV_CMD_NAV_TAKEOFF to the takeoff altitude."""
+        await self.set_mode(mode_set(self.v.mav_type).guided)
+        await _command(self.v, ids.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, self.takeoff_altitude_m)
+
+    async def set_current_speed(self, speed_m_s: float):
+        """MAV_CMD_DO_CHANGE_SPEED (ground speed)."""
+        await _command(self.v, ids.MAV_CMD_DO_CHANGE_SPEED, 1, speed_m_s, -1)
+
+
+class Param:
+    """Parameters by name, read back from the vehicle's PARAM_VALUE."""
+
+    def __init__(self, vehicle):
+        self.v = vehicle
+
+    async def _exchange(self, name: str, make) -> float:
+        key = name.encode()[:16]
+        with self.v.bus.subscribe("PARAM_VALUE", maxsize=64) as queue:
+            for _ in range(PARAM_TRIES):
+                self.v.link.send(make(key))
+                deadline = asyncio.get_running_loop().time() + PARAM_RETRY_S
+                while (left := deadline - asyncio.get_running_loop().time()) > 0:
+                    try:
+                        msg = await asyncio.wait_for(queue.get(), left)
+                    except asyncio.TimeoutError:
+                        break
+                    if self.v.from_autopilot(msg) and msg.param_id == name:
+                        return float(msg.param_value)
+        raise TimeoutError(f"the vehicle did not answer for parameter {name}")
+
+    def _read(self, name):
+        sysid, compid = self.v.target
+        mav = self.v.link.mav
+        return self._exchange(
+            name, lambda key: mav.param_request_read_encode(sysid, compid, key, -1)
+        )
+
+    def _write(self, name, value, kind):
+        sysid, compid = self.v.target
+        mav = self.v.link.mav
+        return self._exchange(
+            name, lambda key: mav.param_set_encode(sysid, compid, key, float(value), kind)
+        )
+
+    async def get_param_int(self, name: str) -> int:
+        """The parameter's value as an integer."""
+        return int(round(await self._read(name)))
+
+    async def get_param_float(self, name: str) -> float:
+        """The parameter's value."""
+        return await self._read(name)
+
+    async def set_param_int(self, name: str, value: int) -> None:
+        """Set it; returns once the vehicle answers with the parameter."""
+        await self._write(name, int(value), ids.MAV_PARAM_TYPE_INT32)
+
+    async def set_param_float(self, name: str, value: float) -> None:
+        """Set it; returns once the vehicle answers with the parameter."""
+        await self._write(name, value, ids.MAV_PARAM_TYPE_REAL32)
+
+
+class MissionRaw:
+    """The mission: download, AUTO's progress, where AUTO resumes."""
+
+    def __init__(self, vehicle):
+        self.v = vehicle
+
+    async def download_mission(self) -> list:
+        """The mission's raw items (TransferFailed on failure)."""
+        return await self.v.mission.download(ids.MAV_MISSION_TYPE_MISSION)
+
+    async def subscribe_mission_progress(self):
+        """MISSION_CURRENT as :class:`~alphafence.vehicle.values.MissionProgress`."""
+        async for m in self.v.bus.stream("MISSION_CURRENT"):
+            if self.v.from_autopilot(m):
+                yield MissionProgress(int(m.seq), int(getattr(m, "total", 0) or 0))
+
+    async def set_current_mission_item(self, index: int):
+        """Make item ``index`` the one AUTO flies to next."""
+        await _command(self.v, ids.MAV_CMD_DO_SET_MISSION_CURRENT, index)
+
+    async def start_mission(self):
+        """AUTO."""
+        await self.v.action.set_mode(mode_set(self.v.mav_type).auto)
