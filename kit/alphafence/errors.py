@@ -12,10 +12,18 @@ class                exit code  raised when
 ``VehicleError``     3          the vehicle or the link to it failed, refused or disagreed
 ``SitlError``        1          an ArduPilot SITL binary is missing or did not start
 ``RoutingError``     1          no route exists (the message says what blocks it)
+``MissingDependency``  2        a package this work needs is not installed (:func:`need`)
 ===================  =========  ==============================================================
+
+The base install (numpy, shapely, pyproj, rich, cryptography) reads and writes every fence
+file and compiles; the packages in :data:`OPTIONAL` come with the extras named there, and a
+module imports them only where its work needs them. :func:`need` checks them and names, in
+one line, what to install.
 """
 
 from __future__ import annotations
+
+import importlib
 
 
 class AlphaFenceError(Exception):
@@ -77,3 +85,138 @@ class SitlError(AlphaFenceError, RuntimeError):
 
 class RoutingError(AlphaFenceError):
     """No route: the message names what blocks it (a start inside a fence, an enclosed goal)."""
+
+
+# the optional packages, by import name: (what PyPI and pip call it, the extra that brings it,
+# Debian's package or None, the oldest version the kit works with)
+OPTIONAL = {
+    "osmium": ("osmium", "build", "python3-pyosmium", "4.0"),
+    "scipy": ("scipy", "build", "python3-scipy", None),
+    "matplotlib": ("matplotlib", "build", "python3-matplotlib", None),
+    "pymavlink": ("pymavlink", "companion", None, None),
+    "mavsdk": ("mavsdk", "vehicle", None, None),
+}
+
+
+class MissingDependency(AlphaFenceError, ImportError):
+    """A package that the work asked for needs is not installed, does not import, or is too
+    old: ``str(err)`` is one line naming it, the extra and the Debian package that bring it.
+
+    It is an ``ImportError`` too, so ``except ImportError`` still catches it.
+
+    Parameters
+    ----------
+    wants : list of (str, str, str or None)
+        ``(package, purpose, fault)`` per missing package, with the package's import name
+        (a key of :data:`OPTIONAL`) and ``fault`` None for "not installed".
+    exit_code : int, optional
+        The command line's exit status (default 2; a vehicle link that is missing: 3).
+
+    Examples
+    --------
+    >>> print(MissingDependency([("osmium", "reading malta.osm.pbf", None)]))
+    reading malta.osm.pbf needs pyosmium: pip install 'alphafence[build]' (Debian: apt install python3-pyosmium)
+    """
+
+    exit_code = 2
+
+    def __init__(self, wants, exit_code=None):
+        self.packages = [w[0] for w in wants]
+        if exit_code is not None:
+            self.exit_code = exit_code
+        needs = {}
+        for package, purpose, fault in wants:
+            what = _display(package) + (f" ({fault})" if fault else "")
+            needs.setdefault(purpose, []).append(what)
+        said = "; ".join(f"{purpose} needs {' and '.join(w)}" for purpose, w in needs.items())
+        extras = sorted({OPTIONAL[p][1] for p in self.packages})
+        debian = [OPTIONAL[p][2] for p in self.packages if OPTIONAL[p][2]]
+        how = f"pip install 'alphafence[{','.join(extras)}]'"
+        if debian:
+            how += f" (Debian: apt install {' '.join(debian)})"
+        super().__init__(" ".join(f"{said}: {how}".split()))
+
+
+def _display(package):
+    name = "pyosmium" if package == "osmium" else package
+    oldest = OPTIONAL[package][3]
+    return f"{name} {oldest} or later" if oldest else name
+
+
+def need(*wants, exit_code=None):
+    """Import optional packages now, or say in one line which are missing and how to get them.
+
+    Parameters
+    ----------
+    *wants : (str, str)
+        ``(module, purpose)``: a module of a package in :data:`OPTIONAL` (``"osmium.filter"``
+        also checks that pyosmium is new enough to have it) and what needs it, as the
+        operator would say it (``"reading malta.osm.pbf"``).
+    exit_code : int, optional
+        The :class:`MissingDependency`'s exit status (default 2).
+
+    Raises
+    ------
+    MissingDependency
+        Naming every package that is missing, too old or broken.
+
+    Examples
+    --------
+    >>> need(("json", "reading JSON"))  # a module that imports: nothing happens
+    """
+    missing = []
+    for module, purpose in wants:
+        package = module.split(".")[0]
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            fault = _fault(package, module, exc) if _installed(package) else None
+            missing.append((package, purpose, fault))
+    if missing:
+        raise MissingDependency(missing, exit_code)
+
+
+def _installed(package):
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(package) is not None
+    except (ImportError, ValueError):  # blocked, or a None in sys.modules
+        return False
+
+
+def _fault(package, module, exc):
+    """Why an installed package did not import: too old to have ``module``, or broken."""
+    from importlib import metadata
+
+    try:
+        version = metadata.version(OPTIONAL[package][0])
+    except (metadata.PackageNotFoundError, KeyError):
+        version = "?"
+    if exc.name == module:
+        return f"{version} is installed, without {module}"
+    return f"{version} is installed but does not import: {exc}"[:200]
+
+
+def missing_dependency(exc, purpose):
+    """The :class:`MissingDependency` for an ``ImportError`` of an optional package, else None.
+
+    Parameters
+    ----------
+    exc : ImportError
+    purpose : str
+        What needed it, for the message.
+
+    Examples
+    --------
+    >>> str(missing_dependency(ModuleNotFoundError(name="scipy"), "re-routing"))[:24]
+    're-routing needs scipy: '
+    >>> missing_dependency(ModuleNotFoundError(name="yaml"), "x") is None
+    True
+    """
+    if isinstance(exc, MissingDependency):
+        return exc
+    package = (exc.name or "").split(".")[0]
+    if package not in OPTIONAL:
+        return None
+    return MissingDependency([(package, purpose, None)])

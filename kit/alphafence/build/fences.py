@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from alphafence.build import METHODS
 from alphafence.build.sites import circle_steps
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
 from alphafence.geo.outward import simplify_polygon
 
-METHODS = ("alpha", "polygon", "circle", "exact")
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
 QUAD_SEGS = 6
 CIRCLE_SEGMENTS = 64

@@ -15,8 +15,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
-from scipy.sparse import coo_array
-from scipy.sparse.csgraph import connected_components
 
 from alphafence.formats.features import make_valid_polygonal
 from alphafence.geo.frame import LocalFrame
@@ -74,6 +72,9 @@ class Site:
 
 
 def _components(n, a, b):
+    from scipy.sparse import coo_array  # scipy (the build extra), imported where it is used
+    from scipy.sparse.csgraph import connected_components
+
     graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 

@@ -5,13 +5,27 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from alphafence.errors import InputError
+from alphafence.errors import InputError, need
 from alphafence.formats.ed269 import looks_like_ed269, read_ed269_doc
 from alphafence.formats.features import Database, select_bbox
 from alphafence.formats.geojson import read_geojson_doc
 from alphafence.formats.jsonfile import read_json
 
 OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
+
+
+def osm_wants(paths):
+    """What reading ``paths`` needs beyond the base install: pyosmium (4.0 or later, for
+    ``osmium.filter``) for each OSM file, as :func:`alphafence.errors.need` takes it.
+
+    Examples
+    --------
+    >>> osm_wants(["malta.osm.pbf", "zones.geojson"])
+    [('osmium.filter', 'reading malta.osm.pbf')]
+    """
+    return [
+        ("osmium.filter", f"reading {p}") for p in paths if str(p).lower().endswith(OSM_SUFFIXES)
+    ]
 
 
 def read_file(path, rules, repaired, skipped):
@@ -38,6 +52,7 @@ def read_file(path, rules, repaired, skipped):
     """
     name = str(path).lower()
     if name.endswith(OSM_SUFFIXES):
+        need(*osm_wants([path]))
         from alphafence.formats.osm import read_osm  # pyosmium, only when OSM is read
 
         return read_osm(path, rules, repaired, skipped)

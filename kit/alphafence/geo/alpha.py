@@ -15,9 +15,6 @@ from __future__ import annotations
 import numpy as np
 import shapely
 import shapely.errors
-from scipy.sparse import coo_array
-from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
-from scipy.spatial import Delaunay, QhullError
 
 
 def outer_polygons(geom):
@@ -135,6 +132,9 @@ def bottleneck_alpha(neighbors, weight, terminal, links=None) -> float:
     finite = np.isfinite(w)
     a, b, w = a[finite], b[finite], w[finite]
     # +1 so zero-weight edges survive the sparse representation
+    from scipy.sparse import coo_array  # scipy (the build extra), imported where it is used
+    from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
+
     graph = coo_array((w + 1.0, (a, b)), shape=(n, n)).tocsr()
     mst = minimum_spanning_tree(graph)
     mst = mst + mst.T
@@ -202,6 +202,10 @@ def alpha_shape(required, alpha: float | None = None):
     )
     if len(pts) < 3:
         return region, 0.0
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import Delaunay, QhullError
+
     try:
         tri = Delaunay(pts)
     except QhullError:
@@ -262,6 +266,8 @@ def alpha_shape_points(points, alpha: float):
     pts = np.unique(np.asarray(points, float), axis=0)
     if len(pts) < 3:
         return shapely.Polygon()
+    from scipy.spatial import Delaunay, QhullError
+
     try:
         tri = Delaunay(pts)
     except QhullError:

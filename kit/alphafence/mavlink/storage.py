@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from alphafence.mavlink.items import POLYGON_EXCLUSION, POLYGON_INCLUSION, RETURN_POINT
+from alphafence.mavlink import ids  # not mavlink.items: the command line's parser reads PROFILES
 
 HEADER_BYTES = 4
 END_BYTES = 1
@@ -50,12 +50,15 @@ def storage_bytes(items) -> int:
     i = 0
     while i < len(items):
         it = items[i]
-        if it.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
+        if it.command in (
+            ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+            ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+        ):
             n = int(it.param1)
             total += polygon_bytes(n)
             i += n
             continue
-        total += RETURN_BYTES if it.command == RETURN_POINT else CIRCLE_BYTES
+        total += RETURN_BYTES if it.command == ids.MAV_CMD_NAV_FENCE_RETURN_POINT else CIRCLE_BYTES
         i += 1
     return total
 

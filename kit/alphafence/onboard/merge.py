@@ -11,7 +11,7 @@ import shapely
 import shapely.errors
 
 from alphafence.build.fences import enclosing_circle
-from alphafence.errors import InputError
+from alphafence.errors import InputError, need
 from alphafence.geo.alpha import alpha_shape
 from alphafence.onboard.options import Piece, piece_options
 
@@ -86,6 +86,7 @@ def _best_merge(pieces, neighbours=4, model=None):
 def _merge(pieces, a, b, profile, merges, model=None):
     pair_of = (pieces[a], pieces[b])
     pair = shapely.GeometryCollection([pieces[a].local, pieces[b].local])
+    need(("scipy", "merging fences to fit the vehicle's storage"))  # the alpha shape's
     try:
         joined, _ = alpha_shape(shapely.union(pieces[a].local, pieces[b].local))
     except shapely.errors.GEOSException:

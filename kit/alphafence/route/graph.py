@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 import shapely
-from scipy.spatial import QhullError, Voronoi, cKDTree
 
 
 def voronoi_edges(roadmap, bounds=None):
@@ -62,6 +61,8 @@ def voronoi_edges(roadmap, bounds=None):
         rings = shapely.boundary(roadmap.warning)
         pts.append(shapely.get_coordinates(shapely.segmentize(rings, 2.0 * s)))
     pts = np.unique(np.round(np.concatenate(pts), 6), axis=0)
+    from scipy.spatial import QhullError, Voronoi  # scipy (the build extra), used here only
+
     try:
         vor = Voronoi(pts)
     except QhullError as exc:  # degenerate input, e.g. all samples collinear
@@ -138,6 +139,8 @@ def add_rings(roadmap, V, edges, k=4):
     allv = np.vstack([V, R])
     links = np.zeros((0, 2), int)
     if len(V):  # each ring vertex to its nearest visible Voronoi vertices
+        from scipy.spatial import cKDTree
+
         kk = min(k, len(V))
         _, nn = cKDTree(V).query(R, k=kk)
         src = np.repeat(np.arange(len(V), len(allv)), kk)

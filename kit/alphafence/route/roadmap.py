@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
-from scipy.spatial import cKDTree
 
 from alphafence.errors import RoutingError
 from alphafence.route.graph import add_rings, adjacency_lists, voronoi_edges
@@ -228,6 +227,8 @@ class Roadmap:
         self.edge_cost = w
         n = len(self.vertices)
         self._adjacency = adjacency_lists(n, edges, w)
+        from scipy.spatial import cKDTree
+
         self.kdtree = cKDTree(self.vertices) if n else None
 
     # -- queries ---------------------------------------------------------------
