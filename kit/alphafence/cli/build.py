@@ -4,21 +4,18 @@ from __future__ import annotations
 
 from collections import Counter, defaultdict
 
-import numpy as np
 from rich.table import Table
 
-from alphafence.build.fences import METHODS
-from alphafence.build.outputs import build_meta, render
-from alphafence.build.pipeline import build_fences
+from alphafence.build import METHODS
 from alphafence.cli.common import callback, err_console, out_console, progress
-from alphafence.cli.options import add_database_options, build_options, non_negative, positive
-from alphafence.formats.atomic import write_all
-from alphafence.formats.database import read_database
-from alphafence.formats.rules import load_rules
-from alphafence.mavlink.items import MAX_POLYGON_VERTICES, fence_items
-from alphafence.mavlink.storage import PROFILES
-
-COPTER_ITEMS = PROFILES["copter"].items
+from alphafence.cli.options import (
+    add_database_options,
+    build_options,
+    build_wants,
+    non_negative,
+    positive,
+)
+from alphafence.errors import need
 
 
 def register(sub):
@@ -61,6 +58,13 @@ def register(sub):
 
 def run(args) -> int:
     """Read the databases, build the fences, write them; exit status 0."""
+    from alphafence.build.outputs import build_meta, render
+    from alphafence.build.pipeline import build_fences
+    from alphafence.formats.atomic import write_all
+    from alphafence.formats.database import read_database
+    from alphafence.formats.rules import load_rules
+
+    need(*build_wants(args.databases, args.figure))
     rules = load_rules(args.rules)
     opts = build_options(args)
     with progress(not args.quiet) as prog:
@@ -93,6 +97,12 @@ def run(args) -> int:
 def summary(db, result, opts, written):
     """Print the fences built per category and kind, and notes on repairs, skipped features
     and what does not fit a vehicle."""
+    import numpy as np
+
+    from alphafence.mavlink.items import MAX_POLYGON_VERTICES, fence_items
+    from alphafence.mavlink.storage import PROFILES
+
+    copter_items = PROFILES["copter"].items
     fences = result.fences
     table = Table(
         title=f"{len(result.sites)} sites from {len(db.features)} restricted features "
@@ -134,9 +144,9 @@ def summary(db, result, opts, written):
     ]
     if big:
         notes.append(f"{len(big)} polygon(s) exceed ArduPilot's 255 vertices: {', '.join(big[:3])}")
-    if len(items) > COPTER_ITEMS:
+    if len(items) > copter_items:
         notes.append(
-            f"{len(items)} fence items: more than a Copter holds ({COPTER_ITEMS}); "
+            f"{len(items)} fence items: more than a Copter holds ({copter_items}); "
             "compile an onboard subset for the operating area before uploading"
         )
     for n in notes:

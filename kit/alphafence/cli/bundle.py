@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from alphafence.build.bundle import generate_key, sign, verify
 from alphafence.cli.common import out_console
 
 
@@ -28,6 +27,8 @@ def register(sub):
 
 def run(args) -> int:
     """Make a key pair, sign fences, or verify them (exit 2 when they do not verify)."""
+    from alphafence.build.bundle import generate_key, sign, verify
+
     if args.bundle_verb == "keygen":
         generate_key(args.private, args.public)
         out_console.print(f"wrote {args.private} (keep it secret) and {args.public}")

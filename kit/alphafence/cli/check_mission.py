@@ -6,7 +6,6 @@ from rich.table import Table
 
 from alphafence.cli.common import err_console, out_console
 from alphafence.cli.options import non_negative
-from alphafence.formats.fence_geojson import read_fences
 
 
 def register(sub):
@@ -32,6 +31,7 @@ def register(sub):
 
 def run(args) -> int:
     """Print the legs near keep-out fences; exit 1 when any leg crosses one, else 0."""
+    from alphafence.formats.fence_geojson import read_fences
     from alphafence.formats.mission import read_mission
     from alphafence.route.legs import check_legs
 

@@ -4,15 +4,11 @@ from __future__ import annotations
 
 import json
 
-from alphafence.build.compare import compare_methods, telling_sites
-from alphafence.build.fences import METHODS
-from alphafence.build.outputs import OSM_ATTRIBUTION
+from alphafence.build import METHODS
 from alphafence.cli.common import callback, out_console, progress
-from alphafence.cli.options import add_database_options, build_options
+from alphafence.cli.options import add_database_options, build_options, build_wants
 from alphafence.cli.tables import stats_table
-from alphafence.errors import InputError
-from alphafence.formats.database import read_database
-from alphafence.formats.rules import load_rules
+from alphafence.errors import InputError, need
 
 
 def register(sub):
@@ -57,6 +53,12 @@ def methods(text):
 
 def run(args) -> int:
     """Build fences with each method and print (or, with --json, dump) how they compare."""
+    from alphafence.build.compare import compare_methods, telling_sites
+    from alphafence.build.outputs import OSM_ATTRIBUTION
+    from alphafence.formats.database import read_database
+    from alphafence.formats.rules import load_rules
+
+    need(*build_wants(args.databases, args.figure))
     rules = load_rules(args.rules)
     opts = build_options(args)
     with progress(not args.json) as prog:

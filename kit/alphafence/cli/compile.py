@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 from alphafence.cli.common import out_console
-from alphafence.cli.options import add_compile_options, bbox, compile_from_args
+from alphafence.cli.options import add_compile_options, bbox, compile_from_args, figure_wants
 from alphafence.cli.tables import compile_report
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats import qgc_wpl as waypoints
-from alphafence.formats.atomic import write_all
-from alphafence.formats.fence_geojson import read_fences
+from alphafence.errors import need
 
 
 def register(sub):
@@ -52,6 +49,12 @@ def register(sub):
 def run(args) -> int:
     """Compile the fences for the flight path or box, write the onboard plan (and waypoint
     file); exit 0."""
+    from alphafence.formats import qgc_plan as plan
+    from alphafence.formats import qgc_wpl as waypoints
+    from alphafence.formats.atomic import write_all
+    from alphafence.formats.fence_geojson import read_fences
+
+    need(*figure_wants(args.figure))
     records = read_fences(args.fences)
     result = compile_from_args(args, records)
     out = {

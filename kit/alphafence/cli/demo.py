@@ -12,25 +12,10 @@ import signal
 from importlib import resources
 from pathlib import Path
 
-import shapely
-
-from alphafence.build.compare import compare_methods, telling_sites
-from alphafence.build.fences import METHODS
-from alphafence.build.outputs import build_meta, render
-from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.build import METHODS
 from alphafence.cli.common import out_console
 from alphafence.cli.tables import stats_table
-from alphafence.formats import qgc_plan
-from alphafence.formats.atomic import write_all
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.rules import load_rules
-from alphafence.mavlink.storage import PROFILES
-from alphafence.onboard.compile import compile_fences
-from alphafence.onboard.decode import decode_fence
-from alphafence.plots.compare import comparison_figure
-from alphafence.plots.fences import fence_map
-from alphafence.plots.flight import flight_figure
+from alphafence.errors import need
 
 NOTE = "Synthetic demo scene authored by the AlphaFence project (not real places)."
 HOME = (-0.5500, 51.4300)  # lon, lat: the scene's take-off point (the egham SITL home)
@@ -81,6 +66,13 @@ def register(sub):
 def run(args) -> int:
     """Build, draw and compare fences for the demo scene, compile them, and fly (or replay)
     the demo flight, all into ``--output-dir``; exit 0."""
+    from alphafence.formats import qgc_plan
+    from alphafence.formats.atomic import write_all
+    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.mavlink.storage import PROFILES
+    from alphafence.onboard.compile import compile_fences
+
+    need(("scipy", "building the demo's fences"), ("matplotlib", "drawing the demo's figures"))
     out = Path(args.output_dir)
     fences_path = _build(out)
     records = read_fences(fences_path)
@@ -112,6 +104,15 @@ def run(args) -> int:
 
 
 def _build(out: Path) -> Path:
+    from alphafence.build.compare import compare_methods, telling_sites
+    from alphafence.build.outputs import build_meta, render
+    from alphafence.build.pipeline import BuildOptions, build_fences
+    from alphafence.formats.atomic import write_all
+    from alphafence.formats.database import read_database
+    from alphafence.formats.rules import load_rules
+    from alphafence.plots.compare import comparison_figure
+    from alphafence.plots.fences import fence_map
+
     scene = scene_path()
     rules = load_rules()
     db = read_database([scene], rules)
@@ -145,6 +146,8 @@ def _build(out: Path) -> Path:
 
 def _area(records):
     """The operating area: the box around every fence of the scene."""
+    import shapely
+
     return shapely.box(*shapely.GeometryCollection([r.geometry for r in records]).bounds)
 
 
@@ -205,6 +208,10 @@ def _replay(out, fences_path, records) -> int:
 
 def _write_flight(out, records, trace, events, title, what):
     import json
+
+    from alphafence.formats.atomic import write_all
+    from alphafence.onboard.decode import decode_fence
+    from alphafence.plots.flight import flight_figure
 
     track = [(s.lon, s.lat) for s in trace.samples]
     flight_figure(

@@ -5,9 +5,6 @@ from __future__ import annotations
 import asyncio
 
 from alphafence.cli.common import add_signing_option, out_console, signing_key, unsigned_hint
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats import qgc_wpl as waypoints
-from alphafence.formats.atomic import write_all
 
 
 def register(sub):
@@ -35,6 +32,9 @@ def run(args) -> int:
 
 
 async def _download(args) -> int:
+    from alphafence.formats import qgc_plan as plan
+    from alphafence.formats import qgc_wpl as waypoints
+    from alphafence.formats.atomic import write_all
     from alphafence.vehicle.fence_transfer import download_fence
     from alphafence.vehicle.link import open_vehicle
 

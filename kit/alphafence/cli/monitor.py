@@ -14,8 +14,7 @@ from alphafence.cli.common import (
     signing_key,
 )
 from alphafence.cli.options import non_negative, positive, sd_fence_kb, storage_profile
-from alphafence.errors import InputError
-from alphafence.monitor.fenceset import FenceSet
+from alphafence.errors import InputError, need
 from alphafence.monitor.options import (
     ACTIONS,
     NOT_REROUTE,
@@ -183,6 +182,8 @@ def _not_reroute(flag):
 
 def run(args) -> int:
     """Monitor the flight until Ctrl-C or SIGTERM; exit 0, or 3 when the link fails."""
+    from alphafence.monitor.fenceset import FenceSet
+
     options = MonitorOptions(
         horizon_s=args.horizon,
         enforce=args.enforce,
@@ -197,6 +198,7 @@ def run(args) -> int:
         onboard=args.onboard,
         rolling=_rolling_options(args),
     )
+    need(*monitor_wants(options))
     check_trust(args, args.fences)
     fences = FenceSet.from_geojson(args.fences)
     args.key = signing_key(args)
@@ -205,6 +207,18 @@ def run(args) -> int:
 
         check_log_path(args.log)
     return asyncio.run(_run(args, fences, options))
+
+
+def monitor_wants(options):
+    """What the monitor needs beyond the base install and its link: scipy to re-route
+    (``--imminent-action reroute``) and to compile the rolling onboard fence (it merges
+    fences to fit the storage), checked before the flight rather than when first needed."""
+    wants = []
+    if options.imminent_action == REROUTE:
+        wants.append(("scipy", "--imminent-action reroute"))
+    if options.onboard == "rolling":
+        wants.append(("scipy", "--onboard rolling"))
+    return wants
 
 
 async def _run(args, fences, options) -> int:

@@ -10,6 +10,10 @@ verb's ``run()`` receives values already parsed and in range:
 
 :class:`Parser` also takes a value that starts with a minus sign and reads as numbers
 (``--bbox -77.5,38.7,-77.0,39.0``, ``--from -35.36,149.16``) as a value, not as an option.
+
+Building the parser imports no geometry (numpy, shapely, pyproj): ``alphafence --help`` starts
+in a fraction of a second. A verb imports the library in its ``run()``, and the argument types
+import what they need when they are called.
 """
 
 from __future__ import annotations
@@ -19,8 +23,6 @@ import math
 import re
 
 from alphafence.errors import InputError
-from alphafence.formats.features import parse_bbox
-from alphafence.geo.coords import valid_lonlat
 
 _NUMBER = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 # "-5", "-.5", "-1e3", and comma lists "-77.5,38.7,-77.0,39.0" (argparse alone knows only the first two)
@@ -59,6 +61,8 @@ def bbox(text: str) -> tuple:
     A malformed box, coordinates out of range or a min not below its max is a usage error
     (``argparse.ArgumentTypeError``).
     """
+    from alphafence.formats.features import parse_bbox
+
     try:
         return parse_bbox(text)
     except InputError as exc:
@@ -86,6 +90,8 @@ def latlon(flag: str):
     """
 
     def parse(text):
+        from alphafence.geo.coords import valid_lonlat
+
         try:
             lat, lon = (float(v) for v in text.split(","))
         except ValueError:
@@ -195,6 +201,20 @@ def add_database_options(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="vertex budget per fence polygon (default 32)",
     )
+
+
+def build_wants(databases, figure=None):
+    """What ``build`` and ``compare`` need beyond the base install, as
+    :func:`alphafence.errors.need` takes it: pyosmium for OSM files, scipy to build fences,
+    matplotlib to draw ``figure``."""
+    from alphafence.formats.database import osm_wants
+
+    return [*osm_wants(databases), ("scipy", "building fences"), *figure_wants(figure)]
+
+
+def figure_wants(figure):
+    """What drawing ``figure`` (a path, or None for no figure) needs: matplotlib."""
+    return [("matplotlib", f"drawing {figure}")] if figure else []
 
 
 def build_options(args):

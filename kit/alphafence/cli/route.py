@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 from alphafence.cli.common import out_console
-from alphafence.cli.options import latlon, non_negative, positive
-from alphafence.errors import RoutingError
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats.atomic import write_all
-from alphafence.formats.fence_geojson import read_fences
+from alphafence.cli.options import figure_wants, latlon, non_negative, positive
+from alphafence.errors import RoutingError, need
 
 
 def register(sub):
@@ -61,9 +58,14 @@ def register(sub):
 def run(args) -> int:
     """Plan the route and write the mission; exit 0, or 1 (a
     :class:`~alphafence.errors.RoutingError`) when no route exists."""
+    from alphafence.formats import qgc_plan as plan
+    from alphafence.formats.atomic import write_all
+    from alphafence.formats.fence_geojson import read_fences
     from alphafence.formats.qgc_plan import mission_items
     from alphafence.formats.qgc_wpl import mission_waypoints_text
     from alphafence.route import FenceRoadmap, NoRoute
+
+    need(("scipy", "routing"), *figure_wants(args.figure))
 
     start, goal = args.start, args.goal
     records = read_fences(args.fences)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 
 from alphafence.cli.common import add_signing_option, err_console, out_console, signing_key
-from alphafence.errors import InputError
+from alphafence.errors import InputError, need
 
 
 def register(sub):
@@ -47,6 +47,7 @@ def run(args) -> int:
         key = write_new_key(args.key)
         out_console.print(f"wrote {args.key} (key {key_id(key)}; keep it secret)")
         return 0
+    need(("pymavlink", f"signing {args.signing_verb}"))
     current = signing_key(args)
     if args.signing_verb == "setup":
         new = load_key(args.key)

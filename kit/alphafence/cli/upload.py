@@ -20,9 +20,6 @@ from alphafence.cli.common import (
 from alphafence.cli.options import add_compile_options, bbox, compile_from_args, storage_profile
 from alphafence.cli.tables import compile_report
 from alphafence.errors import InputError, VehicleError
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.qgc_plan import read_plan_fence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
 
 # MAVSDK's results for a fence the vehicle has no room for (too many items; too many bytes)
@@ -88,6 +85,10 @@ def load_items(args):
     tuple
         ``(items, CompileResult or None)``.
     """
+    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.formats.qgc_plan import read_plan_fence
+    from alphafence.formats.qgc_wpl import read_waypoints_fence
+
     name = args.fences.lower()
     if name.endswith(".plan"):
         return read_plan_fence(args.fences), None
