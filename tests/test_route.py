@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity  # shapely 2.0 does not load it with shapely
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy import ndimage

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
+from shapely.ops import polylabel
 
 from alphafence.build import METHODS
 from alphafence.build.sites import circle_steps
@@ -357,9 +358,12 @@ def _keep_in(site, geometry, margin, opts, base):
         polys = polys[[int(np.argmax(shapely.area(polys)))]]
     poly = shapely.Polygon(polys[0].exterior)
     if opts.method == "circle":
-        mic = shapely.maximum_inscribed_circle(polys[0])
-        cx, cy = shapely.get_coordinates(mic)[0]
-        r = float(mic.length) - PAD_M
+        # the pole of inaccessibility (GEOS's maximum inscribed circle from shapely 2.1 on,
+        # which shapely 2.0 lacks; polylabel is either), at the tolerance GEOS defaults to
+        x0, y0, x1, y1 = polys[0].bounds
+        centre = polylabel(polys[0], max(x1 - x0, y1 - y0) / 1000)
+        cx, cy = centre.x, centre.y
+        r = float(polys[0].boundary.distance(centre)) - PAD_M
         circle = (cx, cy, r)
         local = shapely.Point(cx, cy).buffer(r, quad_segs=16)
     elif opts.method == "exact":

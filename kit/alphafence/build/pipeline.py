@@ -74,8 +74,8 @@ def build_fences(
     >>> result = build_fences(wards, rules)
     >>> for fence in result.fences:
     ...     print(fence.site_id, fence.kind, fence.vertices)
-    hospital/way/2 keep_out 26
-    hospital/way/2 warning 20
+    hospital/way/1 keep_out 26
+    hospital/way/1 warning 20
     hospital/way/3 keep_out 20
     hospital/way/3 warning 20
     """

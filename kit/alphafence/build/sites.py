@@ -136,7 +136,7 @@ def group_sites(features, rules, join_m=25.0):
     ...     return Feature(box, {"amenity": "hospital"}, source, "demo", hospital)
     >>> wards = [ward(14.5, "way/1"), ward(14.5007, "way/2"), ward(14.51, "way/3")]
     >>> [(s.site_id, s.sources) for s in group_sites(wards, rules)]  # 18 m apart, then 700 m
-    [('hospital/way/2', ['way/1', 'way/2']), ('hospital/way/3', ['way/3'])]
+    [('hospital/way/1', ['way/1', 'way/2']), ('hospital/way/3', ['way/3'])]
     """
     by_class = defaultdict(list)
     for f in features:
@@ -198,7 +198,10 @@ def _extent_m(local):
 
 def _make_site(category, kind, margin, frame, members, parts):
     areas = shapely.area(parts)
-    order = np.argsort(-areas, kind="stable")
+    # features within a billionth of the largest count as equally large, and the first of
+    # them in the database's order names the site: not the last digits of a projection
+    key = np.where(areas >= areas.max() * (1 - 1e-9), np.inf, areas)
+    order = np.argsort(-key, kind="stable")
     largest = members[int(order[0])]
     name = next((members[i].name for i in order if members[i].name), None)
     alt_min = [f.alt_min_m for f in members]
