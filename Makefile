@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 
-.PHONY: install demo test sitl-test navio2-test bench soak fuzz fuzz-atheris lint clean
+.PHONY: install demo test test-oldest sitl-test navio2-test bench soak fuzz fuzz-atheris lint clean
 
 install: $(STAMP)
 
@@ -20,6 +20,25 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/pytest -q
+
+# the whole suite at the oldest versions the kit supports (pyproject.toml's floors, mostly
+# Debian bookworm's): .venv-oldest from .ci/oldest-constraints.txt (needs Python 3.11, as
+# bookworm's; pip's downloads cached under $ALPHAFENCE_CACHE, default ~/.cache/alphafence)
+OLDEST       := .venv-oldest
+OLDEST_STAMP := $(OLDEST)/.installed
+OLDEST_CACHE ?= $(or $(ALPHAFENCE_CACHE),$(HOME)/.cache/alphafence)
+
+$(OLDEST_STAMP): pyproject.toml .ci/oldest-constraints.txt
+	$(PYTHON) -m venv $(OLDEST)
+	PIP_CACHE_DIR=$(OLDEST_CACHE)/pip $(OLDEST)/bin/pip install --quiet --upgrade pip
+	PIP_CACHE_DIR=$(OLDEST_CACHE)/pip $(OLDEST)/bin/pip install --quiet \
+		-c .ci/oldest-constraints.txt -e '.[dev]'
+	touch $@
+
+test-oldest: $(OLDEST_STAMP)
+	$(OLDEST)/bin/python -c "import numpy, scipy, shapely; print('oldest versions: numpy', \
+		numpy.__version__, 'scipy', scipy.__version__, 'shapely', shapely.__version__)"
+	$(OLDEST)/bin/pytest -q
 
 sitl-test: $(STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
@@ -61,4 +80,4 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check kit tests bench
 
 clean:
-	rm -rf $(VENV) demo-out bench-out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(OLDEST) demo-out bench-out .pytest_cache .hypothesis
