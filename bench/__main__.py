@@ -14,6 +14,7 @@ from rich.table import Table
 
 from bench import (
     build_bench,
+    cli_bench,
     compile_bench,
     monitor_bench,
     monitor_cpu_bench,
@@ -35,7 +36,7 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--only",
-        choices=["build", "compile", "upload", "monitor", "rolling", "route", "soak"],
+        choices=["build", "cli", "compile", "upload", "monitor", "rolling", "route", "soak"],
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
     )
     p.add_argument(
@@ -50,6 +51,8 @@ def main(argv=None) -> int:
     rows = []
     if args.only in (None, "build"):
         rows += build_bench.run(args.osm, args.optimize_sites, console)
+    if args.only in (None, "cli"):
+        rows += cli_bench.run(build_bench.Row)
     if args.only in (None, "compile"):
         rows += compile_bench.run(args.osm, build_bench.Row)
         rows += compile_bench.navio2(args.osm, build_bench.Row)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 
 from alphafence import __version__
-from alphafence.errors import AlphaFenceError
+from alphafence.errors import AlphaFenceError, missing_dependency
 
 VERBS = (
     "build",
@@ -66,8 +66,9 @@ def main(argv=None) -> int:
     -------
     int
         The exit status: the verb's own (0, or 1 for ``check-mission``'s crossing legs), the
-        ``exit_code`` of an :class:`~alphafence.errors.AlphaFenceError` (2 for bad input, 3
-        when the vehicle or its link fails, 1 otherwise), or 130 on Ctrl-C. A usage error
+        ``exit_code`` of an :class:`~alphafence.errors.AlphaFenceError` (2 for bad input or a
+        missing optional package, 3 when the vehicle or its link fails, 1 otherwise), or 130
+        on Ctrl-C. A usage error
         exits (``SystemExit``) with status 2, as argparse does.
 
     Examples
@@ -84,6 +85,13 @@ def main(argv=None) -> int:
         verb = args.verb if args is not None else _verb(argv)
         print(f"alphafence {verb}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except ImportError as exc:  # an optional package a verb did not check for first
+        verb = args.verb if args is not None else _verb(argv)
+        missing = missing_dependency(exc, verb)
+        if missing is None:
+            raise
+        print(f"alphafence {verb}: error: {missing}", file=sys.stderr)
+        return missing.exit_code
     except KeyboardInterrupt:
         print("alphafence: interrupted", file=sys.stderr)
         return 130

@@ -36,7 +36,7 @@ import time
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from alphafence.errors import SitlError
+from alphafence.errors import SitlError, need
 from alphafence.sitl.cmdline import MODEL, defaults_files, sitl_command, write_param_file
 from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
 from alphafence.sitl.homes import DEFAULT_HOME, Home, resolve_home
@@ -227,12 +227,7 @@ class SitlInstance:
         (with the log's tail) if SITL exits or ``timeout`` seconds pass first."""
         if self.process is None:
             raise SitlError("SITL instance not started")
-        try:
-            import pymavlink  # noqa: F401
-        except ModuleNotFoundError:
-            raise SitlError(
-                "readiness needs pymavlink: pip install 'alphafence[vehicle]'"
-            ) from None
+        need(("pymavlink", "waiting for SITL to be ready"))
         self.state = state = ReadyState()
         listener = ReadinessListener(state)
         try:
