@@ -112,6 +112,18 @@ def check_trust(args, path):
         ) from None
 
 
+def add_link_option(p: argparse.ArgumentParser) -> None:
+    """Add ``--link`` (also ``$ALPHAFENCE_LINK``): which vehicle link to use."""
+    p.add_argument(
+        "--link",
+        choices=("auto", "pymavlink", "mavsdk"),
+        default=None,
+        help="vehicle link: pymavlink (pure Python, any platform, a Navio2 included) or "
+        "mavsdk (MAVSDK 4's native binding); auto takes what is installed (also "
+        "$ALPHAFENCE_LINK)",
+    )
+
+
 def add_signing_option(p: argparse.ArgumentParser) -> None:
     """Add ``--signing-key``, which :func:`signing_key` reads."""
     p.add_argument(

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import asyncio
 
-from alphafence.cli.common import add_signing_option, out_console, signing_key, unsigned_hint
+from alphafence.cli.common import (
+    add_link_option,
+    add_signing_option,
+    out_console,
+    signing_key,
+    unsigned_hint,
+)
 
 
 def register(sub):
@@ -14,13 +20,19 @@ def register(sub):
         help="read the fence a vehicle holds",
         description="Download the vehicle's fence items into a QGroundControl plan.",
     )
-    p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
+    p.add_argument(
+        "--connect",
+        required=True,
+        metavar="URL",
+        help="vehicle connection URL (udpin://HOST:PORT, udpout://, tcpout://)",
+    )
     p.add_argument("-o", "--output", required=True, metavar="OUT.plan")
     p.add_argument(
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
     )
     p.add_argument("--timeout", type=float, default=10.0, metavar="S")
     add_signing_option(p)
+    add_link_option(p)
     p.set_defaults(func=run)
 
 
@@ -39,7 +51,7 @@ async def _download(args) -> int:
     from alphafence.vehicle.link import open_vehicle
 
     with unsigned_hint(args.key):
-        async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
+        async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
             items = await download_fence(vehicle)
     out = {args.output: plan.dumps(plan.plan_document(items))}
     if args.waypoints:

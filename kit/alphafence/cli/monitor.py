@@ -6,6 +6,7 @@ import asyncio
 import signal
 
 from alphafence.cli.common import (
+    add_link_option,
     add_signing_option,
     add_trust_options,
     check_trust,
@@ -34,7 +35,12 @@ def register(sub):
         description="Check every position against the full-resolution fences, predict breaches, "
         "alert the ground station and, with --enforce, brake/RTL/land.",
     )
-    p.add_argument("--connect", required=True, metavar="URL", help="MAVSDK connection URL")
+    p.add_argument(
+        "--connect",
+        required=True,
+        metavar="URL",
+        help="vehicle connection URL (udpin://HOST:PORT, udpout://, tcpout://)",
+    )
     p.add_argument("--fences", required=True, metavar="FENCES.geojson")
     p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
     p.add_argument(
@@ -108,6 +114,7 @@ def register(sub):
     )
     add_trust_options(p)
     add_signing_option(p)
+    add_link_option(p)
     p.set_defaults(func=run)
 
 
@@ -241,6 +248,7 @@ async def _run(args, fences, options) -> int:
             echo=_echo,
             timeout=args.timeout,
             signing_key=args.key,
+            link=args.link,
         )
     except LinkError as exc:
         err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)

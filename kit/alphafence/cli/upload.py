@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 
 from alphafence.cli.common import (
+    add_link_option,
     add_signing_option,
     add_trust_options,
     check_trust,
@@ -46,7 +47,7 @@ def register(sub):
         "--connect",
         required=False,
         metavar="URL",
-        help="MAVSDK connection URL, e.g. udpin://127.0.0.1:14550 or tcpout://navio.local:5760",
+        help="vehicle connection URL, e.g. udpin://127.0.0.1:14550 or tcpout://navio.local:5760",
     )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--area", metavar="MISSION.plan", help="operating area (for a .geojson)")
@@ -71,6 +72,7 @@ def register(sub):
     p.add_argument("--dry-run", action="store_true", help="compile and check, but do not connect")
     add_trust_options(p)
     add_signing_option(p)
+    add_link_option(p)
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
@@ -134,7 +136,7 @@ async def _upload(args, items, profile) -> int:
     from alphafence.vehicle.params import apply_params
 
     with unsigned_hint(args.key):
-        async with open_vehicle(args.connect, args.timeout, args.key) as vehicle:
+        async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
             if profile.file_backed:
                 await _storage(args, vehicle, items, profile)
             try:
