@@ -6,7 +6,9 @@ Runs the real monitor (link, telemetry tasks, checker, log writer) against one S
 1 over the Malta fences, with position and velocity asked for at each rate, on each link that
 is installed (``pymavlink``: the pure-Python link; ``mavsdk``: MAVSDK 4's native binding, the
 named peer), and measures this process's CPU time (all its threads, MAVSDK's included) against
-wall time and against the positions the monitor checked: the CPU per position.
+wall time and against the positions the monitor checked: the CPU per position. Each figure is
+the least of :data:`WINDOWS` windows of :data:`SECONDS` (other work on the machine only ever
+adds CPU time: the least is the nearest to the monitor's own).
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import time
 
 from alphafence.sitl.find import find_sitl_binary
 
-SECONDS = 15.0
+SECONDS = 8.0
+WINDOWS = 3
 SETTLE_S = 3.0  # subscriptions up, the rates applied
 RATES = (10.0, 50.0)
 TARGETS = {10.0: 0.01, 50.0: 0.02}
@@ -45,12 +48,16 @@ async def _measure_one(url, fences, link, hz):
         stop = asyncio.Event()
         task = asyncio.create_task(monitor.run(stop))
         await asyncio.sleep(SETTLE_S)
-        c0, w0, n0 = time.process_time(), time.perf_counter(), checks.n
-        await asyncio.sleep(SECONDS)
-        cpu, wall, n = time.process_time() - c0, time.perf_counter() - w0, checks.n - n0
+        best = None
+        for _ in range(WINDOWS):
+            c0, w0, n0 = time.process_time(), time.perf_counter(), checks.n
+            await asyncio.sleep(SECONDS)
+            cpu, wall, n = time.process_time() - c0, time.perf_counter() - w0, checks.n - n0
+            if best is None or cpu / wall < best[0]:
+                best = (cpu / wall, n / wall, cpu / max(n, 1))
         stop.set()
         await task
-    return cpu / wall, n / wall, cpu / max(n, 1)
+    return best
 
 
 async def _measure(osm, links):

@@ -98,6 +98,8 @@ class LocalFrame:
     # -- arrays ---------------------------------------------------------------
     def to_local(self, lon, lat):
         """WGS84 ``lon``, ``lat`` (scalars or arrays, degrees) -> ``(x, y)`` in metres."""
+        if type(lon) is float and type(lat) is float:  # one position (the monitor's): no arrays
+            return self._tr.transform(lon, lat)
         return self._tr.transform(np.asarray(lon, float), np.asarray(lat, float))
 
     def to_wgs84(self, x, y):

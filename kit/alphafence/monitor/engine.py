@@ -225,6 +225,14 @@ class Engine:
         self.conflicts = keys
         return events
 
+    def tick_due(self) -> float:
+        """When :meth:`tick` may next have something to say (monotonic seconds; infinity until
+        telemetry has come, and once the link is lost): the runner sleeps until then instead
+        of polling."""
+        if self.last_t is None or self.link_lost:
+            return math.inf
+        return self.last_t + (self.options.link_lost_s if self.stale else self.options.stale_s)
+
     def tick(self, now: float) -> list:
         """Called on a timer: telemetry older than ``stale_s`` is an event, and older than
         ``link_lost_s`` the link is lost (each once, until telemetry resumes)."""

@@ -52,17 +52,53 @@ class Feed:
     unavailable : str or None
         The event to log when the stream fails (with its error); None: the failure ends the
         feed's task (a telemetry stream: the runner reports ``telemetry_task_ended``).
+    split : tuple of str or None
+        A feed of several streams at once: each value is a tuple of their values, in this
+        order (observers are told of each under its own name).
     """
 
     open: Callable[[], AsyncIterator]
     deliver: Callable[[float, object], None]
     unavailable: str | None = None
+    split: tuple[str, ...] | None = None  # each value a tuple of these streams' values
 
 
 def telemetry_feed(vehicle, key: str, deliver) -> Feed:
     """The :class:`Feed` of telemetry stream ``key`` (one of :data:`TELEMETRY`)."""
     method = TELEMETRY[key]
     return Feed(lambda: getattr(vehicle.telemetry, method)(), deliver)
+
+
+def telemetry_feeds(vehicle, keep) -> dict:
+    """The feeds of every :data:`TELEMETRY` stream, named ``telemetry:<key>``.
+
+    A link whose position and velocity come in one message (the pymavlink link's
+    ``subscribe_position_velocity``: both from GLOBAL_POSITION_INT) feeds them together, one
+    task and one wake-up per position instead of two, and the position never meets the
+    previous message's velocity.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The link.
+    keep : callable
+        ``keep(key)`` -> the ``deliver(t, value)`` of that stream.
+    """
+    both = getattr(getattr(vehicle, "telemetry", None), "subscribe_position_velocity", None)
+    feeds = {}
+    for key in TELEMETRY:
+        if both is not None and key in ("position", "velocity"):
+            continue
+        feeds[f"telemetry:{key}"] = telemetry_feed(vehicle, key, keep(key))
+    if both is not None:
+        position, velocity = keep("position"), keep("velocity")
+
+        def deliver(t, value):
+            velocity(t, value[1])
+            position(t, value[0])
+
+        feeds["telemetry:position"] = Feed(both, deliver, split=("position", "velocity"))
+    return feeds
 
 
 async def set_rates(telemetry, rate_hz: float) -> None:

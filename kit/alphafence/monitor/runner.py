@@ -1,8 +1,11 @@
-"""The async companion monitor: the parts wired together on one MAVSDK connection.
+"""The async companion monitor: the parts wired together on one vehicle link (either link:
+:mod:`alphafence.vehicle.link`).
 
 Each feed (:mod:`alphafence.monitor.feeds`) is followed by a task of its own and only updates
-the latest state; a checker wakes on every new position and at least every ``TICK_S`` and steps
-the engine (:mod:`alphafence.monitor.engine`); every event it decides is logged
+the latest state; a new position schedules one check (a callback, not a task: at 50 Hz the
+wake-ups are most of the cost), which steps the engine (:mod:`alphafence.monitor.engine`) on the
+latest values; a loop ticks when telemetry would turn stale and every second (time windows,
+ended streams), sleeping in between; every event it decides is logged
 (:mod:`alphafence.monitor.eventlog`, written by its own task off the event loop), alerted and
 acted on (:mod:`alphafence.monitor.commands`, each alert and action in a task of its own);
 re-routes are flown by :mod:`alphafence.monitor.reroute_flight`. Observers
@@ -28,13 +31,13 @@ from alphafence.monitor.feeds import (
     latest_sample,
     other_systems,
     set_rates,
-    telemetry_feed,
+    telemetry_feeds,
 )
 from alphafence.monitor.observe import Observer, Step
 from alphafence.monitor.options import REROUTE
 from alphafence.monitor.reroute_flight import RerouteFlight
 
-TICK_S = 0.1  # the checker wakes at least this often (stale telemetry, time windows)
+TICK_EPSILON_S = 0.005  # the tick wakes this long after its due time (timers may fire early)
 CLOCK_S = 1.0  # fences' time windows and ended telemetry streams are looked at this often
 ROLLING_FINISH_S = 20.0  # a fence transfer under way at shutdown may take this long to end
 
@@ -83,7 +86,9 @@ class Monitor:
         self.log = log
         self.rate_hz = rate_hz
         self.latest = dict.fromkeys(TELEMETRY)
-        self.new_position = asyncio.Event()
+        self._loop = None  # while run() runs: positions are checked
+        self._check_due = False  # a check is scheduled
+        self._failure = None  # what a check raised, for run() to raise
         self.observers: list[Observer] = []
         self.tasks = []
         self.pending = set()  # alerts, actions, commands, re-routes under way
@@ -121,7 +126,7 @@ class Monitor:
             def deliver(t, value):
                 self.latest[key] = (t, value)
                 if key == "position":
-                    self.new_position.set()
+                    self._position_came()
 
             return deliver
 
@@ -129,7 +134,7 @@ class Monitor:
             self.engine.aircraft(t=t, **report)
 
         vehicle = self.vehicle
-        feeds = {f"telemetry:{key}": telemetry_feed(vehicle, key, keep(key)) for key in TELEMETRY}
+        feeds = telemetry_feeds(vehicle, keep)
         feeds["adsb"] = Feed(lambda: adsb(vehicle), traffic, "adsb_unavailable")
         if self.engine.options.mavlink_traffic:
             # every GLOBAL_POSITION_INT on the link crosses into Python: opt-in, for links
@@ -166,19 +171,18 @@ class Monitor:
             self.tasks.append(start)
             if self.rolling is not None:  # one fence transfer at a time
                 self.rolling.after = start
+        stopping = asyncio.ensure_future(stop.wait())
+        self._loop = asyncio.get_running_loop()
         try:
             while not stop.is_set():
-                with contextlib.suppress(asyncio.TimeoutError):
-                    await asyncio.wait_for(self.new_position.wait(), TICK_S)
-                events = []
-                if self.new_position.is_set():
-                    self.new_position.clear()
-                    sample = latest_sample(self.latest)
-                    if sample is not None:
-                        events += self._step(sample)
-                        if self.rolling is not None:  # a re-upload, when due, as a task
-                            self.rolling.consider(sample)
-                events += self.engine.tick(time.monotonic())
+                due = min(self.engine.tick_due(), self._clock_t + CLOCK_S)
+                await asyncio.wait(
+                    {stopping},
+                    timeout=min(CLOCK_S, max(0.0, due - time.monotonic())) + TICK_EPSILON_S,
+                )
+                if self._failure is not None:
+                    raise self._failure
+                events = self.engine.tick(time.monotonic())
                 if time.monotonic() - self._clock_t > CLOCK_S:  # ED-269 time windows
                     self._clock_t = time.monotonic()
                     self.engine.fences.set_time(datetime.now(timezone.utc))
@@ -186,12 +190,39 @@ class Monitor:
                 for e in events:
                     self.handle(e)
         finally:
+            self._loop = None  # no check after this
+            stopping.cancel()
             for t in self.tasks + list(self.pending):
                 t.cancel()
             for t in self.tasks + list(self.pending):
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await t
             await self._finish_rolling()
+
+    def _position_came(self) -> None:
+        """A new position: check it as soon as the values that came with it are in (one
+        callback however many positions arrive before it runs: the latest is checked)."""
+        if self._loop is not None and not self._check_due:
+            self._check_due = True
+            self._loop.call_soon(self._check)
+
+    def _check(self) -> None:
+        """Step the engine on the latest sample, consider a rolling re-upload, act on the
+        events. A failure stops the monitor (``run`` raises it), as it did inline."""
+        self._check_due = False
+        if self._loop is None or self._failure is not None:
+            return
+        try:
+            sample = latest_sample(self.latest)
+            if sample is None:
+                return
+            events = self._step(sample)
+            if self.rolling is not None:  # a re-upload, when due, as a task
+                self.rolling.consider(sample)
+            for e in events:
+                self.handle(e)
+        except Exception as exc:  # noqa: BLE001 - handed to run(), which raises it
+            self._failure = exc
 
     async def _finish_rolling(self):
         """Let a fence transfer under way end before the monitor stops: MAVSDK cannot be
@@ -215,8 +246,11 @@ class Monitor:
             async for value in feed.open():
                 t = time.monotonic()
                 feed.deliver(t, value)
-                for observer in self.observers:
-                    observer.on_value(stream, t, value)
+                if self.observers:
+                    parts = zip(feed.split, value) if feed.split else ((stream, value),)
+                    for part, v in list(parts):
+                        for observer in self.observers:
+                            observer.on_value(part, t, v)
         except asyncio.CancelledError:
             raise
         except Exception as exc:
@@ -317,13 +351,14 @@ async def run_monitor(
     echo=None,
     timeout: float = 10.0,
     signing_key: bytes | None = None,
+    link: str | None = None,
 ):
     """Connect to the vehicle at ``url`` and run a :class:`Monitor` until ``stop`` is set.
 
     Parameters
     ----------
     url : str
-        MAVSDK connection URL.
+        The vehicle's connection URL.
     fences : FenceSet
         Every fence.
     options : MonitorOptions
@@ -338,6 +373,8 @@ async def run_monitor(
         Seconds to find the vehicle.
     signing_key : bytes, optional
         MAVLink 2 signing key for the link.
+    link : str, optional
+        The vehicle link (:func:`~alphafence.vehicle.link.choose_link`).
 
     Returns
     -------
@@ -354,7 +391,7 @@ async def run_monitor(
     stop = stop or asyncio.Event()
     log = EventLog(log_path, echo)
     try:
-        async with open_vehicle(url, timeout, signing_key) as vehicle:
+        async with open_vehicle(url, timeout, signing_key, link) as vehicle:
             monitor = Monitor(vehicle, fences, options, log)
             await monitor.run(stop)
             return monitor

@@ -77,6 +77,15 @@ class Telemetry:
         async for m in self._own("GLOBAL_POSITION_INT"):
             yield VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0)
 
+    async def subscribe_position_velocity(self):
+        """Both from each GLOBAL_POSITION_INT, as ``(Position, VelocityNed)`` (one stream where
+        MAVSDK has two)."""
+        async for m in self._own("GLOBAL_POSITION_INT"):
+            yield (
+                Position(from_e7(m.lat), from_e7(m.lon), m.alt / 1000.0, m.relative_alt / 1000.0),
+                VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
+            )
+
     async def subscribe_flight_mode(self):
         """Each HEARTBEAT's mode as :class:`~alphafence.vehicle.values.FlightMode`."""
         async for m in self._own("HEARTBEAT"):
