@@ -284,17 +284,24 @@ def main(argv=None) -> int:
     except (Exception, BaseException) as exc:  # pytest.fail's Failed is a BaseException
         if isinstance(exc, KeyboardInterrupt):
             raise
-        print(f"navio2 flight: FAILED: {exc}", file=sys.stderr)
+        print(f"navio2 flight: FAILED: {exc}", flush=True)
         log = args.out / "monitor.log"
         if log.is_file():
             tail = log.read_text(errors="replace").splitlines()[-15:]
             print("--- armhf monitor output (last lines):", *tail, sep="\n", file=sys.stderr)
         return 1
     print(json.dumps(result, indent=1))
+    (args.out / "result.json").write_text(json.dumps(result, indent=1) + "\n")
+    w, i, s = result["warning"] or {}, result["imminent"] or {}, result["stopped"]
+    said = (
+        f"armhf monitor ready in {result['monitor_ready_s']} s; WARNING {w.get('edge_m')} m"
+        f" and IMMINENT {i.get('edge_m')} m before the fence, brake, stopped {s['edge_m']} m"
+        f" short ({s['t']} s after the goto); ArduPilot breach: {result['ardupilot_breach']}"
+    )
     if result["failures"]:
-        print("navio2 flight: FAILED: " + "; ".join(result["failures"]), file=sys.stderr)
+        print("navio2 flight: FAILED: " + "; ".join(result["failures"]) + " | " + said)
         return 1
-    print("navio2 flight: passed")
+    print("navio2 flight: passed: " + said)
     return 0
 
 

@@ -14,36 +14,46 @@
 #             (docker/alphafence-monitor.service: its user, ExecStart and environment, plus
 #             enforce and the SITL port) on SITL's second MAVLink link over loopback; a flight
 #             from the host at a keep-out fence (tests/navio2/flight.py)
+#   docker    (trixie) docker/Dockerfile.armv7's steps in another fresh overlay: no Docker
+#             engine here, so its RUN/COPY/ENV run as a script (tests/navio2/dockerfile.py)
 # Environment: NAVIO2_SUITE (trixie | bookworm; default trixie), NAVIO2_PHASES (default
-# "install tests flight"), NAVIO2_TESTS (pytest arguments instead of SELECTION),
+# "install tests flight docker"), NAVIO2_TESTS (pytest arguments instead of SELECTION),
 # ALPHAFENCE_FUZZ_EXAMPLES (default 20 here), NAVIO2_KEEP=1 (keep this run's overlay).
+# Logs: $CACHE/navio2/logs-SUITE/.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 SUITE=${NAVIO2_SUITE:-trixie}
-PHASES=${NAVIO2_PHASES:-install tests flight}
+PHASES=${NAVIO2_PHASES:-install tests flight docker}
 CACHE=${ALPHAFENCE_CACHE:-$HOME/.cache/alphafence}/navio2
 BASE=$CACHE/$SUITE-armhf
 STAMP=$BASE/.alphafence-userland
 RUN=$CACHE/$SUITE-run
 ROOTFS=$RUN/root
+LOGS=$CACHE/logs-$SUITE
+SHARED=$(cd "$ROOT/.." && pwd)/shared
 MIRROR=${NAVIO2_MIRROR:-http://deb.debian.org/debian}
 HOSTPY=$ROOT/.venv/bin/python
 FUZZ=${ALPHAFENCE_FUZZ_EXAMPLES:-20}
 
-# The companion's code and what it stands on: the monitor (engine, state, prediction, onboard
-# layer and its decoding, event log, observers, replay, traffic, time windows, rolling fence),
-# the vehicle link against tests/fake_vehicle.py (upload faults, hostile vehicle input), signing
-# and signed bundles, MAVLink ids, geo (outward simplification), every format reader (OSM
-# included), the layout rules, the entrypoint and the README's install blocks.
+# The companion's code and what it stands on, on the installed package (about 4.5 minutes
+# under qemu): the monitor (engine, state, prediction, onboard layer and its decoding, event
+# log, observers, replay, traffic, time windows, rolling fence), the vehicle link against
+# tests/fake_vehicle.py (upload faults, hostile vehicle input: the MAVSDK cases skip, the
+# pymavlink ones run), signing and signed bundles, the navio2 profile and BRD_SD_FENCE, MAVLink
+# ids, geo (outward simplification), the format readers (OSM on Malta when ../shared is there),
+# every module's doctests, the entrypoint and the README's install steps. Left out: the
+# source-tree checks (test_layout reads the tree, not the install), the CLI, builds, routes and
+# the comparisons, which need no armhf run to be trusted, and SITL (x86 only: the flight).
 SELECTION=(
     tests/test_monitor_engine.py tests/test_monitor_core.py tests/test_monitor_onboard.py
     tests/test_monitor_onboard_decode.py tests/test_monitor_onboard_runner.py
     tests/test_monitor_eventlog.py tests/test_monitor_observer.py tests/test_monitor_replay.py
     tests/test_monitor_traffic.py tests/test_monitor_timewindows.py tests/test_monitor_rolling.py
     tests/test_upload_faults.py tests/test_fuzz_vehicle_input.py tests/test_signing.py
-    tests/test_bundle.py tests/test_mavlink_ids.py tests/test_outward.py tests/test_readers.py
-    tests/test_layout.py tests/test_docker_entrypoint.py tests/test_navio2_install.py
+    tests/test_bundle.py tests/test_navio2.py tests/test_mavlink_ids.py tests/test_outward.py
+    tests/test_readers.py tests/test_doctests.py tests/test_docker_entrypoint.py
+    tests/test_navio2_install.py
 )
 
 USERLAND_PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
@@ -154,12 +164,22 @@ mount_userland() {  # mount_userland fresh|reuse (reuse: a kept run's overlay, N
     mount_in --bind "$CACHE/apt-archives-$SUITE" "$ROOTFS/var/cache/apt/archives"
     mkdir -p "$ROOTFS/root/.cache/pip"
     mount_in --bind "$CACHE/pip-cache" "$ROOTFS/root/.cache/pip"
+    # the OSM extracts, read-only, where the tests look for them (beside the checkout)
+    if [ -d "$SHARED" ]; then
+        mkdir -p "$ROOTFS/root/shared"
+        mount_in --bind -o ro "$SHARED" "$ROOTFS/root/shared"
+    fi
     cp -L /etc/resolv.conf "$ROOTFS/etc/resolv.conf"
     cp -L /etc/hosts "$ROOTFS/etc/hosts"
+    local cas=(/usr/local/share/ca-certificates/*.crt)
+    if [ -e "${cas[0]}" ]; then
+        cp "${cas[@]}" "$ROOTFS/usr/local/share/ca-certificates/"
+        in_userland chroot "$ROOTFS" update-ca-certificates >/dev/null 2>&1
+    fi
 }
 
-copy_source() {  # the kit as a user's clone: tracked and new files of the work tree
-    local dest=$ROOTFS/root/alphafence
+copy_source() {  # copy_source DEST: the kit as a user's clone (tracked and new files)
+    local dest=$1
     rm -rf "$dest"
     mkdir -p "$dest"
     (cd "$ROOT" && git ls-files -z --cached --others --exclude-standard |
@@ -169,12 +189,7 @@ copy_source() {  # the kit as a user's clone: tracked and new files of the work 
 
 install_kit() {
     mount_userland fresh
-    copy_source
-    local cas=(/usr/local/share/ca-certificates/*.crt)
-    if [ -e "${cas[0]}" ]; then
-        cp "${cas[@]}" "$ROOTFS/usr/local/share/ca-certificates/"
-        in_userland chroot "$ROOTFS" update-ca-certificates >/dev/null
-    fi
+    copy_source "$ROOTFS/root/alphafence"
     "$HOSTPY" -m tests.navio2.readme blocks "$SUITE" >"$ROOTFS/root/navio2-install.sh"
     say "the README's install steps for $SUITE, in the armhf userland:"
     sed 's/^/    /' "$ROOTFS/root/navio2-install.sh"
@@ -197,26 +212,47 @@ run_tests() {
     # CI=1: conftest's hypothesis profile (no deadline, fixed seed): qemu is 10-20x slower
     in_userland CI=1 ALPHAFENCE_FUZZ_EXAMPLES="$FUZZ" chroot "$ROOTFS" sh -c \
         'cd /root/alphafence && exec /opt/alphafence/bin/python -m pytest -q -p no:cacheprovider -m "not sitl" "$@"' \
-        pytest "${args[@]}" 2>&1 | tee "$RUN/tests.log"
+        pytest "${args[@]}" 2>&1 | tee "$LOGS/tests.log"
     return "${PIPESTATUS[0]}"
 }
 
 # -- the flight: x86 SITL, the armhf monitor, a scripted approach -------------------------------
 flight() {
     say "flight: x86 SITL, armhf monitor as the systemd unit runs it, GUIDED at a keep-out fence"
-    (cd "$ROOT" && "$HOSTPY" -m tests.navio2.flight --rootfs "$ROOTFS" --out "$RUN/flight")
+    (cd "$ROOT" && "$HOSTPY" -m tests.navio2.flight --rootfs "$ROOTFS" --out "$LOGS/flight") 2>&1 |
+        tee "$LOGS/flight.log"
+    return "${PIPESTATUS[0]}"
+}
+
+# -- docker/Dockerfile.armv7's steps in a fresh overlay ----------------------------------------
+docker_steps() {
+    [ "$SUITE" = trixie ] || { echo "(the armv7 image is trixie's: skipped on $SUITE)"; return 0; }
+    cleanup
+    RUN=$CACHE/$SUITE-docker
+    ROOTFS=$RUN/root
+    mount_userland fresh
+    copy_source "$ROOTFS/context"
+    "$HOSTPY" -m tests.navio2.dockerfile "$ROOT/docker/Dockerfile.armv7" debian:trixie-slim \
+        >"$ROOTFS/root/dockerfile.sh"
+    say "docker/Dockerfile.armv7's steps in a fresh armhf userland (no Docker engine here):"
+    sed 's/^/    /' "$ROOTFS/root/dockerfile.sh"
+    in_userland chroot "$ROOTFS" bash /root/dockerfile.sh 2>&1 | tee "$LOGS/docker.log"
+    return "${PIPESTATUS[0]}"
 }
 
 summary() {
     local phase
     say "summary"
-    for phase in userland install tests flight; do
+    for phase in userland install tests flight docker; do
         [ -n "${SECONDS_OF[$phase]:-}" ] || continue
         printf '  %-9s %5d s  %s\n' "$phase" "${SECONDS_OF[$phase]}" \
             "$([[ " $FAILED " == *" $phase "* ]] && echo FAILED || echo ok)"
     done
-    if [ -f "$RUN/tests.log" ]; then
-        printf '  tests:    %s\n' "$(grep -E '(passed|failed|error)' "$RUN/tests.log" | tail -1)"
+    if [ -n "${SECONDS_OF[tests]:-}" ] && [ -f "$LOGS/tests.log" ]; then
+        printf '  tests:    %s\n' "$(grep -E '(passed|failed|error)' "$LOGS/tests.log" | tail -1)"
+    fi
+    if [ -n "${SECONDS_OF[flight]:-}" ] && [ -f "$LOGS/flight.log" ]; then
+        printf '  flight:   %s\n' "$(grep '^navio2 flight:' "$LOGS/flight.log" | tail -1)"
     fi
     [ -z "$FAILED" ] || { echo "navio2-test: FAILED:$FAILED"; return 1; }
     echo "navio2-test: all phases passed"
@@ -224,6 +260,8 @@ summary() {
 
 main() {
     host_setup
+    rm -rf "$LOGS"
+    mkdir -p "$LOGS"
     timed userland userland || { summary; exit 1; }
     if [[ " $PHASES " == *" install "* ]]; then
         timed install install_kit || { summary; exit 1; }
@@ -235,6 +273,7 @@ main() {
     fi
     if [[ " $PHASES " == *" tests "* ]]; then timed tests run_tests || true; fi
     if [[ " $PHASES " == *" flight "* ]]; then timed flight flight || true; fi
+    if [[ " $PHASES " == *" docker "* ]]; then timed docker docker_steps || true; fi
     summary
 }
 
