@@ -16,6 +16,7 @@ from bench import (
     build_bench,
     cli_bench,
     compile_bench,
+    link_bench,
     monitor_bench,
     monitor_cpu_bench,
     rolling_bench,
@@ -62,6 +63,7 @@ def main(argv=None) -> int:
     if args.only in (None, "monitor"):
         rows += monitor_bench.run(args.osm, build_bench.Row)
         rows += monitor_cpu_bench.run(args.osm, build_bench.Row)
+        rows += link_bench.run(build_bench.Row)
     if args.only in (None, "rolling"):
         rows += rolling_bench.overshoot(args.osm, build_bench.Row)
         rows += rolling_bench.in_flight(args.osm, build_bench.Row)

@@ -55,12 +55,16 @@ class Feed:
     split : tuple of str or None
         A feed of several streams at once: each value is a tuple of their values, in this
         order (observers are told of each under its own name).
+    then : callable or None
+        Called after each value has been delivered and the observers told (the runner's
+        check of a position that came with its velocity).
     """
 
     open: Callable[[], AsyncIterator]
     deliver: Callable[[float, object], None]
     unavailable: str | None = None
     split: tuple[str, ...] | None = None  # each value a tuple of these streams' values
+    then: Callable[[], None] | None = None  # called after each value is delivered and observed
 
 
 def telemetry_feed(vehicle, key: str, deliver) -> Feed:
@@ -102,8 +106,12 @@ def telemetry_feeds(vehicle, keep) -> dict:
 
 
 async def set_rates(telemetry, rate_hz: float) -> None:
-    """Ask for position and velocity at ``rate_hz`` (a vehicle that refuses keeps its rate)."""
-    for setter in (telemetry.set_rate_position, telemetry.set_rate_velocity_ned):
+    """Ask for position and velocity at ``rate_hz`` (a vehicle that refuses keeps its rate).
+    A link whose velocity comes with the position (``subscribe_position_velocity``) asks once."""
+    setters = [telemetry.set_rate_position]
+    if not hasattr(telemetry, "subscribe_position_velocity"):
+        setters.append(telemetry.set_rate_velocity_ned)
+    for setter in setters:
         with contextlib.suppress(Exception):
             await setter(rate_hz)
 

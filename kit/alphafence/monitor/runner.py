@@ -2,8 +2,9 @@
 :mod:`alphafence.vehicle.link`).
 
 Each feed (:mod:`alphafence.monitor.feeds`) is followed by a task of its own and only updates
-the latest state; a new position schedules one check (a callback, not a task: at 50 Hz the
-wake-ups are most of the cost), which steps the engine (:mod:`alphafence.monitor.engine`) on the
+the latest state; a new position is checked at once when its velocity came with it (the
+pymavlink link), else it schedules one check (a callback, not a task: at 50 Hz the wake-ups
+are most of the cost), which steps the engine (:mod:`alphafence.monitor.engine`) on the
 latest values; a loop ticks when telemetry would turn stale and every second (time windows,
 ended streams), sleeping in between; every event it decides is logged
 (:mod:`alphafence.monitor.eventlog`, written by its own task off the event loop), alerted and
@@ -88,6 +89,7 @@ class Monitor:
         self.latest = dict.fromkeys(TELEMETRY)
         self._loop = None  # while run() runs: positions are checked
         self._check_due = False  # a check is scheduled
+        self._inline_check = False  # positions are checked as their feed delivers them
         self._failure = None  # what a check raised, for run() to raise
         self.observers: list[Observer] = []
         self.tasks = []
@@ -135,6 +137,10 @@ class Monitor:
 
         vehicle = self.vehicle
         feeds = telemetry_feeds(vehicle, keep)
+        position = feeds["telemetry:position"]
+        if position.split:  # the velocity came with the position: check at once
+            self._inline_check = True
+            position.then = self._check
         feeds["adsb"] = Feed(lambda: adsb(vehicle), traffic, "adsb_unavailable")
         if self.engine.options.mavlink_traffic:
             # every GLOBAL_POSITION_INT on the link crosses into Python: opt-in, for links
@@ -155,8 +161,10 @@ class Monitor:
         stop : asyncio.Event
             Set it to end the monitor.
         """
-        await set_rates(self.vehicle.telemetry, self.rate_hz)
-        self.tasks = []
+        # asked for beside the feeds: a vehicle that does not answer must not delay the checks
+        self.tasks = [
+            asyncio.create_task(set_rates(self.vehicle.telemetry, self.rate_hz), name="rates")
+        ]
         if self.engine.options.reroute:
             self.reroute.planner_task = asyncio.create_task(
                 self.reroute.build_planner(), name="reroute:planner"
@@ -202,7 +210,7 @@ class Monitor:
     def _position_came(self) -> None:
         """A new position: check it as soon as the values that came with it are in (one
         callback however many positions arrive before it runs: the latest is checked)."""
-        if self._loop is not None and not self._check_due:
+        if self._loop is not None and not self._check_due and not self._inline_check:
             self._check_due = True
             self._loop.call_soon(self._check)
 
@@ -251,6 +259,8 @@ class Monitor:
                     for part, v in list(parts):
                         for observer in self.observers:
                             observer.on_value(part, t, v)
+                if feed.then is not None:
+                    feed.then()
         except asyncio.CancelledError:
             raise
         except Exception as exc:
