@@ -192,3 +192,26 @@ def test_signing_setup_without_pymavlink_names_the_companion_extra(tmp_path):
     code, _, err = _run(argv, NO_EXTRAS + ",pymavlink")
     assert code == 2
     assert "signing setup needs pymavlink: pip install 'alphafence[companion]'" in _one_line(err)
+
+
+def _free_udp_port():
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("verb", ["monitor", "download"])
+def test_the_companion_verbs_run_on_pymavlink_alone(fences, tmp_path, verb):
+    # no vehicle answers: the verb gets as far as its link (exit 3), with no extra but pymavlink
+    url = f"udpin://127.0.0.1:{_free_udp_port()}"
+    argv = {
+        "monitor": ["monitor", "--fences", str(fences), "--allow-unsigned"],
+        "download": ["download", "-o", str(tmp_path / "d.plan")],
+    }[verb]
+    code, modules, err = _run([*argv, "--connect", url, "--timeout", "1"], NO_EXTRAS)
+    assert code == 3, err
+    assert "no autopilot answered" in err
+    assert "pymavlink" in modules
+    assert not _loaded(modules, ("osmium", "scipy", "matplotlib", "mavsdk"))
