@@ -6,7 +6,6 @@ Events are built by alphafence.monitor.events (their alert texts too)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
 
 from alphafence.geo.frame import short_distance_m
 from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
@@ -14,6 +13,7 @@ from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
 from alphafence.monitor.options import REROUTE, MonitorOptions
+from alphafence.monitor.sample import Sample, finite_velocity, plausible
 from alphafence.monitor.state import Assessment, Level, StateMachine, assess
 from alphafence.monitor.traffic import Traffic
 
@@ -23,27 +23,6 @@ COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the 
 # out of a mode the monitor commanded, is the pilot taking over
 PILOT_MODES = {"MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO", "RATTITUDE"}
 GLITCH_SLACK_M = 25.0  # telemetry arrival jitter must not look like a jump
-
-
-@dataclass
-class Sample:
-    """What the vehicle reported, as one input to :meth:`Engine.step`.
-
-    The runner builds one from the latest value of each telemetry stream when a new position
-    arrives; replay tests read them from recorded traces (``Sample(**json)``).
-    """
-
-    t: float  # seconds (monotonic)
-    lat: float
-    lon: float
-    alt_m: float  # above home
-    vn: float = 0.0  # m/s north
-    ve: float = 0.0  # m/s east
-    mode: str | None = None
-    armed: bool | None = None
-    alt_amsl_m: float | None = None  # for other aircraft, whose ADS-B altitudes are AMSL
-    vd: float = 0.0  # m/s down
-    gps_fix: int | None = None  # MAVLink GPS_FIX_TYPE (3 = 3D); None if unknown
 
 
 class Engine:
@@ -107,7 +86,7 @@ class Engine:
         list of dict
             The events, in the order they happened (empty when nothing changed).
         """
-        s = _finite_velocity(s)
+        s = finite_velocity(s)
         events = []
         if s.gps_fix is not None and s.gps_fix < GPS_FIX_TYPE_3D_FIX:
             if not self.gps_degraded:
@@ -120,7 +99,7 @@ class Engine:
                 )
             return []
         self.gps_degraded = False
-        if not _plausible(s):
+        if not plausible(s):
             return self._failsafe(
                 s, "gps_glitch", self.options.on_glitch, reason="position missing, NaN or at 0,0"
             )
@@ -387,17 +366,3 @@ class Engine:
 
     def _site(self, index):
         return None if index is None else self.fences.records[index].site_id
-
-
-def _finite_velocity(s):
-    """A velocity that is missing or not finite counts as zero: positions are still checked,
-    only the prediction along the track is lost."""
-    if all(isinstance(v, (int, float)) and math.isfinite(v) for v in (s.vn, s.ve, s.vd)):
-        return s
-    fix = lambda v: v if isinstance(v, (int, float)) and math.isfinite(v) else 0.0  # noqa: E731
-    return replace(s, vn=fix(s.vn), ve=fix(s.ve), vd=fix(s.vd))
-
-
-def _plausible(s) -> bool:
-    ok = all(isinstance(v, (int, float)) and math.isfinite(v) for v in (s.lat, s.lon, s.alt_m))
-    return ok and abs(s.lat) <= 90 and abs(s.lon) <= 180 and not (s.lat == 0 and s.lon == 0)

@@ -21,6 +21,7 @@ vehicle already holds, or no fence at all (none within the radius), sends nothin
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 from dataclasses import dataclass
@@ -322,3 +323,17 @@ class RollingFence:
             )
         )
         return False
+
+    async def finish(self, timeout: float) -> None:
+        """Let a fence transfer under way end before the monitor stops (at most ``timeout``
+        seconds): MAVSDK cannot be interrupted mid-transfer (its call runs on in a worker
+        thread that the event loop's shutdown would wait for), and then the vehicle holds a
+        verified fence or the failure is logged."""
+        task = self.task
+        if task is None or task.done():
+            return
+        with contextlib.suppress(asyncio.CancelledError, asyncio.TimeoutError, Exception):
+            await asyncio.wait_for(asyncio.shield(task), timeout)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await task

@@ -205,7 +205,8 @@ class Monitor:
             for t in self.tasks + list(self.pending):
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await t
-            await self._finish_rolling()
+            if self.rolling is not None:
+                await self.rolling.finish(ROLLING_FINISH_S)
 
     def _position_came(self) -> None:
         """A new position: check it as soon as the values that came with it are in (one
@@ -231,20 +232,6 @@ class Monitor:
                 self.handle(e)
         except Exception as exc:  # noqa: BLE001 - handed to run(), which raises it
             self._failure = exc
-
-    async def _finish_rolling(self):
-        """Let a fence transfer under way end before the monitor stops: MAVSDK cannot be
-        interrupted mid-transfer (its call runs on in a worker thread that the event loop's
-        shutdown would wait for), and then the vehicle holds a verified fence or the failure
-        is logged. Bounded by :data:`ROLLING_FINISH_S`."""
-        task = self.rolling.task if self.rolling is not None else None
-        if task is None or task.done():
-            return
-        with contextlib.suppress(asyncio.CancelledError, asyncio.TimeoutError, Exception):
-            await asyncio.wait_for(asyncio.shield(task), ROLLING_FINISH_S)
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await task
 
     async def _follow(self, name, feed):
         """Deliver every value of ``feed`` (then tell the observers); a feed that fails is its
