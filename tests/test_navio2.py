@@ -239,7 +239,7 @@ def test_big_fence_needs_file_storage():
     assert kb_needed(BIG) == 4 and len(BIG) > 70
 
 
-async def test_storage_too_small_stops_before_sending(tmp_path, capsys):
+async def test_storage_too_small_stops_before_sending(tmp_path, capsys, link):
     async with FakeVehicle(params={"BRD_SD_FENCE": 0}) as fake:
         code = await upload_cli(fake, tmp_path)
     err = errors(capsys)
@@ -251,7 +251,7 @@ async def test_storage_too_small_stops_before_sending(tmp_path, capsys):
     assert not sent_anything(fake) and fake.fence == []
 
 
-async def test_reboot_refused_while_armed(tmp_path, capsys):
+async def test_reboot_refused_while_armed(tmp_path, capsys, link):
     async with FakeVehicle(params={"BRD_SD_FENCE": 2}, armed=True) as fake:
         code = await upload_cli(fake, tmp_path, "--reboot")
     err = errors(capsys)
@@ -260,7 +260,7 @@ async def test_reboot_refused_while_armed(tmp_path, capsys):
     assert not sent_anything(fake) and fake.reboots == 0
 
 
-async def test_reboot_path_sets_reboots_then_uploads(tmp_path, capsys):
+async def test_reboot_path_sets_reboots_then_uploads(tmp_path, capsys, link):
     async with FakeVehicle(params={"BRD_SD_FENCE": 0}, reboot_seconds=1.5) as fake:
         code = await upload_cli(fake, tmp_path, "--reboot")
         out = capsys.readouterr().out
@@ -287,7 +287,7 @@ async def test_reboot_path_sets_reboots_then_uploads(tmp_path, capsys):
     assert "rebooted" in out and "uploaded 500 fence items" in out
 
 
-async def test_enough_storage_uploads_without_reboot(tmp_path, capsys):
+async def test_enough_storage_uploads_without_reboot(tmp_path, capsys, link):
     async with FakeVehicle(params={"BRD_SD_FENCE": 8}, max_items=1024, storage_size=8192) as fake:
         code = await upload_cli(fake, tmp_path, "--reboot")
         assert code == 0 and fake.reboots == 0 and not fake.received("PARAM_SET")
@@ -295,7 +295,7 @@ async def test_enough_storage_uploads_without_reboot(tmp_path, capsys):
     assert "BRD_SD_FENCE is 8 kB on the vehicle; this fence needs 4 kB" in capsys.readouterr().out
 
 
-async def test_parameter_set_but_not_rebooted_says_so(tmp_path, capsys):
+async def test_parameter_set_but_not_rebooted_says_so(tmp_path, capsys, link):
     # BRD_SD_FENCE reads 64, but the vehicle still has its 560 bytes: it was set since boot
     async with FakeVehicle(params={"BRD_SD_FENCE": 64}) as fake:
         code = await upload_cli(fake, tmp_path)
@@ -305,7 +305,7 @@ async def test_parameter_set_but_not_rebooted_says_so(tmp_path, capsys):
     assert "BRD_SD_FENCE takes effect at boot" in err
 
 
-async def test_reboot_waits_for_the_new_boot():
+async def test_reboot_waits_for_the_new_boot(link):
     async with FakeVehicle(reboot_seconds=1.0) as fake:
         async with open_vehicle(fake.url, 5.0) as vehicle:
             rep = await reboot_vehicle(vehicle, timeout=20.0)
@@ -314,7 +314,7 @@ async def test_reboot_waits_for_the_new_boot():
     assert rep.back_s >= 1.0  # not before the fake was back
 
 
-async def test_reboot_that_never_comes_back_times_out_saying_so():
+async def test_reboot_that_never_comes_back_times_out_saying_so(link):
     async with FakeVehicle(reboot_seconds=60.0) as fake:
         async with open_vehicle(fake.url, 5.0) as vehicle:
             with pytest.raises(RebootError) as err:
@@ -322,7 +322,7 @@ async def test_reboot_that_never_comes_back_times_out_saying_so():
     assert "did not come back within 4 s" in str(err.value) and "\n" not in str(err.value)
 
 
-async def test_download_guard_follows_the_storage():
+async def test_download_guard_follows_the_storage(link):
     many = [it for k in range(6) for it in polygon(200, k)]  # 1200 items: over the old 1000
     async with FakeVehicle(fence=many, max_items=8191, storage_size=65535) as fake:
         async with open_vehicle(fake.url, 5.0) as vehicle:

@@ -80,10 +80,15 @@ class FenceSet:
 
     @classmethod
     def from_geojson(cls, path):
-        """The fences of a fence GeoJSON file (``alphafence build``'s output)."""
+        """The fences of a fence GeoJSON file (``alphafence build``'s output); InputError
+        when it holds none (a monitor with nothing to watch is a mistake, said at once)."""
+        from alphafence.errors import InputError
         from alphafence.formats.fence_geojson import read_fences
 
-        return cls(read_fences(path))
+        records = read_fences(path)
+        if not records:
+            raise InputError(path, "holds no fences: nothing to monitor")
+        return cls(records)
 
     def _build(self, geoms):
         self.local = self.frame.geom_to_local(geoms)
