@@ -58,7 +58,6 @@ SELECTION=(
 
 USERLAND_PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
 declare -A SECONDS_OF=()
-MOUNTS=()
 FAILED=""
 
 say() { printf '\n== navio2-test [%s]: %s\n' "$SUITE" "$*"; }
@@ -70,27 +69,33 @@ in_userland() {
         DEBIAN_FRONTEND=noninteractive "$@"
 }
 
-mount_in() {  # mount_in <mount args...> <target>: remembered for the cleanup
-    mount "$@"
-    MOUNTS+=("${@: -1}")
+mounts_under() {  # the mount points under $1, deepest first
+    awk -v dir="$1/" 'index($2, dir) == 1 { print $2 }' /proc/mounts | sort -r
 }
 
-cleanup() {
-    local i
-    for ((i = ${#MOUNTS[@]} - 1; i >= 0; i--)); do
-        umount "${MOUNTS[i]}" 2>/dev/null || umount -l "${MOUNTS[i]}" 2>/dev/null || true
+cleanup() {  # unmount this suite's run userlands; remove them unless NAVIO2_KEEP=1
+    local run m
+    for run in "$CACHE/$SUITE-run" "$CACHE/$SUITE-docker"; do
+        for m in $(mounts_under "$run"); do
+            umount "$m" 2>/dev/null || umount -l "$m" 2>/dev/null || true
+        done
+        [ "${NAVIO2_KEEP:-0}" != 1 ] && [ -d "$run" ] || continue
+        if [ -n "$(mounts_under "$run")" ]; then  # never delete through a bind of /dev or /sys
+            echo "navio2-test: $run still has mounts; not removed" >&2
+        else
+            rm -rf "$run"
+        fi
     done
-    MOUNTS=()
-    if [ "${NAVIO2_KEEP:-0}" != 1 ] && [ -d "$RUN" ]; then
-        rm -rf "$RUN"
-    fi
 }
 trap cleanup EXIT
 
-timed() {  # timed <phase> <function>: runs it, remembers its wall seconds
-    local phase=$1 t0=$SECONDS status=0
+timed() {  # timed <phase> <function>: runs it in a subshell with errexit, times it
+    local phase=$1 t0=$SECONDS status
     shift
-    "$@" || status=$?
+    set +e
+    (set -e; "$@")  # not in an || list, where bash would ignore errexit inside
+    status=$?
+    set -e
     SECONDS_OF[$phase]=$((SECONDS - t0))
     if [ $status -ne 0 ]; then
         FAILED="$FAILED $phase"
@@ -129,7 +134,7 @@ userland() {
         echo "reusing $BASE ($(head -1 "$STAMP"))"
         return 0
     fi
-    say "debootstrap $SUITE armhf into $BASE (once; about 10 minutes under qemu)"
+    say "debootstrap $SUITE armhf into $BASE (once; 2-3 minutes)"
     rm -rf "$BASE.partial"
     mkdir -p "$CACHE"
     # sudo and ca-certificates come with Raspberry Pi OS; the rest is the README's to install
@@ -143,11 +148,14 @@ userland() {
 
 # -- install: the README's blocks in a fresh overlay ------------------------------------------
 mount_userland() {  # mount_userland fresh|reuse (reuse: a kept run's overlay, NAVIO2_KEEP=1)
-    if [ "$1" = fresh ]; then
-        cleanup
+    local m
+    if [ "$1" = fresh ]; then  # this run's folder from scratch
+        for m in $(mounts_under "$RUN"); do umount "$m" 2>/dev/null || umount -l "$m"; done
+        [ -z "$(mounts_under "$RUN")" ] || die "$RUN still has mounts"
+        rm -rf "$RUN"
     fi
     mkdir -p "$RUN/upper" "$RUN/work" "$ROOTFS" "$CACHE/apt-archives-$SUITE" "$CACHE/pip-cache"
-    if ! mount_in -t overlay overlay \
+    if ! mount -t overlay overlay \
         -o "lowerdir=$BASE,upperdir=$RUN/upper,workdir=$RUN/work" "$ROOTFS" 2>/dev/null; then
         echo "(no overlayfs here: copying the userland)"
         if [ "$1" = fresh ]; then
@@ -155,19 +163,19 @@ mount_userland() {  # mount_userland fresh|reuse (reuse: a kept run's overlay, N
             cp -a "$BASE" "$ROOTFS"
         fi
     fi
-    mount_in -t proc proc "$ROOTFS/proc"
-    mount_in --rbind /sys "$ROOTFS/sys"
-    mount_in --make-rslave "$ROOTFS/sys"
-    mount_in --rbind /dev "$ROOTFS/dev"
-    mount_in --make-rslave "$ROOTFS/dev"
+    mount -t proc proc "$ROOTFS/proc"
+    mount --rbind /sys "$ROOTFS/sys"
+    mount --make-rslave "$ROOTFS/sys"
+    mount --rbind /dev "$ROOTFS/dev"
+    mount --make-rslave "$ROOTFS/dev"
     # downloads kept between runs: Debian's .debs and pip's wheel cache
-    mount_in --bind "$CACHE/apt-archives-$SUITE" "$ROOTFS/var/cache/apt/archives"
+    mount --bind "$CACHE/apt-archives-$SUITE" "$ROOTFS/var/cache/apt/archives"
     mkdir -p "$ROOTFS/root/.cache/pip"
-    mount_in --bind "$CACHE/pip-cache" "$ROOTFS/root/.cache/pip"
+    mount --bind "$CACHE/pip-cache" "$ROOTFS/root/.cache/pip"
     # the OSM extracts, read-only, where the tests look for them (beside the checkout)
     if [ -d "$SHARED" ]; then
         mkdir -p "$ROOTFS/root/shared"
-        mount_in --bind -o ro "$SHARED" "$ROOTFS/root/shared"
+        mount --bind -o ro "$SHARED" "$ROOTFS/root/shared"
     fi
     cp -L /etc/resolv.conf "$ROOTFS/etc/resolv.conf"
     cp -L /etc/hosts "$ROOTFS/etc/hosts"
@@ -193,7 +201,7 @@ install_kit() {
     "$HOSTPY" -m tests.navio2.readme blocks "$SUITE" >"$ROOTFS/root/navio2-install.sh"
     say "the README's install steps for $SUITE, in the armhf userland:"
     sed 's/^/    /' "$ROOTFS/root/navio2-install.sh"
-    in_userland chroot "$ROOTFS" bash -euxo pipefail /root/navio2-install.sh
+    in_userland PS4='+ [${SECONDS} s] ' chroot "$ROOTFS" bash -euxo pipefail /root/navio2-install.sh
     in_userland chroot "$ROOTFS" sh -c '
         uname -m; python3 --version
         /opt/alphafence/bin/alphafence --version
