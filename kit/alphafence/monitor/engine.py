@@ -9,6 +9,7 @@ import math
 
 from alphafence.geo.frame import short_distance_m
 from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
+from alphafence.monitor.clearance import Clearance
 from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
@@ -58,6 +59,8 @@ class Engine:
         self.rerouting = False  # a re-route is being planned or flown (the runner's task)
         self.handing_back = False  # the next commanded mode change returns control
         self.onboard: OnboardLayer | None = None  # the fence the vehicle holds (load_onboard)
+        self.shortcut = True  # positions far from every fence skip the fence query
+        self.clearance: Clearance | None = None  # the room around the last full check
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
@@ -118,11 +121,15 @@ class Engine:
         x, y = self.fences.frame.to_local(s.lon, s.lat)
         speed = math.hypot(s.vn, s.ve)
         lookahead = max(50.0, speed * self.options.horizon_s)
-        check = self.fences.check(float(x), float(y), s.alt_m, s.ve, s.vn, lookahead)
+        x, y = float(x), float(y)
+        a = self._far_from_fences(x, y, speed, lookahead)
+        if a is None:
+            check = self.fences.check(x, y, s.alt_m, s.ve, s.vn, lookahead)
+            a = assess(check, speed, self.options.horizon_s, self.options.braking)
+            if self.options.reroute:
+                a = self._reroute_assessment(a, check)
+            self.clearance = Clearance.after(self.fences, x, y, check) if self.shortcut else None
         self.checks += 1
-        a = assess(check, speed, self.options.horizon_s, self.options.braking)
-        if self.options.reroute:
-            a = self._reroute_assessment(a, check)
         if self.onboard is None:
             d = Decision(a, full_level=a.level)
         else:  # the vehicle's own fence, as a layer of its own
@@ -153,6 +160,13 @@ class Engine:
             events += self._act(s, level, onboard_only=d.onboard_only)
         events += self._traffic(s, float(x), float(y))
         return events
+
+    def _far_from_fences(self, x, y, speed, lookahead):
+        """CLEAR without a fence query when the last full check proves it and nothing could
+        change (the level is CLEAR, no re-route): :mod:`alphafence.monitor.clearance`."""
+        if self.clearance is None or self.sm.level != Level.CLEAR or self.options.reroute:
+            return None
+        return self.clearance.assess(self.fences, x, y, speed, lookahead, self.options.braking)
 
     def load_onboard(self, items, t=None, **fields) -> list:
         """The vehicle's fence (its items, as downloaded) becomes the onboard layer, checked

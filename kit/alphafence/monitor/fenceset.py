@@ -76,6 +76,7 @@ class FenceSet:
 
         self.timed = [k for k, a in enumerate(self.applicability) if timed(a)]
         self.active = np.ones(len(self.records), dtype=bool)
+        self.version = 0  # changes whenever what is in force, or the frame, changes
         self._build(geoms)
 
     @classmethod
@@ -110,6 +111,7 @@ class FenceSet:
         """A new frame centred on ``(lon, lat)``, and the index rebuilt in it."""
         self.frame = LocalFrame(lon, lat)
         self._build(np.array([r.geometry for r in self.records], dtype=object))
+        self.version += 1
 
     def _in_alt(self, idx, alt):
         return (self.alt_min[idx] <= alt) & (alt <= self.alt_max[idx]) & self.active[idx]
@@ -120,7 +122,16 @@ class FenceSet:
         from alphafence.monitor.applicability import is_active
 
         for k in self.timed:
-            self.active[k] = is_active(self.applicability[k], when)
+            now = is_active(self.applicability[k], when)
+            if now != self.active[k]:
+                self.active[k] = now
+                self.version += 1
+
+    def clearance(self, x, y) -> float:
+        """The distance from ``(x, y)`` to the nearest fence of any kind, in force or not
+        (0 inside one): the room in which nothing about the fences can change."""
+        _, d = self.tree.query_nearest(shapely.Point(x, y), return_distance=True)
+        return float(d[0]) if d.size else math.inf
 
     def check(self, x, y, alt=0.0, vx=0.0, vy=0.0, lookahead_m=0.0) -> Check:
         """Position (metres in ``self.frame``), altitude and horizontal velocity.
