@@ -33,11 +33,17 @@ class MissionClient:
     vehicle : PymavlinkVehicle
         Gives ``link`` (``send``, ``mav``: the codec), ``bus`` (``subscribe``) and
         ``target`` (the autopilot's system and component ids).
+
+    Attributes
+    ----------
+    counts : dict
+        ``MAV_MISSION_TYPE`` -> the number of items of its last completed transfer.
     """
 
     def __init__(self, vehicle):
         self.vehicle = vehicle
         self._lock = asyncio.Lock()  # one transfer at a time, as the protocol has it
+        self.counts: dict[int, int] = {}  # mission type -> items of its last transfer
 
     def _mav(self):
         return self.vehicle.link.mav
@@ -92,6 +98,7 @@ class MissionClient:
                 msg = await self._next(queue, mission_type, lambda: link.send(state["last"]), state)
                 if msg.get_type() == "MISSION_ACK":
                     if msg.type == ids.MAV_MISSION_ACCEPTED and sent_last:
+                        self.counts[mission_type] = n
                         return time.monotonic() - t0
                     if msg.type == ids.MAV_MISSION_INVALID_SEQUENCE:
                         continue  # an item it had already (a re-send): ArduPilot goes on
@@ -185,6 +192,7 @@ class MissionClient:
                         items.append(_raw(msg))
                         break  # a repeated COUNT or an item asked for before: ignored
             link.send(mav.mission_ack_encode(sysid, compid, ids.MAV_MISSION_ACCEPTED, mission_type))
+            self.counts[mission_type] = n
             return items
 
 

@@ -228,25 +228,54 @@ class Param:
 
 
 class MissionRaw:
-    """The mission: download, AUTO's progress, where AUTO resumes."""
+    """The mission: upload, download, AUTO's progress, where AUTO resumes."""
 
     def __init__(self, vehicle):
         self.v = vehicle
+
+    async def upload_mission(self, items) -> None:
+        """Upload ``items`` (:class:`~alphafence.vehicle.values.RawItem`, home first) as the
+        mission (TransferFailed on failure)."""
+        await self.v.mission.upload(items, ids.MAV_MISSION_TYPE_MISSION)
 
     async def download_mission(self) -> list:
         """The mission's raw items (TransferFailed on failure)."""
         return await self.v.mission.download(ids.MAV_MISSION_TYPE_MISSION)
 
     async def subscribe_mission_progress(self):
-        """MISSION_CURRENT as :class:`~alphafence.vehicle.values.MissionProgress`."""
-        async for m in self.v.bus.stream("MISSION_CURRENT"):
-            if self.v.from_autopilot(m):
-                yield MissionProgress(int(m.seq), int(getattr(m, "total", 0) or 0))
+        """AUTO's progress as MAVSDK reports it, on each change
+        (:class:`~alphafence.vehicle.values.MissionProgress`).
+
+        ``current``: the item after the last MISSION_ITEM_REACHED (ArduPilot sends those on
+        every link) or MISSION_CURRENT's item (streamed only when asked for; after the last
+        item it stays on the reached one). ``total``: the mission's items, home included: the
+        count of this link's last upload or download of it, else MISSION_CURRENT's total + 1
+        (ArduPilot's leaves home out), else 0.
+        """
+        reached, current, heard, last = -1, None, 0, None
+        async for m in self.v.bus.stream("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
+            if not self.v.from_autopilot(m):
+                continue
+            if m.get_type() == "MISSION_ITEM_REACHED":
+                reached = int(m.seq)
+                current = reached + 1
+            else:
+                n = int(getattr(m, "total", 0) or 0)  # 0: no total (an older MAVLink)
+                heard = n + 1 if n else heard
+                if int(m.seq) != reached:
+                    current = int(m.seq)
+            total = self.v.mission.counts.get(ids.MAV_MISSION_TYPE_MISSION, heard)
+            if current is not None and (current, total) != last:
+                last = (current, total)
+                yield MissionProgress(current, total)
 
     async def set_current_mission_item(self, index: int):
         """Make item ``index`` the one AUTO flies to next."""
         await _command(self.v, ids.MAV_CMD_DO_SET_MISSION_CURRENT, index)
 
     async def start_mission(self):
-        """AUTO."""
+        """AUTO, then MAV_CMD_MISSION_START, as MAVSDK sends them: a copter armed on the ground
+        takes off only after MISSION_START (it sets "auto armed"; AUTO alone waits for
+        throttle, and ArduCopter disarms after DISARM_DELAY)."""
         await self.v.action.set_mode(mode_set(self.v.mav_type).auto)
+        await _command(self.v, ids.MAV_CMD_MISSION_START, 0, 0)
