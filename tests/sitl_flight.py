@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-import json
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -12,8 +12,7 @@ import pytest
 import shapely
 
 from alphafence.geo.frame import LocalFrame
-from alphafence.mavlink.ids import MAV_CMD_SET_MESSAGE_INTERVAL
-from alphafence.mavlink.ids import MAVLINK_MSG_ID_FENCE_STATUS as FENCE_STATUS_ID
+from alphafence.mavlink import ids
 from alphafence.monitor.replay import speedup_options  # noqa: F401 (the flights' options)
 
 # The exclusion square every fenced flight uses, metres east (x) / north (y) of home, and the
@@ -35,7 +34,8 @@ class FlightLog:
     texts: object = ()  # the Vehicle's STATUSTEXT deque, once connected
     positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
     speeds: list = field(default_factory=list)  # (t, horizontal speed m/s)
-    modes: list = field(default_factory=list)  # (t, FlightMode), on change only
+    modes: list = field(default_factory=list)  # (t, mode name), on change only: MAVSDK's
+    # names on either link ("OFFBOARD" = GUIDED, "MISSION" = AUTO, "HOLD" = BRAKE or LOITER)
     custom_modes: list = field(default_factory=list)  # (t, ArduCopter mode number), on change
     armed: list = field(default_factory=list)  # (t, bool), on change only
     fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
@@ -64,7 +64,7 @@ class FlightLog:
         if there are any."""
         pos = self.last_position()
         where = f"x={pos[1]:.1f} y={pos[2]:.1f} alt={pos[3]:.1f}" if pos else "no position"
-        modes = ", ".join(f"{m.name}@{t:.2f}" for t, m in self.modes[-6:])
+        modes = ", ".join(f"{m}@{t:.2f}" for t, m in self.modes[-6:])
         parts = [f"last position {where}", f"modes {modes}"]
         if self.progress:
             parts.append(f"mission progress {self.progress[-1][1:]}")
@@ -81,12 +81,13 @@ class FlightLog:
         return "; ".join(parts)
 
 
-def watch(log: FlightLog, vehicle, direct, *streams: str) -> list[asyncio.Task]:
+def watch(log: FlightLog, vehicle, *streams: str) -> list[asyncio.Task]:
     """Start the subscriptions named in ``streams``, each appending to the log's list of that
-    name: "positions", "speeds", "modes" and "armed" from MAVSDK's telemetry, "progress" from
-    mission_raw, "fence" (FENCE_STATUS) and "custom_modes" (HEARTBEAT) through ``direct``,
-    MAVSDK's mavlink_direct plugin. Returns the tasks, for ``unwatch``. Nothing is asked of the
-    vehicle here: the test sets the rates and asks for FENCE_STATUS itself."""
+    name: "positions", "speeds", "modes" (names) and "armed" from the vehicle's telemetry,
+    "progress" from its mission_raw, "fence" (FENCE_STATUS) and "custom_modes" (the
+    autopilot's HEARTBEAT) from its ``messages``; the same on either link. Returns the tasks,
+    for ``unwatch``. Nothing is asked of the vehicle here: the test sets the rates and asks for
+    FENCE_STATUS itself."""
     frame = log.frame
 
     async def positions():
@@ -100,16 +101,17 @@ def watch(log: FlightLog, vehicle, direct, *streams: str) -> list[asyncio.Task]:
 
     async def modes():
         async for mode in vehicle.telemetry.subscribe_flight_mode():
-            if mode != log.mode():
-                log.modes.append((time.monotonic(), mode))
+            if mode.name != log.mode():
+                log.modes.append((time.monotonic(), mode.name))
 
-    async def custom_modes():  # ArduPilot's own mode number (MAVSDK shows GUIDED as OFFBOARD)
-        async for message in direct.subscribe_message("HEARTBEAT"):
-            if (message.system_id, message.component_id) != (1, 1):
-                continue
-            mode = json.loads(message.fields_json)["custom_mode"]
-            if not log.custom_modes or log.custom_modes[-1][1] != mode:
-                log.custom_modes.append((time.monotonic(), mode))
+    async def custom_modes():  # ArduPilot's own mode number (both links show GUIDED as OFFBOARD)
+        sysid = await vehicle.system_id()
+        async for message in vehicle.messages("HEARTBEAT"):
+            f = message.fields
+            if message.system_id != sysid or f["autopilot"] == ids.MAV_AUTOPILOT_INVALID:
+                continue  # a ground station's (ours included) or another system's
+            if not log.custom_modes or log.custom_modes[-1][1] != f["custom_mode"]:
+                log.custom_modes.append((time.monotonic(), f["custom_mode"]))
 
     async def armed():
         async for is_armed in vehicle.telemetry.subscribe_armed():
@@ -117,8 +119,8 @@ def watch(log: FlightLog, vehicle, direct, *streams: str) -> list[asyncio.Task]:
                 log.armed.append((time.monotonic(), is_armed))
 
     async def fence():
-        async for message in direct.subscribe_message("FENCE_STATUS"):
-            log.fence.append((time.monotonic(), json.loads(message.fields_json)))
+        async for message in vehicle.messages("FENCE_STATUS"):
+            log.fence.append((time.monotonic(), message.fields))
 
     async def progress():
         async for p in vehicle.mission_raw.subscribe_mission_progress():
@@ -137,27 +139,23 @@ async def unwatch(tasks):
     await asyncio.gather(*tasks, return_exceptions=True)
 
 
-async def ask_fence_status(direct, hz: float):
-    """Ask the vehicle to stream FENCE_STATUS (MAVSDK's telemetry has none) through MAVSDK's
-    mavlink_direct plugin on the test's own connection."""
-    from mavsdk.plugins.mavlink_direct import MavlinkMessage
+async def ask_fence_status(vehicle, hz: float):
+    """Ask the vehicle to stream FENCE_STATUS (MAVSDK's telemetry has none) with
+    MAV_CMD_SET_MESSAGE_INTERVAL on the test's own connection."""
+    result = await vehicle.command_long(
+        ids.MAV_CMD_SET_MESSAGE_INTERVAL, ids.MAVLINK_MSG_ID_FENCE_STATUS, 1e6 / hz
+    )
+    assert result == ids.MAV_RESULT_ACCEPTED, f"FENCE_STATUS stream refused: result {result}"
 
-    fields = {
-        "target_system": 1,
-        "target_component": 1,
-        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
-        "confirmation": 0,
-        "param1": FENCE_STATUS_ID,
-        "param2": 1e6 / hz,
-        "param3": 0,
-        "param4": 0,
-        "param5": 0,
-        "param6": 0,
-        "param7": 0,
-    }
-    ack = await direct.send_command(MavlinkMessage("COMMAND_LONG", 0, 0, 1, 1, json.dumps(fields)))
-    result = json.loads(ack.fields_json or "{}").get("result")
-    assert result == 0, f"FENCE_STATUS stream refused: {ack.fields_json!r}"
+
+async def upload_mission(vehicle, items):
+    """Upload ``items`` (:class:`~alphafence.vehicle.values.RawItem`, seq 0 first) as the
+    vehicle's mission with its mission_raw (MAVSDK's wants its own MissionItem: same fields)."""
+    if vehicle.kind == "mavsdk":
+        from mavsdk.plugins.mission_raw import MissionItem
+
+        items = [MissionItem(*dataclasses.astuple(it)) for it in items]
+    await vehicle.mission_raw.upload_mission(items)
 
 
 async def until(what, predicate, timeout, log, poll=0.05):
@@ -172,20 +170,19 @@ async def until(what, predicate, timeout, log, poll=0.05):
 
 
 async def retry(what, call, timeout):
-    """``await call()`` until it succeeds (ArduPilot refuses arming until its checks pass)."""
-    from mavsdk.plugins.action import ActionError
-
+    """``await call()`` until it succeeds (ArduPilot refuses arming until its checks pass;
+    either link's refusal is an exception of its own)."""
     deadline = time.monotonic() + timeout
     while True:
         try:
             return await call()
-        except ActionError as exc:
+        except Exception as exc:
             if time.monotonic() > deadline:
                 pytest.fail(f"{what} refused for {timeout:g} s: {exc}")
             await asyncio.sleep(1.0)
 
 
-async def fence_and_telemetry(vehicle, direct, log, items, poll=0.05):
+async def fence_and_telemetry(vehicle, log, items, poll=0.05):
     """The common start of a fenced SITL flight: upload the exclusion ``items`` and the
     ``copter-rtl`` parameters (each read back by the kit), stream positions and velocities at
     10 Hz and FENCE_STATUS at 2 Hz, and wait for the first of each; the vehicle must not be in
@@ -200,7 +197,7 @@ async def fence_and_telemetry(vehicle, direct, log, items, poll=0.05):
 
     await vehicle.telemetry.set_rate_position(10.0)
     await vehicle.telemetry.set_rate_velocity_ned(10.0)
-    await ask_fence_status(direct, 2.0)
+    await ask_fence_status(vehicle, 2.0)
     await until("a FENCE_STATUS", lambda: log.fence, 15, log, poll)
     await until("a position", lambda: log.positions, 15, log, poll)
     assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
@@ -226,8 +223,6 @@ def exclusion_items(frame: LocalFrame):
 async def take_off(action, log, altitude=ALTITUDE, poll=0.05):
     """Arm (retrying while ArduPilot refuses), take off in GUIDED and climb to 90 % of
     ``altitude``; returns (takeoff command time, climbed time)."""
-    from mavsdk.plugins.telemetry import FlightMode
-
     await action.set_takeoff_altitude(altitude)
     await retry("arming", action.arm, ARM_TIMEOUT)
     t_takeoff = time.monotonic()
@@ -239,7 +234,7 @@ async def take_off(action, log, altitude=ALTITUDE, poll=0.05):
         log,
         poll,
     )
-    assert log.mode() == FlightMode.OFFBOARD, f"not in GUIDED: {log.mode()}"  # GUIDED
+    assert log.mode() == "OFFBOARD", f"not in GUIDED: {log.mode()}"  # GUIDED, in MAVSDK's name
     return t_takeoff, t_up
 
 

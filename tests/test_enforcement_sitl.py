@@ -8,10 +8,10 @@ test asserts that ArduPilot reports the breach (FENCE_STATUS breach_status 1, a 
 breach, "Polygon fence breached") where the square is, switches to RTL within a few seconds of
 it, never gets across the square, and flies back out of it.
 
-MAVSDK's telemetry has no FENCE_STATUS, so it is read with the ``mavlink_direct`` plugin on the
-same MAVSDK connection (only one program can own the SITL UDP port), after asking for it with
-MAV_CMD_SET_MESSAGE_INTERVAL. ArduPilot streams nothing by default on this link: positions and
-velocities are asked for with ``set_rate_*`` too.
+MAVSDK's telemetry has no FENCE_STATUS, so it is read as a MAVLink message (the Vehicle's
+``messages``, on either link) on the same connection (only one program can own the SITL UDP
+port), after asking for it with MAV_CMD_SET_MESSAGE_INTERVAL. ArduPilot streams nothing by
+default on this link: positions and velocities are asked for with ``set_rate_*`` too.
 
 Measured (egham, speedup 5, 2-core machine; 6 runs, two of them side by side; wall-clock
 seconds, x5 for sim time): arming succeeds at the first try (the fixture already waited for a
@@ -68,22 +68,17 @@ async def test_uploaded_exclusion_is_enforced_with_rtl(sitl):
 
 
 async def _fly_into_the_fence(sitl, log: FlightLog):
-    from mavsdk.asyncio.plugins.action import ActionAsync
-    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-    from mavsdk.plugins.telemetry import FlightMode
-
     home = sitl.home
     frame = log.frame
     async with open_vehicle(sitl.connection_url) as vehicle:
         log.texts = vehicle.texts
-        action = ActionAsync(vehicle.system)
-        direct = MavlinkDirectAsync(vehicle.system)
-        watchers = watch(log, vehicle, direct, "positions", "speeds", "modes", "fence")
+        action = vehicle.action
+        watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence")
         try:
             # -- the fence and its parameters, each read back by the kit
-            await fence_and_telemetry(vehicle, direct, log, exclusion_items(frame))
+            await fence_and_telemetry(vehicle, log, exclusion_items(frame))
 
-            # -- arm and take off in GUIDED (MAVSDK shows GUIDED as OFFBOARD)
+            # -- arm and take off in GUIDED (named OFFBOARD, as MAVSDK names it)
             t_takeoff, t_up = await take_off(action, log)
             assert not log.first_breach(), "breach before the vehicle was sent anywhere"
 
@@ -107,12 +102,12 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
             # (b) ... and switches to the configured action, RTL, within a few seconds
             await until(
                 "RTL after the breach",
-                lambda: log.mode() == FlightMode.RETURN_TO_LAUNCH,
+                lambda: log.mode() == "RETURN_TO_LAUNCH",
                 MODE_SWITCH_MAX,
                 log,
                 poll=0.01,
             )
-            t_rtl = next(t for t, m in log.modes if m == FlightMode.RETURN_TO_LAUNCH)
+            t_rtl = next(t for t, m in log.modes if m == "RETURN_TO_LAUNCH")
             assert abs(t_rtl - t_breach) <= MODE_SWITCH_MAX
             await until(
                 "the breach STATUSTEXT",
@@ -139,7 +134,7 @@ async def _fly_into_the_fence(sitl, log: FlightLog):
             )
             farthest = max(p[2] for p in log.positions)
             assert farthest < NEAR_EDGE + 40 < FAR_EDGE, f"flew {farthest:.0f} m north"
-            assert log.mode() == FlightMode.RETURN_TO_LAUNCH, log.mode()
+            assert log.mode() == "RETURN_TO_LAUNCH", log.mode()
             said = [text for t, text in vehicle.texts if t >= t_takeoff]
 
             print(

@@ -5,8 +5,10 @@ The setup is test_enforcement_sitl.py's: an exclusion square (100 m x 100 m, nea
 north of home) uploaded to ArduPilot with the ``copter-rtl`` parameters, a GUIDED takeoff to
 20 m and a goto 400 m north at 10 m/s, straight through the square. The monitor gets the same
 square as a keep-out fence plus a 30 m warning layer around it, and runs as
-``Monitor(vehicle, fences, options, log).run(stop)`` on the test's own MAVSDK connection (only
-one program can own the SITL UDP port). FENCE_STATUS is read with the ``mavlink_direct`` plugin.
+``Monitor(vehicle, fences, options, log).run(stop)`` on the test's own connection (only one
+program can own the SITL UDP port). FENCE_STATUS is read with the Vehicle's ``messages``. The
+enforcing flight runs on each vehicle link (the ``link`` fixture: pymavlink and MAVSDK), the
+alert-only one on the default link.
 
 Times. The engine stamps each sample with its arrival time (``time.monotonic()``, wall
 seconds), and so does this test for every FENCE_STATUS, mode and STATUSTEXT: all event times
@@ -23,11 +25,13 @@ predicted in 15 s") 13.2-13.3 s of flight before ArduPilot's breach, about 131 m
 edge; IMMINENT ("cannot stop before the fence ahead") 3.15-3.22 s of flight before it (31-32 m)
 with the earlier 1.0 s reaction time (32 m stopping distance at 10 m/s); the default is now
 1.5 s (37 m), which puts IMMINENT about 3.7 s ahead by construction.
-With enforce, the brake is MAVSDK's hold(), which ArduCopter carries out as BRAKE (custom mode
-17; MAVSDK reports it as HOLD): the copter stops 0.93-0.95 s wall (about 4.7 s of flight) after
-the IMMINENT, 10.2-10.8 m short of the edge (farthest 139.2-139.8 m north) with the 1.0 s
-reaction time; with the 1.5 s default, IMMINENT at 36.4 m and the stop 15.8 m short (farthest
-134.2 m; one run, 2026-11-22). ArduPilot reports no breach. Each test takes about 18 s wall, SITL start included.
+With enforce, the brake is the link's hold(), which ArduCopter carries out as BRAKE (custom
+mode 17; both links name it HOLD, as MAVSDK does): the copter stops 0.93-0.95 s wall (about
+4.7 s of flight) after the IMMINENT, 10.2-10.8 m short of the edge (farthest 139.2-139.8 m
+north) with the 1.0 s reaction time; with the 1.5 s default, IMMINENT at 36.4 m and the stop
+15.7-15.8 m short (farthest 134.2-134.3 m), the same on the pymavlink and the MAVSDK link
+(2026-11-30). ArduPilot reports no breach. Each test takes about 18-20 s wall, SITL start
+included.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ import pytest
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink import ids
 from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.observe import Observer
@@ -77,7 +82,12 @@ MIN_LEAD_S = 3.0  # flight seconds before ArduPilot's own breach (the requiremen
 STOPPED_MPS = 0.3
 WATCH_AFTER_STOP = 6.0  # wall seconds (30 s of flight at speedup 5) of no breach after stopping
 
-COPTER_MODES = {4: "GUIDED", 5: "LOITER", 6: "RTL", 17: "BRAKE"}  # ArduCopter custom_mode
+COPTER_MODES = {  # ArduCopter's custom_mode
+    ids.COPTER_MODE_GUIDED: "GUIDED",
+    ids.COPTER_MODE_LOITER: "LOITER",
+    ids.COPTER_MODE_RTL: "RTL",
+    ids.COPTER_MODE_BRAKE: "BRAKE",
+}
 
 
 def _monitor_fences(frame: LocalFrame) -> FenceSet:
@@ -139,22 +149,17 @@ class _Flight:
         self.t_goto = None
 
     async def run(self, body):
-        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-
         log, frame = self.log, self.frame
         async with open_vehicle(self.sitl.connection_url) as vehicle:
             self.vehicle = vehicle
             log.texts = vehicle.texts
-            direct = MavlinkDirectAsync(vehicle.system)
-            watchers = watch(
-                log, vehicle, direct, "positions", "speeds", "modes", "fence", "custom_modes"
-            )
+            watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence", "custom_modes")
             self.monitor_log = EventLog()
             log.events = self.monitor_log.events
             stop = asyncio.Event()
             monitor_task = None
             try:
-                await fence_and_telemetry(vehicle, direct, log, exclusion_items(frame), poll=0.02)
+                await fence_and_telemetry(vehicle, log, exclusion_items(frame), poll=0.02)
 
                 monitor = Monitor(
                     vehicle,
@@ -187,13 +192,9 @@ class _Flight:
 
 
 def _ardupilot_breach_time(log: FlightLog, since: float):
-    from mavsdk.plugins.telemetry import FlightMode
-
     breach = log.first_breach()
     times = [breach[0] if breach else None]
-    times.append(
-        next((t for t, m in log.modes if m == FlightMode.RETURN_TO_LAUNCH and t >= since), None)
-    )
+    times.append(next((t for t, m in log.modes if m == "RETURN_TO_LAUNCH" and t >= since), None))
     times.append(
         next((t for t, s in log.texts if t >= since and "fence breached" in s.lower()), None)
     )
@@ -264,11 +265,9 @@ async def test_monitor_warns_well_before_the_onboard_fence_breach(sitl):
 
 
 @pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
-async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(sitl):
-    """(b) enforce: IMMINENT -> brake (MAVSDK hold) and the vehicle stops outside the square;
-    ArduPilot never reports a breach."""
-    from mavsdk.plugins.telemetry import FlightMode
-
+async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(link, sitl):
+    """(b) enforce: IMMINENT -> brake (the link's hold) and the vehicle stops outside the
+    square; ArduPilot never reports a breach. On each vehicle link."""
     results = {}
 
     async def body(flight: _Flight):
@@ -282,7 +281,7 @@ async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(sitl):
         )
         await _until(
             "a mode change after the brake",
-            lambda: log.modes[-1][0] >= t_action - 0.5 and log.mode() != FlightMode.OFFBOARD,
+            lambda: log.modes[-1][0] >= t_action - 0.5 and log.mode() != "OFFBOARD",
             5,
             log,
         )
@@ -312,14 +311,14 @@ async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(sitl):
     assert log.first_breach() is None, [f for _, f in log.fence if f["breach_status"]]
     assert all(f["breach_status"] == 0 for t, f in log.fence), log.summary()
     assert log.fence[-1][0] > results["t_end"] - 2.0, "FENCE_STATUS stopped arriving"
-    assert FlightMode.RETURN_TO_LAUNCH not in [m for _, m in log.modes], log.summary()
+    assert "RETURN_TO_LAUNCH" not in [m for _, m in log.modes], log.summary()
     assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
 
     after = [m for t, m in log.modes if t >= results["t_action"] - 0.5]
     onboard = [
         COPTER_MODES.get(m, m) for t, m in log.custom_modes if t >= results["t_action"] - 0.5
     ]
-    # measured: MAVSDK's hold() puts ArduCopter in BRAKE (FlightMode.HOLD in MAVSDK)
+    # measured: either link's hold() puts ArduCopter in BRAKE (named HOLD, as MAVSDK does)
     assert onboard and onboard[-1] in ("LOITER", "BRAKE"), onboard
     farthest = max(p[2] for p in log.positions)
     final = log.positions[-1]
@@ -329,9 +328,9 @@ async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(sitl):
     assert abs(final[2] - results["y_stop"]) < 3.0, "drifted after stopping"
     y_imminent = _y_at(imminent, flight.frame)
     print(
-        f"\nenforce: IMMINENT/brake at y={y_imminent:.1f} m ({NEAR_EDGE - y_imminent:.1f} m "
-        f"before the edge), modes after it {[m.name for m in after]} (ArduCopter {onboard}), "
-        f"stopped "
+        f"\nenforce ({link} link): IMMINENT/brake at y={y_imminent:.1f} m "
+        f"({NEAR_EDGE - y_imminent:.1f} m before the edge), modes after it {after} "
+        f"(ArduCopter {onboard}), stopped "
         f"{results['t_stop'] - results['t_action']:.2f} s wall after the action, farthest "
         f"y={farthest:.1f} m = {NEAR_EDGE - farthest:.1f} m short of the fence, final "
         f"y={final[2]:.1f} m, no breach for {results['t_end'] - results['t_stop']:.1f} s wall "

@@ -7,8 +7,8 @@ own fence would report a breach, and RTL, if the copter entered it), and a fligh
 square as its only keep-out fence (no warning layer: the planner would otherwise route around
 that too, and the clearance would not be tested) and runs with ``enforce`` and
 ``imminent_action="reroute"`` (20 m clearance) as ``Monitor(...).run(stop)`` on the test's own
-MAVSDK connection (only one program can own the SITL UDP port). FENCE_STATUS is read with the
-``mavlink_direct`` plugin.
+connection (only one program can own the SITL UDP port). FENCE_STATUS is read with the
+Vehicle's ``messages``.
 
 * GUIDED (the issue's case): GUIDED takeoff to 20 m, goto 400 m north. At IMMINENT the goal is
   the vehicle's own GUIDED target (POSITION_TARGET_GLOBAL_INT); the waypoints are flown with goto
@@ -55,6 +55,7 @@ import pytest
 import shapely
 
 from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.coords import to_e7
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.ids import (
     MAV_CMD_NAV_LAND as NAV_LAND,
@@ -65,6 +66,8 @@ from alphafence.mavlink.ids import (
 from alphafence.mavlink.ids import (
     MAV_CMD_NAV_WAYPOINT as NAV_WAYPOINT,
 )
+from alphafence.mavlink.ids import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT
+from alphafence.mavlink.ids import MAV_MISSION_TYPE_MISSION as MISSION_TYPE_MISSION
 from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.runner import Monitor
@@ -83,6 +86,7 @@ from tests.sitl_flight import (
     take_off,
     until,
     unwatch,
+    upload_mission,
     watch,
     within,
 )
@@ -107,17 +111,20 @@ def _events(log, kind):
     return [e for e in log.events if e["event"] == kind]
 
 
-def _mission(frame: LocalFrame, home):
-    """mission_raw items: home (seq 0), takeoff here, a waypoint beyond the square (the leg to
-    it crosses the square), one 50 m further on, land there."""
-    from mavsdk.plugins.mission_raw import MissionItem
+RELATIVE = MAV_FRAME_GLOBAL_RELATIVE_ALT
 
-    def item(seq, command, x_east=None, y_north=None, z=ALTITUDE, frame_id=3):
+
+def _mission(frame: LocalFrame, home):
+    """Raw mission items: home (seq 0), takeoff here, a waypoint beyond the square (the leg to
+    it crosses the square), one 50 m further on, land there."""
+    from alphafence.vehicle.values import RawItem
+
+    def item(seq, command, x_east=None, y_north=None, z=ALTITUDE, frame_id=RELATIVE):
         lat = lon = 0
         if x_east is not None:
             lo, la = frame.to_wgs84(x_east, y_north)
-            lat, lon = int(round(float(la) * 1e7)), int(round(float(lo) * 1e7))
-        return MissionItem(
+            lat, lon = to_e7(float(la)), to_e7(float(lo))
+        return RawItem(
             seq,
             frame_id,
             command,
@@ -130,11 +137,11 @@ def _mission(frame: LocalFrame, home):
             lat,
             lon,
             float(z),
-            0,
+            MISSION_TYPE_MISSION,
         )
 
     return [
-        item(0, NAV_WAYPOINT, 0.0, 0.0, home.alt, frame_id=0),
+        item(0, NAV_WAYPOINT, 0.0, 0.0, home.alt, frame_id=MAV_FRAME_GLOBAL),
         item(1, NAV_TAKEOFF),
         item(2, NAV_WAYPOINT, 0.0, TARGET_NORTH),
         item(3, NAV_WAYPOINT, 0.0, TARGET_NORTH + AUTO_NEXT_M),
@@ -163,20 +170,16 @@ async def test_monitor_reroutes_an_auto_mission_and_resumes_it(sitl):
 
 
 async def _fly(sitl, log: FlightLog, results, auto: bool):
-    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-    from mavsdk.plugins.telemetry import FlightMode
-
     frame = log.frame
     async with open_vehicle(sitl.connection_url) as vehicle:
         log.texts = vehicle.texts
-        direct = MavlinkDirectAsync(vehicle.system)
-        watchers = watch(log, vehicle, direct, "positions", "speeds", "modes", "fence", "progress")
+        watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence", "progress")
         monitor_log = EventLog()
         log.events = monitor_log.events
         stop = asyncio.Event()
         monitor_task = None
         try:
-            await fence_and_telemetry(vehicle, direct, log, exclusion_items(frame))
+            await fence_and_telemetry(vehicle, log, exclusion_items(frame))
 
             fences = FenceSet(
                 [FenceRecord("test/square", "keep_out", frame.geom_to_wgs84(square_local()))]
@@ -190,11 +193,11 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
 
             action = vehicle.action
             if auto:  # the mission's own NAV_TAKEOFF takes off, then it flies north
-                await vehicle.mission_raw.upload_mission(_mission(frame, sitl.home))
+                await upload_mission(vehicle, _mission(frame, sitl.home))
                 await retry("arming", action.arm, ARM_TIMEOUT)
                 results["t_goto"] = time.monotonic()
                 await vehicle.mission_raw.start_mission()
-                await until("AUTO", lambda: log.mode() == FlightMode.MISSION, 5, log)
+                await until("AUTO", lambda: log.mode() == "MISSION", 5, log)
             else:
                 await take_off(action, log)
                 lon, lat = frame.to_wgs84(0.0, TARGET_NORTH)
@@ -217,7 +220,7 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
             )
             results["t_done"] = time.monotonic()
             if auto:
-                await until("AUTO again", lambda: log.mode() == FlightMode.MISSION, 10, log)
+                await until("AUTO again", lambda: log.mode() == "MISSION", 10, log)
                 await until(
                     "the next mission item",
                     lambda: (
@@ -244,8 +247,6 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
 
 
 def _check(sitl, log: FlightLog, results, auto: bool):
-    from mavsdk.plugins.telemetry import FlightMode
-
     frame = log.frame
     square = square_local()
     events = list(log.events)
@@ -266,7 +267,7 @@ def _check(sitl, log: FlightLog, results, auto: bool):
         (done,) = [e for e in events if e["event"] == "reroute_done"]
         assert done["resume_at"] == 3, done
         after = [m for t, m in log.modes if t >= reroute["time"]]
-        assert after == [FlightMode.OFFBOARD, FlightMode.MISSION], after
+        assert after == ["OFFBOARD", "MISSION"], after
     else:
         assert reroute["goal_source"] == "guided target", reroute
     assert reroute["clearance_m"] >= CLEARANCE, reroute
@@ -276,7 +277,7 @@ def _check(sitl, log: FlightLog, results, auto: bool):
     # ArduPilot: no breach from takeoff to the end, no RTL, FENCE_STATUS kept coming
     assert log.first_breach() is None, [f for _, f in log.fence if f["breach_status"]]
     assert log.fence[-1][0] > results["t_end"] - 2.0, "FENCE_STATUS stopped arriving"
-    assert FlightMode.RETURN_TO_LAUNCH not in [m for _, m in log.modes], log.summary()
+    assert "RETURN_TO_LAUNCH" not in [m for _, m in log.modes], log.summary()
     assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
 
     flown = [p for p in log.positions if p[0] >= results["t_goto"]]
@@ -311,7 +312,7 @@ def _check(sitl, log: FlightLog, results, auto: bool):
         f"{results['t_done'] - reroute['time']:.2f} s wall after the reroute; final "
         f"{to_goal:.2f} m from the goal at alt {final[3]:.1f} m; {len(log.fence)} FENCE_STATUS, "
         f"breach_status {sorted({f['breach_status'] for _, f in log.fence})}; modes "
-        f"{[m.name for _, m in log.modes]}; {results['checks']} checks, speedup "
+        f"{[m for _, m in log.modes]}; {results['checks']} checks, speedup "
         f"{sitl.speedup:g} | monitor: {brief}"
     )
     assert max(before) > 0.8 * SPEED, f"only {max(before):.1f} m/s before the re-route"

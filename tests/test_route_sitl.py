@@ -5,7 +5,7 @@ router (``FenceRoadmap``, clearance 20 m) plans a mission from home to a point 4
 on the far side of it, and ``mission_items`` turns the route into the same QGC items the
 ``alphafence route`` CLI writes: takeoff, waypoints out, the same waypoints back (the default
 there-and-back: the final RTL flies straight home, so a one-way mission would end by crossing
-the square), RTL. The items are uploaded with MAVSDK's ``mission_raw`` plugin, the square itself
+the square), RTL. The items are uploaded with the link's ``mission_raw``, the square itself
 with the kit's fence uploader and the ``copter-rtl`` parameters (FENCE_ACTION 1), and the copter
 is armed and flown in AUTO until it has landed back home.
 
@@ -15,11 +15,11 @@ mission's own RTL item runs inside AUTO), that no "fence breached" STATUSTEXT ca
 every position reported stayed outside the square and nearly the clearance away from it.
 
 ArduPilot conventions (checked by downloading the mission after the upload): mission item 0 is
-home, and MAVSDK's ``mission_raw`` passes items through unchanged (no home is added: as many
+home, and ``mission_raw`` (either link's) passes items through unchanged (no home is added: as many
 items come back as were sent), so the list starts with a home item (frame GLOBAL, NAV_WAYPOINT;
 ArduPilot answers with its own home there) and the kit's items follow from seq 1. The RTL item
-comes back in frame 0 instead of 2 (ArduPilot stores no frame for it). ``start_mission`` is, in
-MAVSDK, a mode change to AUTO (MISSION); sent to the armed copter on the ground, the mission's
+comes back in frame 0 instead of 2 (ArduPilot stores no frame for it). ``start_mission`` is, on
+either link, a mode change to AUTO (MISSION); sent to the armed copter on the ground, the mission's
 own NAV_TAKEOFF takes off ("Mission: 1 Takeoff") with no throttle or GUIDED takeoff.
 
 Measured (egham, speedup 5, 3 runs, two of them side by side; wall-clock seconds, x5 for sim
@@ -41,6 +41,7 @@ import shapely
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.formats.qgc_plan import mission_items
+from alphafence.geo.coords import to_e7
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.ids import (
     MAV_CMD_NAV_RETURN_TO_LAUNCH as NAV_RETURN_TO_LAUNCH,
@@ -51,6 +52,8 @@ from alphafence.mavlink.ids import (
 from alphafence.mavlink.ids import (
     MAV_CMD_NAV_WAYPOINT as NAV_WAYPOINT,
 )
+from alphafence.mavlink.ids import MAV_FRAME_GLOBAL as FRAME_GLOBAL
+from alphafence.mavlink.ids import MAV_MISSION_TYPE_MISSION as MISSION_TYPE_MISSION
 from alphafence.route import FenceRoadmap
 from alphafence.vehicle.fence_transfer import upload_fence
 from alphafence.vehicle.link import open_vehicle
@@ -65,6 +68,7 @@ from tests.sitl_flight import (
     square_local,
     until,
     unwatch,
+    upload_mission,
     watch,
     within,
 )
@@ -81,24 +85,17 @@ TRACKING = 5.0  # metres the copter may stray from the planned legs towards the 
 
 WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
 
-FRAME_GLOBAL = 0
-MISSION_TYPE_MISSION = 0
-
 
 def _keep_out(frame: LocalFrame) -> FenceRecord:
     return FenceRecord("square", "keep_out", frame.geom_to_wgs84(square_local()))
 
 
-def _e7(deg) -> int:
-    return int(round(float(deg) * 1e7))
-
-
 def to_mission_raw(items, home):
-    """QGC SimpleItems (``mission_items``) -> mission_raw MissionItems, home first (seq 0)."""
-    from mavsdk.plugins.mission_raw import MissionItem
+    """QGC SimpleItems (``mission_items``) -> raw mission items, home first (seq 0)."""
+    from alphafence.vehicle.values import RawItem
 
     raw = [
-        MissionItem(
+        RawItem(
             seq=0,
             frame=FRAME_GLOBAL,
             command=NAV_WAYPOINT,
@@ -108,8 +105,8 @@ def to_mission_raw(items, home):
             param2=0.0,
             param3=0.0,
             param4=0.0,
-            x=_e7(home.lat),
-            y=_e7(home.lon),
+            x=to_e7(home.lat),
+            y=to_e7(home.lon),
             z=float(home.alt),
             mission_type=MISSION_TYPE_MISSION,
         )
@@ -117,7 +114,7 @@ def to_mission_raw(items, home):
     for seq, it in enumerate(items, start=1):
         p = [0.0 if v is None else float(v) for v in it["params"]]
         raw.append(
-            MissionItem(
+            RawItem(
                 seq=seq,
                 frame=int(it["frame"]),
                 command=int(it["command"]),
@@ -127,8 +124,8 @@ def to_mission_raw(items, home):
                 param2=p[1],
                 param3=p[2],
                 param4=p[3],
-                x=_e7(p[4]),
-                y=_e7(p[5]),
+                x=to_e7(p[4]),
+                y=to_e7(p[5]),
                 z=p[6],
                 mission_type=MISSION_TYPE_MISSION,
             )
@@ -143,10 +140,6 @@ async def test_routed_mission_flies_around_the_keep_out_without_a_breach(sitl):
 
 
 async def _fly_the_route(sitl, log: FlightLog):
-    from mavsdk.asyncio.plugins.action import ActionAsync
-    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-    from mavsdk.plugins.telemetry import FlightMode
-
     home = sitl.home
     frame = log.frame
     square = square_local()
@@ -168,9 +161,8 @@ async def _fly_the_route(sitl, log: FlightLog):
 
     async with open_vehicle(sitl.connection_url) as vehicle:
         log.texts = vehicle.texts
-        action = ActionAsync(vehicle.system)
-        direct = MavlinkDirectAsync(vehicle.system)
-        watchers = watch(log, vehicle, direct, "positions", "modes", "armed", "fence", "progress")
+        action = vehicle.action
+        watchers = watch(log, vehicle, "positions", "modes", "armed", "fence", "progress")
         try:
             # -- the fence and its parameters, the mission, each read back
             report = await upload_fence(vehicle, exclusion_items(frame))
@@ -178,7 +170,7 @@ async def _fly_the_route(sitl, log: FlightLog):
             params = await apply_params(vehicle, PROFILES["copter-rtl"])
             assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
 
-            await vehicle.mission_raw.upload_mission(raw)
+            await upload_mission(vehicle, raw)
             got = await vehicle.mission_raw.download_mission()
             got = sorted({int(r.seq): r for r in got}.values(), key=lambda r: r.seq)
             assert len(got) == len(raw), f"{len(raw)} items sent, {len(got)} read back"
@@ -191,7 +183,7 @@ async def _fly_the_route(sitl, log: FlightLog):
             print(f"\nitem 0 sent {raw[0]}\nitem 0 read back {got[0]}")
 
             await vehicle.telemetry.set_rate_position(10.0)
-            await ask_fence_status(direct, 2.0)
+            await ask_fence_status(vehicle, 2.0)
             await until("a FENCE_STATUS", lambda: log.fence, 15, log)
             await until("a position", lambda: log.positions, 15, log)
             assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"
@@ -200,7 +192,7 @@ async def _fly_the_route(sitl, log: FlightLog):
             await retry("arming", action.arm, ARM_TIMEOUT)
             t_start = time.monotonic()
             await vehicle.mission_raw.start_mission()
-            await until("AUTO", lambda: log.mode() == FlightMode.MISSION, 5, log)
+            await until("AUTO", lambda: log.mode() == "MISSION", 5, log)
             t_up = await until(
                 "climb to 90% of the mission altitude",
                 lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
@@ -233,7 +225,7 @@ async def _fly_the_route(sitl, log: FlightLog):
         f"{farthest:.1f} m; min distance to the square {distances[worst]:.1f} m at "
         f"x={xy[worst, 0]:.1f} y={xy[worst, 1]:.1f}; {len(fence_in_flight)} FENCE_STATUS, "
         f"breach_status {sorted({f['breach_status'] for f in fence_in_flight})}; modes "
-        f"{[m.name for m in modes_in_flight]}; last progress {log.progress[-1][1:]} | "
+        f"{modes_in_flight}; last progress {log.progress[-1][1:]} | "
         f"{'; '.join(said)}"
     )
 
@@ -242,7 +234,7 @@ async def _fly_the_route(sitl, log: FlightLog):
     assert fence_in_flight and all(f["breach_status"] == 0 for f in fence_in_flight), [
         f for f in fence_in_flight if f["breach_status"]
     ]
-    assert FlightMode.RETURN_TO_LAUNCH not in modes_in_flight, modes_in_flight
+    assert "RETURN_TO_LAUNCH" not in modes_in_flight, modes_in_flight
     assert not any("fence" in text.lower() and "breach" in text.lower() for text in said), said
     assert not any(shapely.intersects(shapely.points(xy), square))
     assert distances[worst] >= CLEARANCE - TRACKING, (distances[worst], xy[worst])
