@@ -1,4 +1,5 @@
-"""Fence upload, read-back and parameters against real ArduPilot SITL."""
+"""Fence upload, read-back and parameters against real ArduPilot SITL, on each vehicle link
+(the ``link`` fixture: pymavlink and MAVSDK; the CLI follows ``$ALPHAFENCE_LINK``)."""
 
 import math
 
@@ -22,7 +23,7 @@ from alphafence.vehicle.link import open_vehicle
 from alphafence.vehicle.params import PROFILES as PARAMS
 from alphafence.vehicle.params import apply_params
 
-pytestmark = pytest.mark.sitl
+pytestmark = [pytest.mark.sitl, pytest.mark.usefixtures("link")]
 MALTA_AIRPORT = {"home": "malta_airport", "speedup": 5}
 
 
