@@ -14,6 +14,7 @@ names, so the caller words them once whichever link carried the transfer.
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 
 from alphafence.mavlink import ids
@@ -63,6 +64,9 @@ class MissionClient:
             try:
                 msg = await asyncio.wait_for(queue.get(), RETRY_S)
             except asyncio.TimeoutError:
+                if time.monotonic() - state.get("moved", -math.inf) < RETRY_S:
+                    state["tries"] = 0  # it went on meanwhile (answered as it came)
+                    continue
                 state["tries"] += 1
                 if state["tries"] > RETRIES:
                     raise TransferFailed("TIMEOUT") from None
@@ -91,26 +95,33 @@ class MissionClient:
         n = len(messages)
         t0 = time.monotonic()
         state = {"tries": 0, "last": mav.mission_count_encode(sysid, compid, n, mission_type)}
-        sent_last = n == 0
-        with self.vehicle.bus.subscribe(*REQUESTS) as queue:
+        state["sent_last"] = n == 0
+
+        def request(msg) -> bool:
+            """Answer a request for an item as it is parsed (no wake-up between them)."""
+            if msg.get_type() == "MISSION_ACK" or not self._from_target(msg, mission_type):
+                return False
+            seq = int(msg.seq)
+            if 0 <= seq < n:  # a request for an item we do not have: the ACK will say
+                if seq > state.get("highest", -1):  # a new item asked for: it goes on
+                    state["highest"], state["moved"] = seq, time.monotonic()
+                state["last"] = messages[seq]
+                state["sent_last"] = state["sent_last"] or seq == n - 1
+                link.send(messages[seq])
+            return True
+
+        with self.vehicle.bus.subscribe(*REQUESTS, handle=request) as queue:
             link.send(state["last"])
             while True:
                 msg = await self._next(queue, mission_type, lambda: link.send(state["last"]), state)
-                if msg.get_type() == "MISSION_ACK":
-                    if msg.type == ids.MAV_MISSION_ACCEPTED and sent_last:
-                        self.counts[mission_type] = n
-                        return time.monotonic() - t0
-                    if msg.type == ids.MAV_MISSION_INVALID_SEQUENCE:
-                        continue  # an item it had already (a re-send): ArduPilot goes on
-                    if msg.type == ids.MAV_MISSION_ACCEPTED:  # an ACK before the last item
-                        raise TransferFailed("PROTOCOL_ERROR", "accepted before the last item")
-                    raise TransferFailed(mission_result_name(msg.type))
-                seq = int(msg.seq)
-                if not 0 <= seq < n:
-                    continue  # a request for an item we do not have: the ACK will say
-                state["last"], state["tries"] = messages[seq], 0
-                sent_last = sent_last or seq == n - 1
-                link.send(messages[seq])
+                if msg.type == ids.MAV_MISSION_ACCEPTED and state["sent_last"]:
+                    self.counts[mission_type] = n
+                    return time.monotonic() - t0
+                if msg.type == ids.MAV_MISSION_INVALID_SEQUENCE:
+                    continue  # an item it had already (a re-send): ArduPilot goes on
+                if msg.type == ids.MAV_MISSION_ACCEPTED:  # an ACK before the last item
+                    raise TransferFailed("PROTOCOL_ERROR", "accepted before the last item")
+                raise TransferFailed(mission_result_name(msg.type))
 
     def _item_msg(self, seq, it, mission_type):
         from alphafence.geo.coords import to_e7
@@ -164,7 +175,25 @@ class MissionClient:
         sysid, compid = self.vehicle.target
         mav, link = self._mav(), self.vehicle.link
         state = {"tries": 0, "last": mav.mission_request_list_encode(sysid, compid, mission_type)}
-        with self.vehicle.bus.subscribe(*ANSWERS) as queue:
+        taken: list = []  # the items, in order, as they arrive
+
+        def item(msg) -> bool:
+            """Take the item asked for and ask for the next one at once; the last item goes
+            to the queue (it ends the wait), as do the COUNT and any ACK."""
+            if msg.get_type() != "MISSION_ITEM_INT" or not self._from_target(msg, mission_type):
+                return False
+            n = state.get("n")
+            if n is None or int(msg.seq) != len(taken):
+                return True  # before the count, or one asked for before: ignored
+            if len(taken) == n - 1:
+                return False
+            taken.append(_raw(msg))
+            state["moved"] = time.monotonic()
+            state["last"] = mav.mission_request_int_encode(sysid, compid, len(taken), mission_type)
+            link.send(state["last"])
+            return True
+
+        with self.vehicle.bus.subscribe(*ANSWERS, handle=item) as queue:
             link.send(state["last"])
             while True:
                 msg = await self._next(queue, mission_type, lambda: link.send(state["last"]), state)
@@ -175,22 +204,18 @@ class MissionClient:
             n = int(msg.count)
             if max_items is not None and n > max_items:
                 raise TransferFailed("COUNT_TOO_LARGE", str(n))
-            items: list = []
-            while len(items) < n:
-                seq = len(items)
-                state["last"] = mav.mission_request_int_encode(sysid, compid, seq, mission_type)
+            items = taken
+            if n:
+                state["n"] = n
+                state["last"] = mav.mission_request_int_encode(sysid, compid, 0, mission_type)
                 state["tries"] = 0
                 link.send(state["last"])
-                while True:
-                    msg = await self._next(
-                        queue, mission_type, lambda: link.send(state["last"]), state
-                    )
-                    kind = msg.get_type()
-                    if kind == "MISSION_ACK":
-                        raise TransferFailed(mission_result_name(msg.type))
-                    if kind == "MISSION_ITEM_INT" and int(msg.seq) == seq:
-                        items.append(_raw(msg))
-                        break  # a repeated COUNT or an item asked for before: ignored
+            while len(items) < n:
+                msg = await self._next(queue, mission_type, lambda: link.send(state["last"]), state)
+                if msg.get_type() == "MISSION_ACK":
+                    raise TransferFailed(mission_result_name(msg.type))
+                if msg.get_type() == "MISSION_ITEM_INT" and int(msg.seq) == len(items):
+                    items.append(_raw(msg))  # the last one: the others were taken as they came
             link.send(mav.mission_ack_encode(sysid, compid, ids.MAV_MISSION_ACCEPTED, mission_type))
             self.counts[mission_type] = n
             return items

@@ -41,29 +41,37 @@ class Bus:
     unbounded backlog)."""
 
     def __init__(self):
-        self._subs: dict[str, list[asyncio.Queue]] = defaultdict(list)
+        self._subs: dict[str, list[tuple]] = defaultdict(list)  # name -> (queue, handle)
         self.wanted: set[str] = set(ALWAYS)  # message types the link decodes
 
     def publish(self, msg) -> None:
-        """Hand ``msg`` to every queue following its type."""
-        for queue in self._subs.get(msg.get_type(), ()):
+        """Hand ``msg`` to every subscriber of its type: its ``handle`` first, if it has one
+        (which may take the message), else its queue."""
+        for queue, handle in self._subs.get(msg.get_type(), ()):
+            if handle is not None and handle(msg):
+                continue
             if queue.full():
                 queue.get_nowait()
             queue.put_nowait(msg)
 
     @contextlib.contextmanager
-    def subscribe(self, *names: str, maxsize: int = 256):
+    def subscribe(self, *names: str, maxsize: int = 256, handle=None):
         """``with bus.subscribe("MISSION_ACK", ...) as queue:`` the messages of those types
-        that arrive while the block runs."""
+        that arrive while the block runs.
+
+        ``handle(msg) -> bool``, if given, sees each message first, as it is parsed (no task
+        wakes up for it): a transfer answers the vehicle's request there at once; the messages
+        it returns True for are not queued."""
         queue: asyncio.Queue = asyncio.Queue(maxsize)
+        entry = (queue, handle)
         for name in names:
-            self._subs[name].append(queue)
+            self._subs[name].append(entry)
             self.wanted.add(name)
         try:
             yield queue
         finally:
             for name in names:
-                self._subs[name].remove(queue)
+                self._subs[name].remove(entry)
                 if not self._subs[name] and name not in ALWAYS:
                     del self._subs[name]
                     self.wanted.discard(name)
