@@ -107,10 +107,46 @@ async def _grpc(url, hz):
         await asyncio.sleep(0.5)  # its UDP port free again
 
 
+FLOOR_SENDER = """
+import socket, sys, time
+port, hz = int(sys.argv[1]), float(sys.argv[2])
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+t = time.monotonic()
+while True:
+    s.sendto(bytes(40), ("127.0.0.1", port))
+    t += 1 / hz
+    time.sleep(max(0.0, t - time.monotonic()))
+"""
+
+
+async def _floor(hz):
+    """The CPU of an asyncio UDP endpoint that does nothing with datagrams arriving at ``hz``:
+    what waking up costs on this machine now (a loaded machine's caches make it dearer)."""
+    import subprocess
+    import sys
+
+    n = [0]
+
+    class Count(asyncio.DatagramProtocol):
+        def datagram_received(self, data, addr):
+            n[0] += 1
+
+    loop = asyncio.get_running_loop()
+    transport, _ = await loop.create_datagram_endpoint(Count, local_addr=("127.0.0.1", 0))
+    port = transport.get_extra_info("sockname")[1]
+    sender = subprocess.Popen([sys.executable, "-c", FLOOR_SENDER, str(port), str(hz)])
+    try:
+        return await _windows(lambda: n[0])
+    finally:
+        sender.kill()
+        sender.wait()
+        transport.close()
+
+
 async def _measure(links):
     from alphafence.sitl import launch_sitl
 
-    out = {}
+    out = {("floor", hz): await _floor(hz) for hz in RATES}
     async with launch_sitl(home="malta_airport", speedup=1) as sitl:
         for link in links:
             for hz in RATES:
@@ -139,6 +175,14 @@ def run(Row):
     got = asyncio.run(_measure(links))
     rows = []
     for hz in RATES:
+        share, _, per = got["floor", hz]
+        rows.append(
+            Row(
+                f"floor: an asyncio UDP endpoint doing nothing, {hz:g} datagrams/s",
+                f"{100 * share:.2f} % of a core, {1e6 * per:.0f} us/datagram",
+                "-", "-", "-", True,
+            )
+        )  # fmt: skip
         ours = got.get(("pymavlink", hz))
         for link in links:
             share, rate, per = got[link, hz]

@@ -25,7 +25,7 @@ from alphafence.vehicle.base import LinkError, NoLinkError, Vehicle
 __all__ = ["LinkError", "NoLinkError", "Vehicle", "choose_link", "open_vehicle"]
 
 LINKS = ("auto", "pymavlink", "mavsdk")
-PREFERRED = ("mavsdk", "pymavlink")  # auto's order
+PREFERRED = ("pymavlink", "mavsdk")  # auto's order: the leaner first (bench/link_bench.py)
 INSTALL = {
     "pymavlink": "pip install pymavlink (the 'companion' extra; pure Python, any platform)",
     "mavsdk": "pip install mavsdk (MAVSDK 4: wheels for x86-64 and arm64 only, none for "
