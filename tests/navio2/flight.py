@@ -1,7 +1,7 @@
 """The flight of `make navio2-test`: x86 ArduPilot SITL, the armhf monitor, a keep-out fence.
 
 SITL (the kit's harness, ``launch_sitl(radio=True)``) sends MAVLink on two loopback links:
-SERIAL0 to this script (MAVSDK on x86: upload, parameters, the flight, FENCE_STATUS) and
+SERIAL0 to this script (the kit's link on x86: upload, parameters, the flight, FENCE_STATUS) and
 SERIAL1 to the armhf monitor. The monitor runs in the armhf userland (``--rootfs``) exactly as
 the systemd unit starts it: ``docker/alphafence-monitor.service``'s user, ExecStart and
 environment (fences, trusted key, event log), with only ``ALPHAFENCE_CONNECT`` (SITL's second
@@ -135,8 +135,6 @@ async def _wait(what, predicate, timeout, monitor=None, log=None, poll=0.05):
 
 async def fly(rootfs: Path, out: Path) -> dict:
     """The flight; returns what it measured (raises on a failed check)."""
-    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-
     from alphafence.geo.frame import LocalFrame
     from alphafence.sitl.homes import resolve_home
     from alphafence.sitl.instance import launch_sitl
@@ -171,12 +169,11 @@ async def fly(rootfs: Path, out: Path) -> dict:
         flog = FlightLog(frame)
         async with open_vehicle(sitl.connection_url) as vehicle:
             flog.texts = vehicle.texts
-            direct = MavlinkDirectAsync(vehicle.system)
-            watchers = watch(flog, vehicle, direct, "positions", "speeds", "modes", "fence")
+            watchers = watch(flog, vehicle, "positions", "speeds", "modes", "fence")
             monitor = None
             stderr = open(out / "monitor.log", "wb")
             try:
-                await fence_and_telemetry(vehicle, direct, flog, exclusion_items(frame))
+                await fence_and_telemetry(vehicle, flog, exclusion_items(frame))
                 t_start = time.monotonic()
                 monitor = await asyncio.create_subprocess_exec(
                     *command, stdin=asyncio.subprocess.DEVNULL, stdout=stderr, stderr=stderr

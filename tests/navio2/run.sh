@@ -201,7 +201,9 @@ install_kit() {
     "$HOSTPY" -m tests.navio2.readme blocks "$SUITE" >"$ROOTFS/root/navio2-install.sh"
     say "the README's install steps for $SUITE, in the armhf userland:"
     sed 's/^/    /' "$ROOTFS/root/navio2-install.sh"
-    in_userland PS4='+ [${SECONDS} s] ' chroot "$ROOTFS" bash -euxo pipefail /root/navio2-install.sh
+    # each step echoed with the seconds since the start (bash takes no PS4 from root's environment)
+    in_userland chroot "$ROOTFS" bash -c \
+        'PS4="+ [\${SECONDS} s] "; set -euxo pipefail; . /root/navio2-install.sh' </dev/null
     in_userland chroot "$ROOTFS" sh -c '
         uname -m; python3 --version
         /opt/alphafence/bin/alphafence --version
