@@ -251,3 +251,28 @@ def unreadable(previous, error, t=None, at=None, **fields) -> list:
     else:
         kept = f"the previous onboard fence ({previous.items} items)"
     return [new_event("onboard_failed", t, at, error=error, kept=kept, **fields)]
+
+
+async def download_layer(monitor, cause: str) -> list:
+    """:meth:`Monitor.reload_onboard <alphafence.monitor.runner.Monitor.reload_onboard>`:
+    download the vehicle's fence, load it into the engine, handle the events."""
+    import asyncio
+    import time
+
+    from alphafence.errors import VehicleError
+    from alphafence.vehicle.fence_transfer import download_fence
+
+    t0 = time.monotonic()
+    try:
+        items = await download_fence(monitor.vehicle)
+    except asyncio.CancelledError:
+        raise
+    except Exception as exc:  # a failed download is an event: the monitor goes on
+        error = str(exc) if isinstance(exc, VehicleError) else f"{type(exc).__name__}: {exc}"
+        events = monitor.engine.onboard_unreadable(error, cause=cause)
+    else:
+        seconds = round(time.monotonic() - t0, 3)
+        events = monitor.engine.load_onboard(items, cause=cause, seconds=seconds)
+    for event in events:
+        monitor.handle(event)
+    return events

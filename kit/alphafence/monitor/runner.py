@@ -237,17 +237,30 @@ class Monitor:
         """Deliver every value of ``feed`` (then tell the observers); a feed that fails is its
         ``unavailable`` event, or ends the task (telemetry: see :meth:`_ended_tasks`)."""
         stream = name.split(":", 1)[-1]
+
+        def take(value):
+            t = time.monotonic()
+            feed.deliver(t, value)
+            if self.observers:
+                parts = zip(feed.split, value) if feed.split else ((stream, value),)
+                for part, v in list(parts):
+                    for observer in self.observers:
+                        observer.on_value(part, t, v)
+            if feed.then is not None:
+                feed.then()
+
+        def pushed(value):  # called by the link as it parses: a failure goes to run()
+            try:
+                take(value)
+            except Exception as exc:  # noqa: BLE001 - run() raises it
+                self._failure = self._failure or exc
+
         try:
+            if feed.listen is not None:
+                with feed.listen(pushed):
+                    await asyncio.Event().wait()  # until cancelled
             async for value in feed.open():
-                t = time.monotonic()
-                feed.deliver(t, value)
-                if self.observers:
-                    parts = zip(feed.split, value) if feed.split else ((stream, value),)
-                    for part, v in list(parts):
-                        for observer in self.observers:
-                            observer.on_value(part, t, v)
-                if feed.then is not None:
-                    feed.then()
+                take(value)
         except asyncio.CancelledError:
             raise
         except Exception as exc:
@@ -298,23 +311,9 @@ class Monitor:
             (the download failed or brought no valid fence: the layer in use is kept). Never
             raises but for cancellation.
         """
-        from alphafence.errors import VehicleError
-        from alphafence.vehicle.fence_transfer import download_fence
+        from alphafence.monitor.onboard import download_layer
 
-        t0 = time.monotonic()
-        try:
-            items = await download_fence(self.vehicle)
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:  # a failed download is an event: the monitor goes on
-            error = str(exc) if isinstance(exc, VehicleError) else f"{type(exc).__name__}: {exc}"
-            events = self.engine.onboard_unreadable(error, cause=cause)
-        else:
-            seconds = round(time.monotonic() - t0, 3)
-            events = self.engine.load_onboard(items, cause=cause, seconds=seconds)
-        for event in events:
-            self.handle(event)
-        return events
+        return await download_layer(self, cause)
 
     def handle(self, event: dict) -> None:
         """Carry out one event: log it (the observers see it), alert the ground station if it

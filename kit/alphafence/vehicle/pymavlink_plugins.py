@@ -86,6 +86,25 @@ class Telemetry:
                 VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
             )
 
+    def listen_position_velocity(self, callback):
+        """``with telemetry.listen_position_velocity(callback):`` ``callback((Position,
+        VelocityNed))`` for each GLOBAL_POSITION_INT of the autopilot, called as the message is
+        parsed: no task wakes up for it (the monitor's feed at 10-50 Hz)."""
+
+        def handle(m) -> bool:
+            if self.v.from_autopilot(m):
+                callback(
+                    (
+                        Position(
+                            from_e7(m.lat), from_e7(m.lon), m.alt / 1000.0, m.relative_alt / 1000.0
+                        ),
+                        VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
+                    )
+                )
+            return True
+
+        return self.v.bus.subscribe("GLOBAL_POSITION_INT", maxsize=1, handle=handle)
+
     async def subscribe_flight_mode(self):
         """Each HEARTBEAT's mode as :class:`~alphafence.vehicle.values.FlightMode`."""
         async for m in self._own("HEARTBEAT"):
