@@ -464,7 +464,7 @@ async def test_disconnect_mid_upload_fails_cleanly():
     assert_upload_kept_old_fence(
         fake, err, holds="no longer connected (no heartbeat), so what it holds is unknown"
     )
-    assert seconds < 8.0
+    assert seconds < 15.0  # no hang: 7-8.6 s on either link (under qemu too)
 
 
 async def test_no_vehicle_is_a_link_error():

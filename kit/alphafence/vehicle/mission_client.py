@@ -198,7 +198,8 @@ class MissionClient:
             while True:
                 msg = await self._next(queue, mission_type, lambda: link.send(state["last"]), state)
                 if msg.get_type() == "MISSION_ACK":
-                    raise TransferFailed(mission_result_name(msg.type))
+                    _refused(msg)
+                    continue
                 if msg.get_type() == "MISSION_COUNT":
                     break
             n = int(msg.count)
@@ -213,12 +214,26 @@ class MissionClient:
             while len(items) < n:
                 msg = await self._next(queue, mission_type, lambda: link.send(state["last"]), state)
                 if msg.get_type() == "MISSION_ACK":
-                    raise TransferFailed(mission_result_name(msg.type))
+                    _refused(msg)
+                    continue
                 if msg.get_type() == "MISSION_ITEM_INT" and int(msg.seq) == len(items):
                     items.append(_raw(msg))  # the last one: the others were taken as they came
             link.send(mav.mission_ack_encode(sysid, compid, ids.MAV_MISSION_ACCEPTED, mission_type))
             self.counts[mission_type] = n
             return items
+
+
+DOWNLOAD_REFUSALS = (ids.MAV_MISSION_DENIED, ids.MAV_MISSION_UNSUPPORTED)
+"""The MISSION_ACKs that refuse a download (ArduPilot: DENIED while an upload is under way).
+Any other ACK during a download is a late answer to an earlier transfer (the ERROR a vehicle
+sends for a repeated last item, after it has stored the fence) and is ignored: the download's
+own retries and timeout still bound it."""
+
+
+def _refused(msg) -> None:
+    """Raise TransferFailed if ``msg`` (a MISSION_ACK during a download) refuses it."""
+    if msg.type in DOWNLOAD_REFUSALS:
+        raise TransferFailed(mission_result_name(msg.type))
 
 
 def _raw(msg) -> RawItem:
