@@ -96,6 +96,7 @@ def fences(tmp_path_factory):
 
 # a corner of the demo scene whose fences fit a copter without merging
 CORNER = ["--bbox", "-0.57,51.425,-0.56,51.43", "--distance", "300"]
+MONITOR = ["monitor", "--connect", "udpin://127.0.0.1:9", "--fences", "{f}", "--allow-unsigned"]
 
 
 def test_compile_and_check_mission_need_no_extra(fences, tmp_path):
@@ -149,30 +150,9 @@ def test_a_pyosmium_without_osmium_filter_is_too_old(tmp_path):
             ["route", "{f}", "--from", "51.42,-0.56", "--to", "51.44,-0.53", "-o", "{t}/r.plan"],
             "routing",
         ),  # fmt: skip
+        ([*MONITOR, "--imminent-action", "reroute"], "--imminent-action reroute"),
         (
-            [
-                "monitor",
-                "--connect",
-                "udpin://127.0.0.1:9",
-                "--fences",
-                "{f}",
-                "--allow-unsigned",
-                "--imminent-action",
-                "reroute",
-            ],
-            "--imminent-action reroute",
-        ),  # fmt: skip
-        (
-            [
-                "monitor",
-                "--connect",
-                "udpin://127.0.0.1:9",
-                "--fences",
-                "{f}",
-                "--allow-unsigned",
-                "--onboard",
-                "rolling",
-            ],
+            [*MONITOR, "--onboard", "rolling"],
             "--onboard rolling",
         ),  # fmt: skip
         (["demo", "-o", "{t}/demo"], "building the demo's fences"),

@@ -63,3 +63,18 @@ def test_recorded_flight_with_enforce_commands_the_brake_first():
     eng = Engine(fences(), options(enforce=True))
     actions = [e for s in samples() for e in eng.step(s) if e["event"] == "action"]
     assert actions and actions[0]["action"] == "brake"
+
+
+def test_a_trace_file_that_is_too_big_or_unreadable_is_one_line(tmp_path, monkeypatch):
+    import pytest
+
+    from alphafence.errors import InputError
+    from alphafence.monitor import replay
+
+    monkeypatch.setattr(replay, "MAX_TRACE_BYTES", 1000)
+    big = tmp_path / "big.trace.jsonl"
+    big.write_bytes(b"{}\n" * 400)
+    with pytest.raises(InputError, match=r"big.trace.jsonl: a trace over 0 MB"):
+        replay.Trace.read(big)
+    with pytest.raises(InputError, match=r"missing.jsonl: cannot read \(No such file"):
+        replay.Trace.read(tmp_path / "missing.jsonl")

@@ -1,4 +1,4 @@
-"""JSON files, read whole with a size limit and one-line errors."""
+"""Files read whole with a size limit and one-line errors: JSON, and raw bytes."""
 
 from __future__ import annotations
 
@@ -13,6 +13,25 @@ MAX_JSON_MB_DEFAULT = 512  # JSON is parsed whole: refuse what would not fit, be
 def max_json_bytes() -> int:
     """The largest JSON file read: ``$ALPHAFENCE_MAX_JSON_MB`` megabytes (default 512)."""
     return int(float(os.environ.get("ALPHAFENCE_MAX_JSON_MB", MAX_JSON_MB_DEFAULT)) * 1024 * 1024)
+
+
+def read_limited(path, limit: int, too_big: str, unreadable: str = "cannot read") -> bytes:
+    """The bytes of a file of at most ``limit`` bytes (only ``limit + 1`` are ever read).
+
+    Raises
+    ------
+    InputError
+        ``"<path>: <unreadable> (<why>)"`` when it cannot be read, ``"<path>: <too_big>"``
+        when it is larger.
+    """
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(limit + 1)
+    except OSError as exc:
+        raise InputError(str(path), f"{unreadable} ({exc.strerror})") from None
+    if len(data) > limit:
+        raise InputError(str(path), too_big)
+    return data
 
 
 def read_json(path):

@@ -13,6 +13,7 @@ import json
 from dataclasses import dataclass, field
 
 from alphafence.errors import InputError
+from alphafence.formats.jsonfile import read_limited
 from alphafence.mavlink.items import FenceItem
 from alphafence.monitor.engine import Engine, Sample
 from alphafence.monitor.fenceset import FenceSet
@@ -80,13 +81,8 @@ class Trace:
     @classmethod
     def read(cls, path) -> Trace:
         """Read a trace file (at most 20 MB)."""
-        try:
-            with open(path, "rb") as fh:
-                data = fh.read(MAX_TRACE_BYTES + 1)
-        except OSError as exc:
-            raise InputError(str(path), f"cannot read ({exc.strerror})") from None
-        if len(data) > MAX_TRACE_BYTES:
-            raise InputError(str(path), f"a trace over {MAX_TRACE_BYTES // 10**6} MB")
+        too_big = f"a trace over {MAX_TRACE_BYTES // 10**6} MB"
+        data = read_limited(path, MAX_TRACE_BYTES, too_big)
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError:

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from alphafence.errors import InputError
+from alphafence.formats.jsonfile import read_limited
 
 KEY_BYTES = 32
 MAX_KEY_FILE_BYTES = 4096
@@ -29,13 +30,9 @@ _HEX_KEY = re.compile(r"[0-9a-fA-F]{64}")
 def load_key(path: str | os.PathLike) -> bytes:
     """The 32-byte key in a key file (64 hex digits, or a passphrase hashed with SHA-256)."""
     p = Path(path)
-    try:
-        with open(p, "rb") as f:
-            data = f.read(MAX_KEY_FILE_BYTES + 1)
-    except OSError as exc:
-        raise InputError(str(path), f"cannot read the signing key: {exc.strerror}") from None
-    if len(data) > MAX_KEY_FILE_BYTES:
-        raise InputError(str(path), "not a signing key file (over 4 KB)")
+    data = read_limited(
+        p, MAX_KEY_FILE_BYTES, "not a signing key file (over 4 KB)", "cannot read the signing key"
+    )
     try:
         text = data.decode("utf-8").strip()
     except UnicodeDecodeError:
