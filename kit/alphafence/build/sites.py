@@ -79,7 +79,9 @@ def _components(n, a, b):
     return connected_components(graph, directed=False)[1]
 
 
-def _widths(features, rules):
+def feature_widths(features, rules):
+    """Metres each feature is widened by before grouping: the rules' point radius for points,
+    half their line width for lines, 0 for areas."""
     w = np.zeros(len(features))
     for i, f in enumerate(features):
         gt = f.geomtype
@@ -92,9 +94,43 @@ def _widths(features, rules):
 
 def _regions(geoms, widths, join_m):
     """Conservative clusters: degree envelopes grown by the join distance and widths."""
-    bounds = shapely.bounds(geoms)
+    return region_labels(shapely.bounds(geoms), widths, join_m)
+
+
+def region_labels(bounds, widths, join_m):
+    """Conservative clusters of features of one class, from their extents alone.
+
+    Each extent (degrees) is grown by the join distance, twice the feature's width and a metre;
+    features whose grown extents meet, directly or through others, share a region. A site never
+    spans two regions, so regions can be fenced apart (in tiles, in worker processes) and give
+    exactly the sites :func:`group_sites` gives.
+
+    Parameters
+    ----------
+    bounds : ndarray, shape (n, 4)
+        ``minlon, minlat, maxlon, maxlat`` per feature.
+    widths : ndarray, shape (n,)
+        Metres each feature is widened by (points and lines), else 0.
+    join_m : float
+
+    Returns
+    -------
+    ndarray of int
+        A region label per feature.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> b = np.array([[14.5, 35.9, 14.5005, 35.9004], [14.5007, 35.9, 14.5012, 35.9004],
+    ...               [14.51, 35.9, 14.5105, 35.9004]])
+    >>> region_labels(b, np.zeros(3), 25.0).tolist()
+    [0, 0, 1]
+    """
+    bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
+    if len(bounds) == 1:
+        return np.zeros(1, int)
     lat = np.clip(np.maximum(np.abs(bounds[:, 1]), np.abs(bounds[:, 3])), 0, 89.9)
-    grow_m = join_m + 2 * widths + 1.0
+    grow_m = join_m + 2 * np.asarray(widths, dtype=float) + 1.0
     dlat = grow_m / M_PER_DEG_LAT
     dlon = grow_m / (M_PER_DEG_LON * np.cos(np.radians(lat)))
     boxes = shapely.box(
@@ -102,7 +138,25 @@ def _regions(geoms, widths, join_m):
     )
     tree = shapely.STRtree(boxes)
     a, b = tree.query(boxes, predicate="intersects")
-    return _components(len(geoms), a, b)
+    return _components(len(bounds), a, b)
+
+
+def site_class(feature):
+    """The key features are grouped by: only features with equal keys may share a site.
+
+    Today category, kind and margin (the rule's).
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.features import Feature
+    >>> from alphafence.formats.rules import load_rules
+    >>> tags = {"amenity": "hospital"}
+    >>> rule = load_rules().match(tags.get, "area")
+    >>> site_class(Feature(shapely.box(14.5, 35.9, 14.501, 35.901), tags, "way/1", "demo", rule))
+    ('hospital', 'keep_out', 30.0)
+    """
+    return (feature.category, feature.kind, feature.rule.margin_m)
 
 
 def group_sites(features, rules, join_m=25.0):
@@ -140,24 +194,39 @@ def group_sites(features, rules, join_m=25.0):
     """
     by_class = defaultdict(list)
     for f in features:
-        by_class[(f.category, f.kind, f.rule.margin_m)].append(f)
+        by_class[site_class(f)].append(f)
     sites = []
-    for (category, kind, margin), feats in sorted(by_class.items(), key=lambda kv: kv[0][:2]):
+    for _key, feats in sorted(by_class.items(), key=lambda kv: kv[0][:2]):
         geoms = np.array([f.geometry for f in feats], dtype=object)
-        widths = _widths(feats, rules)
+        widths = feature_widths(feats, rules)
         regions = _regions(geoms, widths, join_m)
         for r in np.unique(regions):
             idx = np.flatnonzero(regions == r)
-            sites.extend(
-                _region_sites(
-                    category, kind, margin, [feats[i] for i in idx], geoms[idx], widths[idx], join_m
-                )
-            )
+            sites.extend(_region_sites([feats[i] for i in idx], geoms[idx], widths[idx], join_m))
     sites.sort(key=lambda s: (s.category, s.site_id))
     return sites
 
 
-def _region_sites(category, kind, margin, feats, geoms, widths, join_m):
+def region_sites(features, rules, join_m=25.0):
+    """The sites of one region (features of one class, as :func:`region_labels` groups them,
+    in the database's order): what :func:`group_sites` makes of that region.
+
+    Parameters
+    ----------
+    features : list of Feature
+    rules : Rules
+    join_m : float
+
+    Returns
+    -------
+    list of Site
+    """
+    geoms = np.array([f.geometry for f in features], dtype=object)
+    return _region_sites(features, geoms, feature_widths(features, rules), join_m)
+
+
+def _region_sites(feats, geoms, widths, join_m):
+    category, kind, margin = feats[0].category, feats[0].kind, feats[0].rule.margin_m
     frame = LocalFrame.around(geoms)
     local = make_valid_polygonal(frame.geom_to_local(geoms))
     # points and lines become discs and strips; polygons stay as they are
