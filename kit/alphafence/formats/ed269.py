@@ -79,7 +79,7 @@ def _limit(path, label, geom, key, units):
     return float(value) * units
 
 
-def _projection(path, label, proj):
+def _projection(path, label, proj, units=1.0):
     if not isinstance(proj, dict):
         raise InputError(path, "horizontalProjection must be an object", label)
     ptype = proj.get("type")
@@ -104,8 +104,9 @@ def _projection(path, label, proj):
             raise InputError(
                 path, f"Circle radius must be a positive number, not {radius!r}", label
             )
-        return circle_polygon(center[0], center[1], float(radius)), {
-            "circle": [center[0], center[1], float(radius)]
+        radius_m = float(radius) * units  # uomDimensions applies to the radius too
+        return circle_polygon(center[0], center[1], radius_m), {
+            "circle": [center[0], center[1], radius_m]
         }
     if ptype in ("Polygon", "MultiPolygon"):
         try:
@@ -180,7 +181,7 @@ def read_ed269_doc(path, doc, rules, repaired, skipped):
                 raise InputError(
                     path, f"upperLimit {upper} m is not above lowerLimit {lower} m", elabel
                 )
-            geom, extra = _projection(path, elabel, entry.get("horizontalProjection"))
+            geom, extra = _projection(path, elabel, entry.get("horizontalProjection"), _UNITS[unit])
             props = {
                 "restriction": restriction,
                 "reason": reasons,
