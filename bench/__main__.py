@@ -2,6 +2,7 @@
 
 python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf
 python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf --only soak  # 30 min (make soak)
+python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf --only scale --scale-sizes 13300
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from bench import (
     monitor_cpu_bench,
     rolling_bench,
     route_bench,
+    scale_bench,
     soak_bench,
     upload_bench,
 )
@@ -37,7 +39,17 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--only",
-        choices=["build", "cli", "compile", "upload", "monitor", "rolling", "route", "soak"],
+        choices=[
+            "build",
+            "cli",
+            "compile",
+            "upload",
+            "monitor",
+            "rolling",
+            "route",
+            "scale",
+            "soak",
+        ],
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
     )
     p.add_argument(
@@ -46,6 +58,13 @@ def main(argv=None) -> int:
         default=30.0,
         metavar="N",
         help="wall minutes of the soak (default 30)",
+    )
+    p.add_argument(
+        "--scale-sizes",
+        type=lambda s: tuple(int(v) for v in s.split(",")),
+        default=scale_bench.SIZES,
+        metavar="N,N",
+        help="areas built by the scale group (default 133000,1000000)",
     )
     args = p.parse_args(argv)
     console = Console(width=150)
@@ -69,6 +88,8 @@ def main(argv=None) -> int:
         rows += rolling_bench.in_flight(args.osm, build_bench.Row)
     if args.only in (None, "route"):
         rows += route_bench.run(args.osm, build_bench.Row)
+    if args.only in (None, "scale"):
+        rows += scale_bench.run(args.osm, build_bench.Row, console, args.scale_sizes)
     if args.only == "soak":
         rows += soak_bench.run(args.osm, build_bench.Row, args.soak_minutes, console)
     elif args.only is None:  # too long for the default run
