@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import shapely
 
+from alphafence.errors import InputError
 from alphafence.formats.database import read_database
 from alphafence.geo.frame import LocalFrame
 
@@ -36,3 +37,99 @@ def test_a_circle_radius_in_feet_is_converted(rules):
     local = LocalFrame(8.5421, 47.3769).geom_to_local(zone.geometry)
     assert local.covers(shapely.Point(0, 0).buffer(304.79, quad_segs=64))
     assert zone.properties["circle"] == [8.5421, 47.3769, pytest.approx(304.8)]
+
+
+# -- 3: layouts --------------------------------------------------------------------------
+
+
+def test_the_uaszonelist_wrapper_and_limits_given_as_strings_are_read(rules):
+    db = read_database([DATA / "uaszonelist.json"], rules)
+    got = {f.source: f for f in db.features}
+    assert set(got) == {"ZL-P01", "ZL-C02"}
+    assert got["ZL-P01"].alt_min_m == 0 and got["ZL-P01"].alt_max_m == 120
+    assert got["ZL-C02"].alt_max_m == 150.5 and got["ZL-C02"].kind == "keep_out"
+    assert 300 <= local_radius(got["ZL-C02"], 8.5601, 47.3851) < 303
+
+
+@pytest.mark.parametrize("bad", ["ten", "", "nan", "inf", "1e400", [120], True])
+def test_a_limit_that_is_no_number_is_one_line(write_json, rules, bad):
+    doc = load("uaszonelist.json")
+    doc["UASZoneList"][1]["geometry"][0]["upperLimit"] = bad
+    with pytest.raises(InputError) as exc:
+        read_database([write_json("zones.json", doc)], rules)
+    msg = str(exc.value)
+    assert "\n" not in msg and "zones.json" in msg and "ZL-C02" in msg and "upperLimit" in msg
+
+
+def test_an_empty_uaszonelist_is_no_restricted_features_not_a_geojson_error(write_json, rules):
+    path = write_json("empty.json", {"formatVersion": "1.0.0", "UASZoneList": []})
+    with pytest.raises(InputError, match="no restricted features"):
+        read_database([path], rules)
+
+
+def test_ed318_zones_are_read(rules):
+    db = read_database([DATA / "ed318.json"], rules)
+    got = {f.source: f for f in db.features}
+    assert set(got) == {"E318P1", "E318C2"}  # the U-space zone restricts nothing by itself
+    assert any("USPACE" in reason for reason in db.skipped)
+    prison, heliport = got["E318P1"], got["E318C2"]
+    assert prison.kind == heliport.kind == "keep_out"
+    assert prison.name == "Prison Lenzwil" and heliport.name == "Heliport Aarfeld"
+    assert prison.geometry.equals(shapely.box(8.6001, 47.4001, 8.6041, 47.4031))
+    assert (prison.alt_min_m, prison.alt_max_m) == (0, 120)
+    assert prison.properties["upper_reference"] == "AGL" and prison.properties["reason"] == [
+        "SENSITIVE"
+    ]
+    # a Point with a Circle extent (radius in metres); the layer in feet
+    assert 500 <= local_radius(heliport, 8.6201, 47.4101) < 505
+    assert heliport.alt_max_m == pytest.approx(1000 * 0.3048)
+    assert heliport.properties["upper_reference"] == "AMSL"
+    assert heliport.properties["lower_reference"] == "AGL"
+    assert heliport.properties["restriction"] == "REQ_AUTHORISATION"
+    assert heliport.properties["applicability"][0]["schedule"][0]["day"][0] == "MON"
+
+
+def test_ed318_layout_variants(write_json, rules):
+    doc = load("ed318.json")
+    prison = doc["features"][0]
+    # uas_standards also reads the zone nested under UASZone and the layer in the properties
+    nested = {
+        "type": "Feature",
+        "properties": {
+            "UASZone": prison["properties"],
+            "verticalLayer": prison["geometry"].pop("layer"),
+        },
+        "geometry": prison["geometry"],
+    }
+    db = read_database([write_json("nested.json", {**doc, "features": [nested]})], rules)
+    (zone,) = db.features
+    assert zone.source == "E318P1" and zone.alt_max_m == 120
+
+
+@pytest.mark.parametrize(
+    "change, expected",
+    [
+        (lambda z: z["geometry"].update(type="LineString"), "LineString"),
+        (lambda z: z["geometry"].update(type="Point", coordinates=[8.6, 47.4]), "extent"),
+        (lambda z: z["geometry"]["layer"].update(uom="furlong"), "uom"),
+        (lambda z: z["geometry"]["layer"].update(upper="high"), "upper"),
+        (lambda z: z["properties"].pop("type"), "type"),
+    ],
+)
+def test_bad_ed318_is_one_line(write_json, rules, change, expected):
+    doc = load("ed318.json")
+    change(doc["features"][0])
+    with pytest.raises(InputError) as exc:
+        read_database([write_json("zones.json", doc)], rules)
+    msg = str(exc.value)
+    assert "\n" not in msg and "E318P1" in msg and expected in msg
+
+
+def test_a_file_that_adds_nothing_is_said_when_several_are_read(write_json, rules):
+    quiet = load("uaszonelist.json")
+    for zone in quiet["UASZoneList"]:
+        zone["restriction"] = "NO_RESTRICTION"
+    path = write_json("quiet.json", quiet)
+    db = read_database([DATA / "feet-circle.json", path], rules)
+    assert [f.source for f in db.features] == ["FT-C01"]
+    assert any("quiet.json" in reason for reason in db.skipped)

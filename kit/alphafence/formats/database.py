@@ -44,26 +44,35 @@ def read_file(path, rules, repaired, skipped):
     Returns
     -------
     list of Feature
+        When empty, ``skipped`` says so, naming the file (one of several databases that adds
+        nothing is not dropped in silence).
 
     Raises
     ------
     InputError
         An unknown suffix, or what the reader raised.
     """
-    name = str(path).lower()
+    name, left_out = str(path).lower(), sum(skipped.values())
     if name.endswith(OSM_SUFFIXES):
         need(*osm_wants([path]))
         from alphafence.formats.osm import read_osm  # pyosmium, only when OSM is read
 
-        return read_osm(path, rules, repaired, skipped)
-    if name.endswith((".geojson", ".json")):
+        features = read_osm(path, rules, repaired, skipped)
+    elif name.endswith((".geojson", ".json")):
         doc = read_json(path)
         if looks_like_ed269(doc):
-            return read_ed269_doc(path, doc, rules, repaired, skipped)
-        return read_geojson_doc(path, doc, rules, repaired, skipped)
-    raise InputError(
-        path, "unknown database format (expected .osm.pbf, .osm, .geojson or ED-269 .json)"
-    )
+            features = read_ed269_doc(path, doc, rules, repaired, skipped)
+        else:
+            features = read_geojson_doc(path, doc, rules, repaired, skipped)
+    else:
+        raise InputError(
+            path, "unknown database format (expected .osm.pbf, .osm, .geojson or ED-269 .json)"
+        )
+    if not features:
+        skipped[f"all of {path}: it holds no restricted features (rules: {rules.source})"] += (
+            sum(skipped.values()) - left_out
+        )
+    return features
 
 
 def read_database(paths, rules, bbox=None, *, bbox_name="the bounding box") -> Database:
