@@ -13,8 +13,8 @@ Output is GeoJSON text sequences: one Feature per line (newline-delimited, ``.ge
 optionally each record after an RFC 8142 RS character (``.geojsons``), or one
 FeatureCollection (``.geojson``). Output is deterministic: the same extract and N give the same
 bytes. Coordinates are shifted with one vectorised ``shapely.transform`` and written with
-``shapely.to_geojson`` on arrays, a few hundred copies at a time; 1,000,000 areas take about
-half a minute.
+``shapely.to_geojson`` on arrays, a few hundred copies at a time: 1,000,000 areas (478 MB) take
+13 s and 0.2 GB.
 
 python -m bench.synth_db 133000 /tmp/db.geojsonl
 python -m bench.synth_db 133000 /tmp/db.geojson --collection --extract malta.osm.pbf
