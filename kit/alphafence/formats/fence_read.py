@@ -1,0 +1,231 @@
+"""Fence files of any output format read back as ``fence_geojson.FenceRecord``: the kit's fence
+GeoJSON, GeoJSON text sequences (RS-separated or one Feature per line) and GeoParquet.
+
+A sequence is read one record at a time and a GeoParquet file one row group batch at a time,
+so neither is ever held whole as text; each record is checked as ``fence_geojson`` checks a
+feature of its FeatureCollection.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import shapely
+from shapely.errors import ShapelyError
+
+from alphafence.errors import InputError
+from alphafence.formats import fence_geojson, fence_parquet
+from alphafence.formats.features import check_coordinates
+from alphafence.formats.jsonfile import max_json_bytes
+
+SEQ_SUFFIXES = (".geojsonl", ".geojsons", ".geojsonseq")
+GEOJSON_SUFFIXES = (".geojson", ".json")
+PARQUET_SUFFIXES = (".parquet",)
+CHUNK = 1 << 20
+
+
+def read_fence_file(path) -> list:
+    """The fences of a fence file, whatever format ``alphafence build`` wrote it in.
+
+    The format is told by the suffix (``.geojson``/``.json``, ``.geojsonl``/``.geojsons``/
+    ``.geojsonseq``, ``.parquet``); any other suffix by the first bytes (RS: a sequence,
+    ``PAR1``: Parquet, else GeoJSON).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    list of FenceRecord
+        As ``fence_geojson.read_fences`` returns them.
+
+    Raises
+    ------
+    InputError
+        One line naming the file and the feature (or record, or row) that is malformed.
+    MissingDependency
+        A ``.parquet`` file without pyarrow installed.
+    """
+    kind = _kind(path)
+    if kind == "seq":
+        return read_sequence(path)
+    if kind == "parquet":
+        return read_geoparquet(path)
+    return fence_geojson.read_fences(path)
+
+
+def _kind(path):
+    suffix = str(path).lower().rsplit("/", 1)[-1]
+    suffix = "." + suffix.rsplit(".", 1)[-1] if "." in suffix else ""
+    if suffix in SEQ_SUFFIXES:
+        return "seq"
+    if suffix in PARQUET_SUFFIXES:
+        return "parquet"
+    if suffix in GEOJSON_SUFFIXES:
+        return "geojson"
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError:
+        return "geojson"  # its reader says what is wrong with the path
+    if head[:1] == b"\x1e":
+        return "seq"
+    return "parquet" if head == b"PAR1" else "geojson"
+
+
+def fence_record(path, props, geometry, label, index):
+    """One fence from its properties and shapely geometry, checked as ``fence_geojson``
+    checks a feature (kind, polygonal geometry, a circle's centre and radius).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, for messages.
+    props : dict
+    geometry : shapely geometry or None
+    label : str
+        The feature as messages name it (``"record 3 (hospital/way/1)"``).
+    index : int
+        Its place in the file: ``site_id`` is ``"fence/<index>"`` when it has none.
+
+    Returns
+    -------
+    FenceRecord
+    """
+    kind = _kind_of(path, props, label)
+    gtype = getattr(geometry, "geom_type", None)
+    if gtype not in ("Polygon", "MultiPolygon"):
+        raise InputError(path, f"a fence must be a Polygon or MultiPolygon, not {gtype}", label)
+    circle = None
+    if "radius_m" in props:
+        c, r = props.get("center"), props.get("radius_m")
+        if not (isinstance(c, list) and len(c) == 2 and isinstance(r, (int, float)) and r > 0):
+            raise InputError(
+                path, "circle fence needs center [lon, lat] and a positive radius_m", label
+            )
+        circle = (float(c[0]), float(c[1]), float(r))
+    return fence_geojson.FenceRecord(
+        site_id=str(props["site_id"] if props.get("site_id") is not None else f"fence/{index}"),
+        kind=kind,
+        geometry=geometry,
+        margin_m=float(props.get("margin_m") or 0.0),
+        name=props.get("name"),
+        category=props.get("category"),
+        alt_min_m=props.get("alt_min_m"),
+        alt_max_m=props.get("alt_max_m"),
+        circle=circle,
+        properties=props,
+    )
+
+
+def _kind_of(path, props, label):
+    kind = props.get("kind")
+    if kind not in fence_geojson.KINDS:
+        kinds = ", ".join(fence_geojson.KINDS)
+        raise InputError(path, f"kind must be one of {kinds}, not {kind!r}", label)
+    return kind
+
+
+def _checked(path, out, what):
+    if out:
+        geoms = np.array([f.geometry for f in out], dtype=object)
+        check_coordinates(path, geoms, lambda k: f"{what} {k} ({out[k].site_id})")
+    return out
+
+
+def read_sequence(path) -> list:
+    """The fences of a GeoJSON text sequence: RS-separated records (RFC 8142) or one
+    Feature per line, read a record at a time (FeatureCollection records are taken
+    feature by feature; empty records are skipped).
+
+    Raises
+    ------
+    InputError
+        One line naming the file and the record: not UTF-8, malformed JSON, not a Feature,
+        larger than ``ALPHAFENCE_MAX_JSON_MB``, or a malformed fence.
+    """
+    out = []
+    for n, record in enumerate(_records(path)):
+        try:
+            doc = json.loads(record.decode("utf-8"))
+        except UnicodeDecodeError as exc:
+            raise InputError(path, f"not UTF-8 text ({exc.reason})", f"record {n}") from None
+        except ValueError as exc:
+            raise InputError(path, f"malformed JSON ({exc})", f"record {n}") from None
+        kind = doc.get("type") if isinstance(doc, dict) else None
+        if kind == "FeatureCollection" and isinstance(doc.get("features"), list):
+            features = doc["features"]
+        elif kind == "Feature":
+            features = [doc]
+        else:
+            raise InputError(path, f"not a GeoJSON Feature ({kind!r})", f"record {n}")
+        for feat in features:
+            out.append(_feature(path, feat, len(out)))
+    return _checked(path, out, "record")
+
+
+def _feature(path, feat, i):
+    props = feat.get("properties") if isinstance(feat, dict) else None
+    if not isinstance(props, dict):
+        raise InputError(path, "feature without properties", f"record {i}")
+    label = f"record {i} ({props.get('site_id', '?')})"
+    _kind_of(path, props, label)  # before the geometry, as fence_geojson checks them
+    try:
+        geom = shapely.geometry.shape(feat.get("geometry"))
+    except (ShapelyError, ValueError, TypeError, AttributeError, KeyError, IndexError) as exc:
+        raise InputError(path, f"malformed geometry ({exc})", label) from None
+    return fence_record(path, props, geom, label, i)
+
+
+def _records(path):
+    """The records of a sequence as bytes, without separators; RS-separated when the file
+    starts with RS, else one per line."""
+    limit = max_json_bytes()
+    try:
+        fh = open(path, "rb")
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror})") from None
+    with fh:
+        sep, pending, size, n = None, [], 0, 0
+        while chunk := fh.read(CHUNK):
+            if sep is None:
+                sep = b"\x1e" if chunk[:1] == b"\x1e" else b"\n"
+            parts = chunk.split(sep)
+            for part in parts[:-1]:
+                pending.append(part)
+                record, pending, size = b"".join(pending), [], 0
+                if record.strip():
+                    yield record
+                    n += 1
+            pending.append(parts[-1])
+            size += len(parts[-1])
+            if size > limit:
+                raise InputError(
+                    path, "a record is larger than ALPHAFENCE_MAX_JSON_MB", f"record {n}"
+                )
+        record = b"".join(pending)
+        if record.strip():
+            yield record
+
+
+def read_geoparquet(path) -> list:
+    """The fences of a GeoParquet fence file (see ``fence_parquet``), a batch at a time.
+
+    Raises
+    ------
+    InputError
+        One line naming the file and the row that is malformed.
+    MissingDependency
+        pyarrow is not installed.
+    """
+    out = []
+    for rows, geoms in fence_parquet.read_rows(path):
+        for props, geom in zip(rows, geoms):
+            i = len(out)
+            label = f"row {i} ({props.get('site_id') or '?'})"
+            out.append(fence_record(path, props, geom, label, i))
+    return _checked(path, out, "row")
