@@ -76,7 +76,9 @@ TARGETS = {
 
 def seeds(target: str) -> list[bytes]:
     data = resources.files("alphafence") / "data"
-    if target in ("geojson", "fences", "ed269"):
+    if target == "ed269":  # both ED-269 wrappers and ED-318, as others write them
+        return [p.read_bytes() for p in sorted((Path(__file__).parent / "data/ed269").glob("*"))]
+    if target in ("geojson", "fences"):
         return [(data / "demo-scene.geojson").read_bytes()[:4096]]
     if target == "rules":
         return [(data / "rules.toml").read_bytes()]

@@ -133,3 +133,27 @@ def test_a_file_that_adds_nothing_is_said_when_several_are_read(write_json, rule
     db = read_database([DATA / "feet-circle.json", path], rules)
     assert [f.source for f in db.features] == ["FT-C01"]
     assert any("quiet.json" in reason for reason in db.skipped)
+
+
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("uomDimensions", []),  # was a TypeError (a list is unhashable)
+        ("uomDimensions", "furlong"),
+        ("horizontalProjection", {"type": "Circle", "center": [10**400, 47.0], "radius": 5}),
+        (
+            "horizontalProjection",  # was an OverflowError from shapely
+            {"type": "Polygon", "coordinates": [[[10**400, 47], [8, 47], [8, 48], [10**400, 47]]]},
+        ),
+        ("horizontalProjection", {"type": "Circle", "center": [8.5, 47.4], "radius": "ten"}),
+    ],
+)
+def test_odd_values_are_one_line(tmp_path, rules, key, value):
+    doc = load("feet-circle.json")
+    doc["features"][0]["geometry"][0][key] = value
+    path = tmp_path / "zones.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as exc:
+        read_database([path], rules)
+    msg = str(exc.value)
+    assert "\n" not in msg and "zones.json" in msg and "FT-C01" in msg

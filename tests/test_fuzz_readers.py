@@ -110,6 +110,10 @@ def test_geojson_reader(doc):
     only_input_errors(lambda p: read_database([p], RULES), write(".geojson", json.dumps(doc)))
 
 
+# limits and radii as files write them: numbers, numeric strings, and strings that are not
+limits = st.one_of(
+    scalars, st.sampled_from(["0", "120", " 50 ", "-5", "1e400", "nan", "inf", "ten", ""])
+)
 zone = st.fixed_dictionaries(
     {
         "identifier": st.one_of(st.text(max_size=6), scalars),
@@ -121,11 +125,11 @@ zone = st.fixed_dictionaries(
                 st.fixed_dictionaries(
                     {
                         "uomDimensions": st.one_of(st.sampled_from(["M", "FT"]), scalars),
-                        "lowerLimit": scalars,
-                        "upperLimit": scalars,
+                        "lowerLimit": limits,
+                        "upperLimit": limits,
                         "horizontalProjection": st.one_of(
                             st.fixed_dictionaries(
-                                {"type": st.just("Circle"), "center": coords, "radius": scalars}
+                                {"type": st.just("Circle"), "center": coords, "radius": limits}
                             ),
                             st.fixed_dictionaries(
                                 {
@@ -145,9 +149,110 @@ zone = st.fixed_dictionaries(
 )
 
 
+# ED-318: GeoJSON features whose geometries carry a vertical layer
+layer = st.one_of(
+    st.fixed_dictionaries(
+        {
+            "upper": limits,
+            "lower": limits,
+            "uom": st.one_of(st.sampled_from(["m", "ft", "FT"]), scalars),
+            "upperReference": st.one_of(st.sampled_from(["AGL", "AMSL", "WGS84"]), scalars),
+            "lowerReference": st.one_of(st.sampled_from(["AGL", "AMSL", "WGS84"]), scalars),
+        }
+    ),
+    json_values,
+)
+ed318_part = st.one_of(
+    st.fixed_dictionaries(
+        {
+            "type": st.just("Point"),
+            "coordinates": coords,
+            "extent": st.one_of(
+                st.fixed_dictionaries({"subType": st.just("Circle"), "radius": limits}),
+                json_values,
+            ),
+            "layer": layer,
+        }
+    ),
+    st.fixed_dictionaries(
+        {
+            "type": st.sampled_from(["Polygon", "MultiPolygon", "LineString", "Curve"]),
+            "coordinates": st.one_of(st.lists(rings, max_size=2), json_values),
+            "layer": layer,
+        }
+    ),
+    json_values,
+)
+ed318_feature = st.fixed_dictionaries(
+    {
+        "type": st.just("Feature"),
+        "properties": st.one_of(
+            st.fixed_dictionaries(
+                {
+                    "identifier": st.one_of(st.text(max_size=7), scalars),
+                    "type": st.one_of(
+                        st.sampled_from(["PROHIBITED", "REQ_AUTHORIZATION", "USPACE"]), scalars
+                    ),
+                    "name": json_values,
+                    "reasons": json_values,
+                    "zoneAuthority": json_values,
+                    "limitedApplicability": json_values,
+                }
+            ),
+            st.fixed_dictionaries({"UASZone": json_values, "verticalLayer": layer}),
+            json_values,
+        ),
+        "geometry": st.one_of(
+            ed318_part,
+            st.fixed_dictionaries(
+                {
+                    "type": st.just("GeometryCollection"),
+                    "geometries": st.one_of(st.lists(ed318_part, max_size=3), json_values),
+                }
+            ),
+        ),
+    }
+)
+ED269_SAMPLES = sorted((Path(__file__).parent / "data" / "ed269").glob("*.json"))
+
+
 @FUZZ
-@given(st.fixed_dictionaries({"features": st.lists(zone, min_size=1, max_size=3)}))
+@given(
+    st.one_of(
+        st.fixed_dictionaries({"features": st.lists(zone, min_size=1, max_size=3)}),
+        st.fixed_dictionaries(
+            {"formatVersion": st.just("1.0.0"), "UASZoneList": st.lists(zone, max_size=3)}
+        ),
+        st.lists(zone, min_size=1, max_size=3),
+        st.fixed_dictionaries(
+            {
+                "type": st.just("FeatureCollection"),
+                "features": st.lists(ed318_feature, min_size=1, max_size=3),
+            }
+        ),
+    )
+)
 def test_ed269_reader(doc):
+    only_input_errors(lambda p: read_database([p], RULES), write(".json", json.dumps(doc)))
+
+
+@pytest.mark.parametrize("sample", ED269_SAMPLES, ids=lambda p: p.name)
+@FUZZ
+@given(data=st.data())
+def test_ed269_reader_on_samples_with_one_value_changed(sample, data):
+    """The samples (ED-269 in both wrappers, ED-318) with one value replaced by anything."""
+    doc = json.loads(sample.read_text())
+    node, parent, key = doc, None, None
+    for _ in range(8):  # walk down towards a leaf, then replace what the walk stopped at
+        keys = list(node) if isinstance(node, dict) else list(range(len(node)))
+        if not keys:
+            break
+        parent, key = node, data.draw(st.sampled_from(keys))
+        node = node[key]
+        if not isinstance(node, (dict, list)) or data.draw(st.booleans()):
+            break
+    if parent is not None:
+        parent[key] = data.draw(json_values)
     only_input_errors(lambda p: read_database([p], RULES), write(".json", json.dumps(doc)))
 
 

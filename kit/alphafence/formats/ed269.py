@@ -125,14 +125,13 @@ def circle_polygon(lon, lat, radius_m):
 
 def _number(value):
     """A finite float from a number or a numeric string (``"0"``), else None."""
-    if isinstance(value, str):
-        try:
-            value = float(value.strip())
-        except ValueError:
-            return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
         return None
-    return float(value) if math.isfinite(value) else None
+    try:
+        value = float(value.strip() if isinstance(value, str) else value)
+    except (ValueError, OverflowError):  # "ten"; an integer beyond any float
+        return None
+    return value if math.isfinite(value) else None
 
 
 def _limit(path, label, geom, key, units):
@@ -146,7 +145,7 @@ def _limit(path, label, geom, key, units):
 
 
 def _unit(path, label, value, key):
-    unit = value.upper() if isinstance(value, str) else value
+    unit = value.upper() if isinstance(value, str) else None  # a list is no unit (nor a key)
     if unit not in _UNITS:
         raise InputError(path, f"{key} must be M or FT, not {value!r}", label)
     return _UNITS[unit]
@@ -161,7 +160,7 @@ def _circle(path, label, center, radius, units):
     if (
         not isinstance(center, list)
         or len(center) != 2
-        or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in center)
+        or not all(isinstance(c, (int, float)) and _number(c) is not None for c in center)
         or not valid_lonlat(*center)
     ):
         raise InputError(path, f"Circle center must be [lon, lat] in range, not {center!r}", label)
@@ -177,7 +176,15 @@ def _circle(path, label, center, radius, units):
 def _shape(path, label, gtype, coordinates):
     try:
         return shapely.geometry.shape({"type": gtype, "coordinates": coordinates})
-    except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
+    except (
+        ValueError,
+        TypeError,
+        IndexError,
+        KeyError,
+        AttributeError,
+        OverflowError,
+        ShapelyError,
+    ) as exc:
         raise InputError(path, f"malformed {gtype} ({exc})", label) from None
 
 
