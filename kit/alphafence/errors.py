@@ -93,6 +93,8 @@ OPTIONAL = {
     "osmium": ("osmium", "build", "python3-pyosmium", "4.0"),
     "scipy": ("scipy", "build", "python3-scipy", None),
     "matplotlib": ("matplotlib", "build", "python3-matplotlib", None),
+    "ijson": ("ijson", "build", "python3-ijson", None),
+    "distributed": ("distributed", "dask", "python3-distributed", None),
     "pymavlink": ("pymavlink", "companion", None, None),
     "mavsdk": ("mavsdk", "vehicle", None, None),
     "pyarrow": ("pyarrow", "parquet", None, "17.0"),

@@ -9,6 +9,7 @@ from alphafence.errors import InputError, need
 from alphafence.formats.ed269 import looks_like_ed269, read_ed269_doc
 from alphafence.formats.features import Database, select_bbox
 from alphafence.formats.geojson import read_geojson_doc
+from alphafence.formats.geojson_stream import SEQ_SUFFIXES, iter_geojson, should_stream
 from alphafence.formats.jsonfile import read_json
 
 OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
@@ -58,6 +59,8 @@ def read_file(path, rules, repaired, skipped):
         from alphafence.formats.osm import read_osm  # pyosmium, only when OSM is read
 
         features = read_osm(path, rules, repaired, skipped)
+    elif should_stream(path):
+        features = [f for batch in iter_geojson(path, rules, repaired, skipped) for f in batch]
     elif name.endswith((".geojson", ".json")):
         doc = read_json(path)
         if looks_like_ed269(doc):
@@ -66,7 +69,8 @@ def read_file(path, rules, repaired, skipped):
             features = read_geojson_doc(path, doc, rules, repaired, skipped)
     else:
         raise InputError(
-            path, "unknown database format (expected .osm.pbf, .osm, .geojson or ED-269 .json)"
+            path,
+            "unknown database format (expected .osm.pbf, .osm, .geojson, .geojsonl or ED-269 .json)",
         )
     if not features:
         skipped[f"all of {path}: it holds no restricted features (rules: {rules.source})"] += (
@@ -101,3 +105,75 @@ def read_database(paths, rules, bbox=None, *, bbox_name="the bounding box") -> D
         why = f" inside {bbox_name} {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
         raise InputError(where, f"no restricted features{why} (rules: {rules.source})")
     return Database(selected, [str(p) for p in paths], repaired, skipped, bbox)
+
+
+class DatabaseStream:
+    """A geofence database read in batches of restricted features, for builds too large to
+    hold every feature at once: large GeoJSON is streamed; OSM, ED-269 and small GeoJSON files
+    come as one batch each.
+
+    Attributes
+    ----------
+    files : list of str
+    repaired : list of str
+    skipped : collections.Counter
+    bbox : tuple, optional
+    count : int
+        Restricted features yielded so far.
+
+    Examples
+    --------
+    >>> from importlib import resources
+    >>> from alphafence.formats.rules import load_rules
+    >>> scene = resources.files("alphafence").joinpath("data/demo-scene.geojson")
+    >>> stream = DatabaseStream([str(scene)], load_rules())
+    >>> [len(batch) for batch in stream.batches()], stream.count
+    ([16], 16)
+    """
+
+    def __init__(self, paths, rules, bbox=None, *, bbox_name="the bounding box"):
+        if isinstance(paths, (str, Path)):
+            paths = [paths]
+        self.paths = list(paths)
+        self.files = [str(p) for p in self.paths]
+        self.rules = rules
+        self.bbox = bbox
+        self.bbox_name = bbox_name
+        self.repaired, self.skipped, self.count = [], Counter(), 0
+
+    def batches(self):
+        """Lists of restricted features (inside the bbox), file by file.
+
+        Raises
+        ------
+        InputError
+            As :func:`read_database`, including when no file holds a restricted feature.
+        """
+        for path in self.paths:
+            if should_stream(path) and str(path).lower().endswith(
+                (".json", ".geojson", *SEQ_SUFFIXES)
+            ):
+                parts = iter_geojson(path, self.rules, self.repaired, self.skipped)
+            else:
+                parts = [read_file(path, self.rules, self.repaired, self.skipped)]
+            before = self.count
+            for part in parts:
+                part = select_bbox(part, self.bbox)
+                if part:
+                    self.count += len(part)
+                    yield part
+            if self.count == before and parts is not None and not isinstance(parts, list):
+                note = (
+                    f"all of {path}: it holds no restricted features (rules: {self.rules.source})"
+                )
+                self.skipped[note] += 0  # said, as read_file says it for files read whole
+        if not self.count:
+            where = ", ".join(self.files)
+            why = ""
+            if self.bbox:
+                why = f" inside {self.bbox_name} {','.join(f'{v:g}' for v in self.bbox)}"
+            raise InputError(where, f"no restricted features{why} (rules: {self.rules.source})")
+
+    def database(self, features=()) -> Database:
+        """What was read, as a :class:`Database` (holding ``features``)."""
+        return Database(list(features), self.files, self.repaired, self.skipped, self.bbox)

@@ -121,46 +121,33 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
     raw = doc.get("features")
     if not isinstance(raw, list):
         raise InputError(path, "FeatureCollection has no 'features' list")
+    return features_of(path, enumerate(raw), rules, repaired, skipped)
+
+
+def features_of(path, numbered, rules, repaired, skipped):
+    """The restricted features among GeoJSON Feature objects.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, for messages.
+    numbered : iterable of (int, object)
+        Each parsed Feature with its index in the file.
+    rules, repaired, skipped
+        As for :func:`read_geojson_doc`.
+
+    Returns
+    -------
+    list of Feature
+    """
     geoms, tags_list, sources, rule_list = [], [], [], []
-    for i, feat in enumerate(raw):
-        label = f"feature {i}"
-        if not isinstance(feat, dict) or feat.get("type") != "Feature":
-            raise InputError(path, "not a GeoJSON Feature", label)
-        props = feat.get("properties") or {}
-        if not isinstance(props, dict):
-            raise InputError(path, "properties must be an object", label)
-        gj = feat.get("geometry")
-        if gj is None:
-            skipped["feature without geometry"] += 1
-            continue
-        if not isinstance(gj, dict) or not isinstance(gj.get("type"), str):
-            raise InputError(path, "geometry must be an object with a type", label)
-        try:
-            geom = shapely.geometry.shape(gj)
-        except GeometryTypeError:
-            raise InputError(path, f"unknown geometry type {gj.get('type')!r}", label) from None
-        except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
-            raise InputError(path, f"malformed {gj.get('type')} geometry ({exc})", label) from None
-        if geom.geom_type == "GeometryCollection":
-            parts = shapely.get_parts(geom)
-            parts = parts[[geomtype_of(g) is not None for g in parts]] if len(parts) else parts
-            if not len(parts):
-                skipped["empty geometry collection"] += 1
-                continue
-            dims = shapely.get_dimensions(parts)
-            geom = shapely.union_all(parts[dims == dims.max()])
-        gtype = geomtype_of(geom)
-        if gtype is None:
-            raise InputError(path, f"unsupported geometry type {geom.geom_type!r}", label)
-        tags = tags_of(props)
-        rule = rules.match(tags.get, gtype)
-        if rule is None:
-            continue
-        source = source_of(feat, props, gtype, i)
-        geoms.append(geom)
-        tags_list.append(tags)
-        sources.append(source)
-        rule_list.append(rule)
+    for i, feat in numbered:
+        found = _restricted(path, i, feat, rules, skipped)
+        if found is not None:
+            geoms.append(found[0])
+            tags_list.append(found[1])
+            sources.append(found[2])
+            rule_list.append(found[3])
     if not geoms:
         return []
     geoms = np.array(geoms, dtype=object)
@@ -171,3 +158,42 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
         for g, t, s, r in zip(geoms, tags_list, sources, rule_list)
         if not g.is_empty
     ]
+
+
+def _restricted(path, i, feat, rules, skipped):
+    """(geometry, tags, source, rule) of one restricted Feature, or None when it is not one."""
+    label = f"feature {i}"
+    if not isinstance(feat, dict) or feat.get("type") != "Feature":
+        raise InputError(path, "not a GeoJSON Feature", label)
+    props = feat.get("properties") or {}
+    if not isinstance(props, dict):
+        raise InputError(path, "properties must be an object", label)
+    gj = feat.get("geometry")
+    if gj is None:
+        skipped["feature without geometry"] += 1
+        return None
+    if not isinstance(gj, dict) or not isinstance(gj.get("type"), str):
+        raise InputError(path, "geometry must be an object with a type", label)
+    try:
+        geom = shapely.geometry.shape(gj)
+    except GeometryTypeError:
+        raise InputError(path, f"unknown geometry type {gj.get('type')!r}", label) from None
+    except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
+        raise InputError(path, f"malformed {gj.get('type')} geometry ({exc})", label) from None
+    if geom.geom_type == "GeometryCollection":
+        parts = shapely.get_parts(geom)
+        parts = parts[[geomtype_of(g) is not None for g in parts]] if len(parts) else parts
+        if not len(parts):
+            skipped["empty geometry collection"] += 1
+            return None
+        dims = shapely.get_dimensions(parts)
+        geom = shapely.union_all(parts[dims == dims.max()])
+    gtype = geomtype_of(geom)
+    if gtype is None:
+        raise InputError(path, f"unsupported geometry type {geom.geom_type!r}", label)
+    tags = tags_of(props)
+    rule = rules.match(tags.get, gtype)
+    if rule is None:
+        return None
+    source = source_of(feat, props, gtype, i)
+    return geom, tags, source, rule

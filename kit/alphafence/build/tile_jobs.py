@@ -1,0 +1,219 @@
+"""Tile jobs run here, in worker processes or on a Dask cluster, with results in order.
+
+A job carries everything it needs (its features' spool records, the rules, the options), so
+a worker on another machine needs no shared disk. It returns its fences already encoded for
+each output, and a few numbers per fence for the summary, so the main process only writes.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+from alphafence.build.fences import site_fences
+from alphafence.build.sites import region_sites
+from alphafence.build.spool import Spool
+
+
+@dataclass
+class JobInput:
+    """What a worker needs for one tile job.
+
+    Attributes
+    ----------
+    number : int
+    records : list of bytes
+        Spool records, region after region.
+    spans : list of tuple
+        ``(start, end)`` of each region in ``records``.
+    rules : Rules
+        For the widths of points and lines.
+    rule_table, origins : list
+        The spool's tables the records refer to.
+    options : BuildOptions
+    encoders : tuple
+        ``encode(features) -> payload`` per output (run here, written by the main process).
+    keep : bool
+        Also return the Fence and Site objects (for outputs that need them all at once).
+    """
+
+    number: int
+    records: list
+    spans: list
+    rules: object
+    rule_table: list
+    origins: list
+    options: object
+    encoders: tuple = ()
+    keep: bool = False
+
+
+@dataclass
+class JobOutput:
+    """What a tile job made.
+
+    Attributes
+    ----------
+    number : int
+    features : int
+        Restricted features fenced.
+    encoded : list
+        One payload per encoder.
+    rows : list of tuple
+        ``(category, kind, vertices, area_m2, repaired, site_id, circle, items)`` per fence.
+    sites : int
+    site_kinds : list of tuple
+        ``(category, kind)`` per site.
+    fences, site_objects : list, optional
+        When the job was asked to keep them.
+    """
+
+    number: int
+    features: int
+    encoded: list
+    rows: list
+    sites: int
+    site_kinds: list = field(default_factory=list)
+    fences: list | None = None
+    site_objects: list | None = None
+
+
+def fence_rows(fences):
+    """The numbers the build's summary needs per fence (see :attr:`JobOutput.rows`)."""
+    from alphafence.mavlink.items import fence_items
+
+    return [
+        (
+            f.category,
+            f.kind,
+            f.vertices,
+            f.area_m2,
+            f.repaired,
+            f.site_id,
+            f.circle is not None,
+            len(fence_items([f])),
+        )
+        for f in fences
+    ]
+
+
+def run_job(job: JobInput) -> JobOutput:
+    """Group one job's regions into sites and fence them (the untiled build's own steps).
+
+    Parameters
+    ----------
+    job : JobInput
+
+    Returns
+    -------
+    JobOutput
+    """
+    from alphafence.formats.fence_geojson import fences_geojson
+
+    features = Spool.decode(job.records, job.rule_table, job.origins)
+    sites = []
+    for start, end in job.spans:
+        sites.extend(region_sites(features[start:end], job.rules, job.options.join_m))
+    sites.sort(key=lambda s: (s.category, s.site_id))
+    fences = []
+    for site in sites:
+        fences.extend(site_fences(site, job.options))
+    encoded = []
+    if job.encoders:
+        docs = fences_geojson(fences)["features"]
+        encoded = [encode(docs) for encode in job.encoders]
+    return JobOutput(
+        job.number,
+        len(features),
+        encoded,
+        fence_rows(fences),
+        len(sites),
+        [(s.category, s.kind) for s in sites],
+        fences if job.keep else None,
+        sites if job.keep else None,
+    )
+
+
+def _in_order(submit, results_of, jobs, window):
+    """Submit jobs at most ``window`` ahead and yield their results in job order."""
+    pending = deque()
+    it = iter(jobs)
+    for job in it:
+        pending.append(submit(job))
+        if len(pending) >= window:
+            break
+    while pending:
+        yield results_of(pending.popleft())
+        for job in it:
+            pending.append(submit(job))
+            break
+
+
+def run_local(jobs):
+    """Jobs one after the other in this process."""
+    for job in jobs:
+        yield run_job(job)
+
+
+def run_processes(jobs, workers: int):
+    """Jobs in ``workers`` worker processes (forkserver), results in job order, at most two
+    jobs per worker in flight (so memory holds a few tiles, not the country).
+
+    Parameters
+    ----------
+    jobs : iterable of JobInput
+    workers : int
+
+    Yields
+    ------
+    JobOutput
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        yield from _in_order(
+            lambda job: pool.submit(run_job, job), lambda fut: fut.result(), jobs, 2 * workers
+        )
+
+
+def run_dask(jobs, address: str, connect_timeout: float = 30.0):
+    """Jobs on a ``dask.distributed`` cluster, results in job order.
+
+    Parameters
+    ----------
+    jobs : iterable of JobInput
+    address : str
+        The scheduler's address, e.g. ``tcp://10.0.0.5:8786``.
+    connect_timeout : float
+        Seconds to wait for the scheduler.
+
+    Yields
+    ------
+    JobOutput
+
+    Raises
+    ------
+    alphafence.errors.InputError
+        No scheduler answers at ``address``, or it has no workers.
+    """
+    from alphafence.errors import InputError, need
+
+    need(("distributed", f"--dask {address}"))
+    from distributed import Client
+
+    try:
+        client = Client(address, timeout=connect_timeout, set_as_default=False)
+    except OSError as exc:
+        raise InputError("--dask", f"no Dask scheduler at {address} ({exc})") from None
+    with client:
+        workers = len(client.scheduler_info().get("workers", {}))
+        if not workers:
+            raise InputError("--dask", f"the Dask scheduler at {address} has no workers")
+        yield from _in_order(
+            lambda job: client.submit(run_job, job, pure=False),
+            lambda fut: fut.result(),
+            jobs,
+            2 * workers,
+        )

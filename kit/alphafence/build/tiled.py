@@ -1,0 +1,177 @@
+"""The build at country scale: stream the database, spool its restricted features, plan tile
+jobs, fence them on every core (or a Dask cluster) and hand each job's fences to the writers
+as it completes, in a fixed order.
+
+Memory holds the features' extents (some 60 bytes each), a few tile jobs in flight and the
+writers' buffers; never the country's fences. The fences are exactly the untiled build's
+(:func:`alphafence.build.pipeline.build_fences`): the same sites, the same geometry.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from alphafence.build.sites import feature_widths, site_class
+from alphafence.build.spool import Spool
+from alphafence.build.tile_jobs import JobInput, run_dask, run_local, run_processes
+from alphafence.build.tiles import TARGET_FEATURES, TILE_DEG, plan_jobs
+
+
+def default_jobs() -> int:
+    """All the cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+@dataclass
+class TiledResult:
+    """What :func:`build_tiled` made.
+
+    Attributes
+    ----------
+    features : int
+        Restricted features read.
+    sites : int
+    site_kinds : collections.Counter
+        ``(category, kind)`` -> sites.
+    rows : list of tuple
+        Per fence, as :func:`alphafence.build.tile_jobs.fence_rows` gives them.
+    jobs : int
+        Tile jobs run.
+    fences, site_objects : list, optional
+        Every Fence and Site, when asked to keep them.
+    seconds : dict
+        ``"read"`` (and spool, plan) and ``"fence"``.
+    """
+
+    features: int = 0
+    sites: int = 0
+    site_kinds: Counter = field(default_factory=Counter)
+    rows: list = field(default_factory=list)
+    jobs: int = 0
+    fences: list | None = None
+    site_objects: list | None = None
+    seconds: dict = field(default_factory=dict)
+
+
+def build_tiled(
+    stream,
+    rules,
+    options,
+    *,
+    writers=(),
+    jobs=None,
+    dask=None,
+    keep=False,
+    progress=None,
+    tile_deg=TILE_DEG,
+    target=TARGET_FEATURES,
+    spool_dir=None,
+) -> TiledResult:
+    """Build the fences of a database of any size.
+
+    Parameters
+    ----------
+    stream : DatabaseStream
+        The database, read batch by batch.
+    rules : Rules
+    options : BuildOptions
+    writers : sequence
+        Output writers: ``encode`` runs where the job runs, ``write`` here, job by job.
+    jobs : int, optional
+        Worker processes (default: every core; 1 = this process).
+    dask : str, optional
+        A Dask scheduler's address: run the jobs there instead.
+    keep : bool
+        Keep every Fence and Site in the result (for a figure or a vehicle's files).
+    progress : callable, optional
+        ``progress(phase, done, total)``: ``"reading"`` (features, total None) and
+        ``"fencing"`` (features fenced of all).
+    tile_deg : float
+        Tile edge, degrees.
+    target : int
+        Features per job to aim for.
+    spool_dir : str, optional
+        Where the spool's temporary file goes.
+
+    Returns
+    -------
+    TiledResult
+
+    Examples
+    --------
+    >>> from importlib import resources
+    >>> from alphafence.build.pipeline import BuildOptions
+    >>> from alphafence.formats.database import DatabaseStream
+    >>> from alphafence.formats.rules import load_rules
+    >>> rules = load_rules()
+    >>> scene = str(resources.files("alphafence").joinpath("data/demo-scene.geojson"))
+    >>> result = build_tiled(DatabaseStream(scene, rules), rules, BuildOptions(), jobs=1)
+    >>> result.features, result.sites, len(result.rows)
+    (16, 11, 19)
+    """
+    jobs = default_jobs() if jobs is None else max(1, int(jobs))
+    result = TiledResult(site_kinds=Counter(), fences=[] if keep else None)
+    result.site_objects = [] if keep else None
+    t0 = time.perf_counter()
+    with Spool(spool_dir) as spool:
+        for batch in stream.batches():
+            widths = feature_widths(batch, rules)
+            spool.add(batch, widths, [spool.class_of(site_class(f)) for f in batch])
+            if progress is not None:
+                progress("reading", stream.count, None)
+        result.features = len(spool)
+        plan = plan_jobs(
+            spool.bounds, spool.widths, spool.classes, options.join_m, tile_deg, target
+        )
+        result.jobs = len(plan)
+        t1 = time.perf_counter()
+        encoders = tuple(type(w).encode for w in writers)
+
+        def inputs():
+            for job in plan:
+                spans, start = [], 0
+                for region in job.regions:
+                    spans.append((start, start + len(region)))
+                    start += len(region)
+                records = spool.records(np.concatenate(job.regions))
+                yield JobInput(
+                    job.number,
+                    records,
+                    spans,
+                    rules,
+                    spool.rules,
+                    spool.origins,
+                    options,
+                    encoders,
+                    keep,
+                )
+
+        if dask:
+            outputs = run_dask(inputs(), dask)
+        elif jobs > 1 and len(plan) > 1:
+            outputs = run_processes(inputs(), min(jobs, len(plan)))
+        else:
+            outputs = run_local(inputs())
+        done = 0
+        for out in outputs:
+            for writer, payload in zip(writers, out.encoded):
+                writer.write(payload)
+            result.sites += out.sites
+            result.site_kinds.update(out.site_kinds)
+            result.rows.extend(out.rows)
+            if keep:
+                result.fences.extend(out.fences)
+                result.site_objects.extend(out.site_objects)
+            done += out.features
+            if progress is not None:
+                progress("fencing", done, result.features)
+    result.seconds = {"read": t1 - t0, "fence": time.perf_counter() - t1}
+    return result
