@@ -30,6 +30,18 @@ def default_jobs() -> int:
         return os.cpu_count() or 1
 
 
+def job_size(features: int, workers: int) -> int:
+    """Features per tile job: about four jobs per worker (so none waits long on the last),
+    at least 200 (a job's fixed costs) and at most 2,000 (memory in flight).
+
+    Examples
+    --------
+    >>> job_size(432, 2), job_size(133_000, 2), job_size(50, 8)
+    (200, 2000, 200)
+    """
+    return int(min(TARGET_FEATURES, max(200, -(-features // (4 * max(1, workers))))))
+
+
 @dataclass
 class TiledResult:
     """What :func:`build_tiled` made.
@@ -72,7 +84,7 @@ def build_tiled(
     keep=False,
     progress=None,
     tile_deg=TILE_DEG,
-    target=TARGET_FEATURES,
+    target=None,
     spool_dir=None,
 ) -> TiledResult:
     """Build the fences of a database of any size.
@@ -96,8 +108,9 @@ def build_tiled(
         ``"fencing"`` (features fenced of all).
     tile_deg : float
         Tile edge, degrees.
-    target : int
-        Features per job to aim for.
+    target : int, optional
+        Features per job to aim for (default: about four jobs per worker, 200 to 2,000
+        features each).
     spool_dir : str, optional
         Where the spool's temporary file goes.
 
@@ -128,6 +141,8 @@ def build_tiled(
             if progress is not None:
                 progress("reading", stream.count, None)
         result.features = len(spool)
+        if target is None:
+            target = job_size(result.features, jobs if not dask else 4)
         plan = plan_jobs(
             spool.bounds, spool.widths, spool.classes, options.join_m, tile_deg, target
         )

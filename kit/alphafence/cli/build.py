@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from collections import Counter, defaultdict
+from collections import defaultdict
 
 from rich.table import Table
 
 from alphafence.build import METHODS
-from alphafence.cli.common import callback, err_console, out_console, progress
+from alphafence.cli.common import err_console, out_console, progress
 from alphafence.cli.options import (
     add_database_options,
+    at_least,
     build_options,
     build_wants,
     non_negative,
@@ -52,46 +53,97 @@ def register(sub):
         metavar="M",
         help="warning layer this far beyond each keep-out fence (default 30; 0 = none)",
     )
+    p.add_argument(
+        "--jobs",
+        type=at_least("--jobs", 1),
+        metavar="N",
+        help="worker processes fencing tiles (default: every core; 1 = this process)",
+    )
+    p.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="fence the tiles on a dask.distributed cluster (e.g. tcp://10.0.0.5:8786); "
+        "needs alphafence[dask] here and on the workers",
+    )
+    p.add_argument(
+        "--tile-size",
+        type=positive("--tile-size", "degrees"),
+        default=0.25,
+        metavar="DEG",
+        help="tile edge in degrees (default 0.25); sites never split at tile edges",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    """Read the databases, build the fences, write them; exit status 0."""
+    """Read the databases as a stream, fence them tile by tile, write the outputs as tiles
+    complete (all or nothing); exit status 0."""
     from alphafence.build.outputs import build_meta, render
-    from alphafence.build.pipeline import build_fences
+    from alphafence.build.tiled import build_tiled
     from alphafence.formats.atomic import write_all
-    from alphafence.formats.database import read_database
+    from alphafence.formats.database import DatabaseStream
+    from alphafence.formats.fence_stream import open_writers, writer_for
     from alphafence.formats.rules import load_rules
 
-    need(*build_wants(args.databases, args.figure))
+    wants = build_wants(args.databases, args.figure)
+    if args.dask:
+        wants.append(("distributed", f"--dask {args.dask}"))
+    if writer_for(args.output).suffixes == (".parquet",):
+        wants.append(("pyarrow", f"writing {args.output}"))
+    need(*wants)
     rules = load_rules(args.rules)
     opts = build_options(args)
-    with progress(not args.quiet) as prog:
-        if prog is not None:
-            t = prog.add_task("reading " + ", ".join(args.databases), total=None)
-        db = read_database(args.databases, rules, args.bbox, bbox_name="--bbox")
-        if prog is not None:
-            prog.remove_task(t)
-        result = build_fences(db.features, rules, opts, progress=callback(prog, "fencing sites"))
-    meta = build_meta(db, rules, opts)
-    outputs = render(result.fences, meta, args.output, args.plan, args.waypoints)
-    write_all(outputs)
-    written = list(outputs)
+    stream = DatabaseStream(args.databases, rules, args.bbox, bbox_name="--bbox")
+    meta = build_meta(stream.database(), rules, opts)
+    keep = bool(args.plan or args.waypoints or args.figure)
+    with progress(not args.quiet) as prog, open_writers([args.output], meta) as writers:
+        result = build_tiled(
+            stream,
+            rules,
+            opts,
+            writers=writers,
+            jobs=args.jobs,
+            dask=args.dask,
+            keep=keep,
+            progress=phases(prog, ", ".join(args.databases)),
+            tile_deg=args.tile_size,
+        )
+        extra = render(result.fences, meta, None, args.plan, args.waypoints) if keep else {}
+    write_all(extra)
+    written = [args.output, *extra]
     if args.figure:
         from alphafence.plots.fences import fence_map
 
         fence_map(
             result.fences,
-            result.sites,
+            result.site_objects,
             args.figure,
             title=f"AlphaFence: {opts.method} fences",
             note=meta.get("attribution"),
         )
         written.append(args.figure)
     if not args.quiet:
-        summary(db, result, opts, written)
+        summary(stream.database(), result, opts, written)
     return 0
+
+
+def phases(prog, what):
+    """A ``progress(phase, done, total)`` callback for :func:`build_tiled`: features read,
+    then features fenced of all, with counts and rates."""
+    if prog is None:
+        return None
+    tasks = {}
+
+    def update(phase, done, total):
+        if phase not in tasks:
+            for task in tasks.values():
+                prog.stop_task(task)
+            label = f"reading {what}" if phase == "reading" else "fencing tiles"
+            tasks[phase] = prog.add_task(label, total=total)
+        prog.update(tasks[phase], completed=done, total=total)
+
+    return update
 
 
 def summary(db, result, opts, written):
@@ -99,30 +151,30 @@ def summary(db, result, opts, written):
     and what does not fit a vehicle."""
     import numpy as np
 
-    from alphafence.mavlink.items import MAX_POLYGON_VERTICES, fence_items
+    from alphafence.mavlink.items import MAX_POLYGON_VERTICES
     from alphafence.mavlink.storage import PROFILES
 
     copter_items = PROFILES["copter"].items
-    fences = result.fences
+    rows = result.rows
+    seconds = sum(result.seconds.values())
     table = Table(
-        title=f"{len(result.sites)} sites from {len(db.features)} restricted features "
-        f"({opts.method} fences, {sum(result.seconds.values()):.2f} s)"
+        title=f"{result.sites} sites from {result.features} restricted features "
+        f"({opts.method} fences, {result.jobs} tile job(s), {seconds:.2f} s)"
     )
     for col in ("category", "kind", "sites", "fences", "vertices (median / max)", "area km²"):
         table.add_column(col, justify="right" if col not in ("category", "kind") else "left")
     groups = defaultdict(list)
-    for f in fences:
-        groups[(f.category, f.kind)].append(f)
-    site_count = Counter((s.category, s.kind) for s in result.sites)
-    for (cat, kind), fs in sorted(groups.items()):
-        v = [f.vertices for f in fs]
+    for row in rows:
+        groups[(row[0], row[1])].append(row)
+    for (cat, kind), rs in sorted(groups.items()):
+        v = [r[2] for r in rs]
         table.add_row(
             cat,
             kind,
-            str(site_count.get((cat, kind), "")),
-            str(len(fs)),
+            str(result.site_kinds.get((cat, kind), "")),
+            str(len(rs)),
             f"{np.median(v):.0f} / {max(v)}",
-            f"{sum(f.area_m2 for f in fs) / 1e6:.3f}",
+            f"{sum(r[3] for r in rs) / 1e6:.3f}",
         )
     out_console.print(table)
     notes = []
@@ -131,22 +183,18 @@ def summary(db, result, opts, written):
         notes.append(f"repaired {len(db.repaired)} invalid (self-intersecting) polygon(s): {shown}")
     for reason, n in db.skipped.items():
         notes.append(f"skipped {n} feature(s): {reason}")
-    fixed = [f.site_id for f in fences if f.repaired]
+    fixed = [r[5] for r in rows if r[4]]
     if fixed:
         notes.append(
             f"{len(fixed)} fence(s) re-united with their site after a containment check: {', '.join(fixed[:5])}"
         )
-    items = fence_items(fences)
-    big = [
-        f.site_id
-        for f in fences
-        if f.kind != "warning" and f.circle is None and f.vertices > MAX_POLYGON_VERTICES
-    ]
+    items = sum(r[7] for r in rows)
+    big = [r[5] for r in rows if r[1] != "warning" and not r[6] and r[2] > MAX_POLYGON_VERTICES]
     if big:
         notes.append(f"{len(big)} polygon(s) exceed ArduPilot's 255 vertices: {', '.join(big[:3])}")
-    if len(items) > copter_items:
+    if items > copter_items:
         notes.append(
-            f"{len(items)} fence items: more than a Copter holds ({copter_items}); "
+            f"{items} fence items: more than a Copter holds ({copter_items}); "
             "compile an onboard subset for the operating area before uploading"
         )
     for n in notes:

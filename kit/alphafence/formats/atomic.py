@@ -8,6 +8,33 @@ import tempfile
 from pathlib import Path
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)  # read it the only way POSIX offers: set and put back
+    os.umask(mask)
+    return mask
+
+
+def temp_beside(path):
+    """A temporary sibling of ``path`` for an all-or-nothing write: ``(fd, name)``, opened
+    for writing, with the permissions a new file at ``path`` would get (``0666 & ~umask``,
+    where ``mkstemp`` alone gives ``0600``).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     fd, tmp = temp_beside(os.path.join(d, "fences.geojson"))
+    ...     os.close(fd)
+    ...     mode = os.stat(tmp).st_mode & 0o777
+    >>> mode == 0o666 & ~_umask(), os.path.basename(tmp).startswith(".fences.geojson.")
+    (True, True)
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.fchmod(fd, 0o666 & ~_umask())
+    return fd, tmp
+
+
 def write_all(outputs: dict):
     """Write several text files all or nothing: either every file is written, or none is
     changed.
@@ -23,7 +50,7 @@ def write_all(outputs: dict):
         for path, text in outputs.items():
             path = Path(path)
             path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            fd, tmp = temp_beside(path)
             temps.append((tmp, path))
             with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
                 fh.write(text)
@@ -45,7 +72,7 @@ def write_bytes_atomic(path, data: bytes):
     it was or holds all of ``data``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = temp_beside(path)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)

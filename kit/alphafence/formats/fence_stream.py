@@ -25,12 +25,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 
 from alphafence import __version__
 from alphafence.errors import InputError
 from alphafence.formats import fence_parquet
+from alphafence.formats.atomic import temp_beside
 
 RS = b"\x1e"
 GENERATOR = f"alphafence {__version__}"  # as fence_geojson writes it
@@ -91,9 +91,7 @@ class FenceWriter(_AllOrNothing):
         self.records = 0
         self.state = "open"
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(
-            prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent
-        )
+        fd, tmp = temp_beside(self.path)  # a new file's permissions, not mkstemp's 0600
         self.tmp = Path(tmp)
         self._fh = os.fdopen(fd, "wb")
         try:
