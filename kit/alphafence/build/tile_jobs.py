@@ -178,7 +178,7 @@ def run_processes(jobs, workers: int):
         )
 
 
-def run_dask(jobs, address: str, connect_timeout: float = 30.0):
+def run_dask(jobs, address: str, connect_timeout: float = 10.0):
     """Jobs on a ``dask.distributed`` cluster, results in job order.
 
     Parameters

@@ -1,0 +1,161 @@
+"""`alphafence build` at scale, end to end: worker processes and a Dask cluster (a scheduler and
+two workers started here on loopback) write the very bytes one process writes; every streamed
+output format holds the same fences; a bad feature deep in a streamed database stops the build
+with one line and leaves nothing behind."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import shapely
+
+from alphafence.cli import main
+from alphafence.formats.fence_read import read_fence_file
+
+CLI = [sys.executable, "-m", "alphafence"]
+
+
+def _build(args, tmp_path):
+    return subprocess.run(
+        [*CLI, "build", *args, "-q"], capture_output=True, text=True, timeout=600, cwd=tmp_path
+    )
+
+
+@pytest.fixture(scope="module")
+def one_process(malta, tmp_path_factory):
+    out = tmp_path_factory.mktemp("one") / "fences.geojson"
+    assert main(["build", str(malta), "-o", str(out), "--jobs", "1", "-q"]) == 0
+    return out
+
+
+def test_worker_processes_write_what_one_process_writes(malta, one_process, tmp_path):
+    out = tmp_path / "fences.geojson"
+    res = _build([str(malta), "-o", str(out), "--jobs", "2"], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert out.read_bytes() == one_process.read_bytes()
+    assert len(json.loads(out.read_text())["features"]) == 510
+
+
+@pytest.mark.parametrize("suffix", [".geojsonl", ".geojsons", ".parquet"])
+def test_every_streamed_format_holds_the_same_fences(malta, one_process, tmp_path, suffix):
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow")
+    out = tmp_path / f"fences{suffix}"
+    assert main(["build", str(malta), "-o", str(out), "--jobs", "2", "-q"]) == 0
+    want = {(f.site_id, f.kind): f for f in read_fence_file(one_process)}
+    got = {(f.site_id, f.kind): f for f in read_fence_file(out)}
+    assert want.keys() == got.keys()
+    for key, fence in want.items():
+        # GeoJSON rounds to 1e-8 degrees; GeoParquet keeps every bit
+        assert shapely.equals_exact(fence.geometry, got[key].geometry, 2e-8), key
+
+
+def test_a_bad_feature_deep_in_a_stream_leaves_nothing_behind(tmp_path):
+    db = tmp_path / "zones.geojsonl"
+    good = {
+        "type": "Feature",
+        "properties": {"amenity": "hospital"},
+        "geometry": {"type": "Point", "coordinates": [14.5, 35.9]},
+    }
+    lines = [json.dumps(dict(good, id=i)) for i in range(50_000)]
+    lines[45_000] = json.dumps(
+        {
+            "type": "Feature",
+            "id": 45_000,
+            "properties": {"amenity": "hospital"},
+            "geometry": {"type": "Point", "coordinates": [14.5, 135.9]},
+        }
+    )
+    db.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out" / "fences.geojson"
+    out.parent.mkdir()
+    out.write_text("previous fences\n")
+    res = _build([str(db), "-o", str(out)], tmp_path)
+    assert res.returncode == 2
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1 and str(db) in err[0] and "feature/45000" in err[0], res.stderr
+    assert out.read_text() == "previous fences\n"
+    assert sorted(p.name for p in out.parent.iterdir()) == ["fences.geojson"]
+
+
+def test_no_dask_scheduler_is_one_line(tmp_path, malta):
+    pytest.importorskip("distributed")
+    out = tmp_path / "fences.geojson"
+    res = _build([str(malta), "-o", str(out), "--dask", "tcp://127.0.0.1:9"], tmp_path)
+    assert res.returncode == 2
+    assert len(res.stderr.strip().splitlines()) == 1 and "Dask" in res.stderr, res.stderr
+    assert not out.exists() and not list(tmp_path.glob(".fences*"))
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """A Dask scheduler and two single-threaded worker processes on loopback, as an operator
+    starts them on a cluster (`dask scheduler`, `dask worker`)."""
+    distributed = pytest.importorskip("distributed")
+    dask_cli = shutil.which("dask", path=str(Path(sys.executable).parent))
+    if dask_cli is None:
+        pytest.skip("the dask command is not installed beside this Python")
+    info = tmp_path / "scheduler.json"
+    procs = [
+        subprocess.Popen(
+            [
+                dask_cli,
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--dashboard-address",
+                ":0",
+                "--scheduler-file",
+                str(info),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
+    try:
+        for _ in range(2):
+            procs.append(
+                subprocess.Popen(
+                    [
+                        dask_cli,
+                        "worker",
+                        "--scheduler-file",
+                        str(info),
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--host",
+                        "127.0.0.1",
+                        "--no-dashboard",
+                    ],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    cwd=tmp_path,
+                )
+            )
+        with distributed.Client(scheduler_file=str(info), timeout=60) as client:
+            client.wait_for_workers(2, timeout=120)
+            yield client.scheduler.address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def test_a_dask_cluster_writes_what_one_process_writes(malta, one_process, dask_cluster, tmp_path):
+    out = tmp_path / "fences.geojson"
+    res = _build([str(malta), "-o", str(out), "--dask", dask_cluster], tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert out.read_bytes() == one_process.read_bytes()
