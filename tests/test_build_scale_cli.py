@@ -159,3 +159,32 @@ def test_a_dask_cluster_writes_what_one_process_writes(malta, one_process, dask_
     res = _build([str(malta), "-o", str(out), "--dask", dask_cluster], tmp_path)
     assert res.returncode == 0, res.stderr
     assert out.read_bytes() == one_process.read_bytes()
+
+
+def test_progress_shows_counts_and_rate(monkeypatch):
+    import io
+    import re
+
+    from rich.console import Console
+
+    import alphafence.cli.common as common
+    from alphafence.cli.build import phases
+
+    buf = io.StringIO()
+    monkeypatch.setattr(common, "err_console", Console(file=buf, force_terminal=True, width=120))
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    clock = iter(range(1000))  # one second per reading of the clock: rates without waiting
+    with common.progress(True) as prog:
+        prog.get_time = lambda: float(next(clock))
+        for task in prog.tasks:
+            task._get_time = prog.get_time
+        update = phases(prog, "zones.geojsonl")
+        for done in (0, 10_000, 40_000):
+            update("reading", done, None)
+        for done in (0, 10_000, 25_000):
+            update("fencing", done, 40_000)
+        prog.refresh()
+        shown = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", buf.getvalue())
+    assert "reading zones.geojsonl" in shown and "40000/?" in shown
+    assert "fencing tiles" in shown and "25000/40000" in shown
+    assert re.search(r"[\d,]+/s", shown)

@@ -13,6 +13,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    ProgressColumn,
     SpinnerColumn,
     TextColumn,
     TimeElapsedColumn,
@@ -23,6 +24,17 @@ from alphafence.errors import InputError, VehicleError
 # piped or captured output gets a table-friendly width instead of rich's default 80 columns
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
 out_console = Console(width=None if sys.stdout.isatty() else 120)
+
+
+class RateColumn(ProgressColumn):
+    """Items per second of a task (rich's own speed columns count bytes)."""
+
+    def render(self, task):
+        """The task's rate, e.g. ``12,345/s`` (empty until rich has measured one)."""
+        from rich.text import Text
+
+        speed = task.finished_speed or task.speed
+        return Text(f"{speed:,.0f}/s" if speed else "", style="progress.data.speed")
 
 
 @contextmanager
@@ -42,6 +54,7 @@ def progress(enabled=True):
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
+        RateColumn(),
         TimeElapsedColumn(),
         console=err_console,
         transient=True,
