@@ -99,19 +99,34 @@ def reads_lines(extract):
 
 # -- one measured process tree -----------------------------------------------------------
 def _stat_table():
-    """{pid: (ppid, rss bytes)} of every process, from /proc/<pid>/stat."""
-    page = os.sysconf("SC_PAGE_SIZE")
+    """{pid: (ppid, rss bytes, cpu seconds, start time)} of every process, from
+    /proc/<pid>/stat."""
+    page, tick = os.sysconf("SC_PAGE_SIZE"), os.sysconf("SC_CLK_TCK")
     out = {}
     for name in os.listdir("/proc"):
         if not name.isdigit():
             continue
         try:
             with open(f"/proc/{name}/stat", "rb") as fh:
-                fields = fh.read().rsplit(b")", 1)[1].split()
+                f = fh.read().rsplit(b")", 1)[1].split()
         except OSError:  # gone meanwhile
             continue
-        out[int(name)] = (int(fields[1]), int(fields[21]) * page)
+        out[int(name)] = (int(f[1]), int(f[21]) * page, (int(f[11]) + int(f[12])) / tick, f[19])
     return out
+
+
+def _tree(roots, table):
+    """The pids of ``roots`` and all their descendants in ``table``."""
+    children = {}
+    for pid, row in table.items():
+        children.setdefault(row[0], []).append(pid)
+    seen, todo = set(), [p for p in roots if p in table]
+    while todo:
+        pid = todo.pop()
+        if pid not in seen:
+            seen.add(pid)
+            todo.extend(children.get(pid, ()))
+    return seen
 
 
 def _pss(pid):
@@ -126,33 +141,26 @@ def _pss(pid):
     return None
 
 
-def tree_memory(roots):
+def tree_sample(roots):
     """The summed RSS and PSS in bytes of ``roots`` and all their descendants (a process
-    without a readable PSS counts its RSS).
+    without a readable PSS counts its RSS), and each one's CPU seconds so far (user + system)
+    by (pid, start time).
 
     Examples
     --------
-    >>> rss, pss = tree_memory([os.getpid()])
-    >>> 0 < pss <= rss
-    True
+    >>> rss, pss, cpu = tree_sample([os.getpid()])
+    >>> 0 < pss <= rss, len(cpu)
+    (True, 1)
     """
     table = _stat_table()
-    children = {}
-    for pid, (ppid, _) in table.items():
-        children.setdefault(ppid, []).append(pid)
-    seen, todo = set(), [p for p in roots if p in table]
-    while todo:
-        pid = todo.pop()
-        if pid not in seen:
-            seen.add(pid)
-            todo.extend(children.get(pid, ()))
+    seen = _tree(roots, table)
     rss = sum(table[p][1] for p in seen)
     pss = sum(x if (x := _pss(p)) is not None else table[p][1] for p in seen)
-    return rss, pss
+    return rss, pss, {(p, table[p][3]): table[p][2] for p in seen}
 
 
 class PeakSampler(threading.Thread):
-    """Samples :func:`tree_memory` of ``roots`` every 50 ms until stopped, keeping the peaks
+    """Samples :func:`tree_sample` of ``roots`` every 50 ms until stopped, keeping the peaks
     (``peak``: RSS, ``peak_pss``: PSS held for two samples); calls ``on_limit`` once when the RSS passes ``limit`` bytes
     or ``deadline`` passes."""
 
@@ -165,12 +173,14 @@ class PeakSampler(threading.Thread):
             on_limit,
         )
         self.peak, self.peak_pss, self.stopped_why = 0, 0, None
+        self.cpu = {}  # (pid, start time): user + system seconds last seen
         self._done = threading.Event()
 
     def run(self):
         last = 0
         while not self._done.is_set():
-            rss, pss = tree_memory(self.roots)
+            rss, pss, cpu = tree_sample(self.roots)
+            self.cpu.update(cpu)
             # a PSS sum read across a fork can count the parent whole and its child's share:
             # a peak must hold for two samples
             self.peak, self.peak_pss = max(self.peak, rss), max(self.peak_pss, min(last, pss))
@@ -198,7 +208,7 @@ def _pin():
 
 def measure(argv, limit_s, limit_bytes, extra_roots=()):
     """Run ``argv`` pinned to 2 cores in a session of its own; returns a dict: ``wall`` s,
-    ``cpu`` s (user + system of it and its waited-for descendants), ``peak`` bytes (with
+    ``cpu`` s (user + system of every process in the trees, as last sampled), ``peak`` bytes (with
     ``extra_roots``' trees), ``rc`` and ``why`` (None, or why it was stopped)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(
@@ -220,14 +230,14 @@ def measure(argv, limit_s, limit_bytes, extra_roots=()):
     )
     sampler.start()
     err = proc.stderr.read()  # until the build (and anything holding its stderr) ends
-    _, status, usage = os.wait4(proc.pid, 0)
+    _, status, _ = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
     sampler.stop()
     kill()  # any worker it left behind
     return {
         "wall": wall,
-        "cpu": usage.ru_utime + usage.ru_stime,
+        "cpu": sum(sampler.cpu.values()),
         "peak": sampler.peak,
         "pss": sampler.peak_pss,
         "rc": proc.returncode,
