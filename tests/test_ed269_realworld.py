@@ -3,13 +3,20 @@ feet, the UASZoneList wrapper, numbers given as strings, the successor format, a
 must never share one fence (time windows, restriction, altitude band, reference)."""
 
 import json
+from collections import Counter
+from datetime import datetime, timezone
 from pathlib import Path
 
 import pytest
 import shapely
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from alphafence.build.pipeline import build_fences
 from alphafence.errors import InputError
 from alphafence.formats.database import read_database
+from alphafence.formats.ed269 import read_ed269_doc
+from alphafence.formats.rules import load_rules
 from alphafence.geo.frame import LocalFrame
 
 DATA = Path(__file__).parent / "data" / "ed269"
@@ -157,3 +164,165 @@ def test_odd_values_are_one_line(tmp_path, rules, key, value):
         read_database([path], rules)
     msg = str(exc.value)
     assert "\n" not in msg and "zones.json" in msg and "FT-C01" in msg
+
+
+# -- 1 and 8: zones that differ in force, restriction, band or reference never share a fence
+
+
+def build(path, rules, tmp_path):
+    from alphafence.cli import main
+
+    out = tmp_path / "fences.geojson"
+    assert main(["build", str(path), "-o", str(out), "-q"]) == 0
+    return [f["properties"] for f in json.loads(out.read_text())["features"]]
+
+
+def test_a_permanent_preserve_stays_in_force_beside_a_weekend_concert(rules, tmp_path):
+    from alphafence.monitor.applicability import is_active
+
+    fences = [p for p in build(DATA / "preserve-concert.json", rules, tmp_path)]
+    keep_out = {tuple(p["sources"]): p for p in fences if p["kind"] == "keep_out"}
+    assert set(keep_out) == {("NAT-01",), ("EVT-07",)}
+    wednesday = datetime(2025, 7, 2, 12, 0, tzinfo=timezone.utc)
+    saturday_night = datetime(2025, 7, 5, 20, 0, tzinfo=timezone.utc)
+    preserve, concert = keep_out[("NAT-01",)], keep_out[("EVT-07",)]
+    assert is_active(preserve["zone"]["applicability"], wednesday)
+    assert not is_active(concert["zone"]["applicability"], wednesday)
+    assert is_active(concert["zone"]["applicability"], saturday_night)
+    assert preserve["zone"]["reason"] == ["NATURE"] and concert["zone"]["reason"] == ["POPULATION"]
+
+
+def test_nested_altitude_bands_stay_three_fences_with_their_bands(rules, tmp_path):
+    fences = build(DATA / "nested-bands.json", rules, tmp_path)
+    bands = sorted(
+        (p["alt_min_m"], p["alt_max_m"], p["sources"][0]) for p in fences if p["kind"] == "keep_out"
+    )
+    assert bands == [(0, 120, "BND-00"), (50, 120, "BND-50"), (100, 120, "BND-100")]
+    assert all(p["zone"]["lower_reference"] == "AGL" for p in fences)
+
+
+def test_a_height_and_an_altitude_limit_are_never_one_ceiling(rules, tmp_path):
+    fences = build(DATA / "agl-amsl.json", rules, tmp_path)
+    keep_out = {p["sources"][0]: p for p in fences if p["kind"] == "keep_out"}
+    assert set(keep_out) == {"REF-AG", "REF-AM"}
+    assert keep_out["REF-AG"]["alt_max_m"] == 120
+    assert keep_out["REF-AG"]["zone"]["upper_reference"] == "AGL"
+    assert keep_out["REF-AM"]["alt_max_m"] == 500
+    assert keep_out["REF-AM"]["zone"]["upper_reference"] == "AMSL"
+
+
+WEEKEND = [
+    {
+        "permanent": "NO",
+        "startDateTime": "2025-07-04T00:00:00Z",
+        "endDateTime": "2025-07-07T00:00:00Z",
+        "schedule": [{"day": ["SAT", "SUN"], "startTime": "14:00:00Z", "endTime": "23:00:00Z"}],
+    }
+]
+NOVEMBER = [
+    {
+        "permanent": "NO",
+        "startDateTime": "2026-11-01T00:00:00Z",
+        "endDateTime": "2026-12-01T00:00:00Z",
+    }
+]
+attributes = st.fixed_dictionaries(
+    {
+        "restriction": st.sampled_from(["PROHIBITED", "REQ_AUTHORISATION"]),
+        "applicability": st.sampled_from(["permanent", "weekend", "november"]),
+        "band": st.sampled_from([(0, 120), (50, 120), (0, 150)]),
+        "lower_reference": st.sampled_from(["AGL", "AMSL"]),
+        "upper_reference": st.sampled_from(["AGL", "AMSL"]),
+    }
+)
+zones = st.lists(
+    st.tuples(
+        attributes,
+        st.floats(-80, 80),  # centre offsets, metres: every pair of circles overlaps
+        st.floats(-80, 80),
+        st.floats(200, 400),  # radius, metres
+        st.sampled_from(["M", "FT"]),
+    ),
+    min_size=2,
+    max_size=5,
+)
+
+
+def zone_doc(drawn):
+    feats = []
+    for i, (attrs, dx, dy, radius, uom) in enumerate(drawn):
+        scale = 0.3048 if uom == "FT" else 1.0
+        lower, upper = attrs["band"]
+        feats.append(
+            {
+                "identifier": f"Z{i}",
+                "country": "CHE",
+                "name": f"zone {i}",
+                "type": "COMMON",
+                "restriction": attrs["restriction"],
+                "reason": ["OTHER"],
+                "zoneAuthority": [{"purpose": "INFORMATION"}],
+                "applicability": {
+                    "permanent": [{"permanent": "YES"}],
+                    "weekend": WEEKEND,
+                    "november": NOVEMBER,
+                }[attrs["applicability"]],
+                "geometry": [
+                    {
+                        "uomDimensions": uom,
+                        "lowerLimit": lower / scale,
+                        "lowerVerticalReference": attrs["lower_reference"],
+                        "upperLimit": upper / scale,
+                        "upperVerticalReference": attrs["upper_reference"],
+                        "horizontalProjection": {
+                            "type": "Circle",
+                            "center": [8.8 + dx / 75_000.0, 47.5 + dy / 111_200.0],
+                            "radius": radius / scale,
+                        },
+                    }
+                ],
+            }
+        )
+    return {"title": "random overlapping zones", "features": feats}
+
+
+def attributes_of(zone_properties):
+    return (
+        zone_properties["restriction"],
+        json.dumps(zone_properties["applicability"], sort_keys=True),
+        zone_properties["lower_reference"],
+        zone_properties["upper_reference"],
+    )
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+@given(zones)
+def test_zones_share_a_fence_only_when_equal_in_force_restriction_band_and_reference(drawn):
+    rules = load_rules()
+    doc = zone_doc(drawn)
+    features = read_ed269_doc("random.json", doc, rules, [], Counter())
+    expected = Counter(
+        (*attributes_of(f.properties), round(f.alt_min_m, 3), round(f.alt_max_m, 3))
+        for f in features
+    )
+    result = build_fences(features, rules)
+    keys_seen = []
+    for site in result.sites:
+        keys = {
+            (*attributes_of(f.properties), round(f.alt_min_m, 3), round(f.alt_max_m, 3))
+            for f in site.features
+        }
+        assert len(keys) == 1, keys  # never two kinds of zone in one site
+        (key,) = keys
+        keys_seen.append(key)
+        # the site's band is its zones' band, not a union of others
+        assert (round(site.alt_min_m, 3), round(site.alt_max_m, 3)) == key[-2:]
+    # every circle overlaps every other: equal zones merge, so one site per kind of zone
+    assert sorted(keys_seen) == sorted(expected)
+    for fence in result.fences:
+        site = next(s for s in result.sites if s.site_id == fence.site_id)
+        member = site.features[0].properties
+        assert fence.properties["applicability"] == member["applicability"]
+        assert fence.properties["restriction"] == member["restriction"]
+        assert fence.properties["upper_reference"] == member["upper_reference"]
+        assert (fence.alt_min_m, fence.alt_max_m) == (site.alt_min_m, site.alt_max_m)

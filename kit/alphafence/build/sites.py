@@ -144,7 +144,11 @@ def region_labels(bounds, widths, join_m):
 def site_class(feature):
     """The key features are grouped by: only features with equal keys may share a site.
 
-    Today category, kind and margin (the rule's).
+    Category, kind and margin (the rule's), the altitude band, and for ED-269/ED-318 zones
+    their restriction, when they are in force and their vertical references
+    (:func:`alphafence.formats.ed269.zone_class`): a site keeps one band, one time window and
+    one reference, so a permanent zone is never switched off with an overlapping temporary
+    one, nor a height limit read as an altitude.
 
     Examples
     --------
@@ -154,9 +158,19 @@ def site_class(feature):
     >>> tags = {"amenity": "hospital"}
     >>> rule = load_rules().match(tags.get, "area")
     >>> site_class(Feature(shapely.box(14.5, 35.9, 14.501, 35.901), tags, "way/1", "demo", rule))
-    ('hospital', 'keep_out', 30.0)
+    ('hospital', 'keep_out', 30.0, None, None, ())
     """
-    return (feature.category, feature.kind, feature.rule.margin_m)
+    from alphafence.formats.ed269 import zone_class  # loaded with the database readers
+
+    lo, hi = feature.alt_min_m, feature.alt_max_m  # to the mm: feet converted are not exact
+    return (
+        feature.category,
+        feature.kind,
+        feature.rule.margin_m,
+        None if lo is None else round(lo, 3),
+        None if hi is None else round(hi, 3),
+        zone_class(feature.properties),
+    )
 
 
 def group_sites(features, rules, join_m=25.0):

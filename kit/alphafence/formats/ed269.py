@@ -6,13 +6,13 @@ ED-269 zones come as ``{"features": [...]}`` (InterUSS's ED269Schema), as
 a bare list. Each zone becomes one feature per geometry entry (ED-318: per geometry), with
 pseudo-tags the rules match on (``ed269:restriction``, ``ed269:reason``, ``name``), altitude
 limits converted to metres (their references kept), and restriction and applicability kept as
-properties. ED-318's zone ``type`` is read as the restriction (``REQ_AUTHORIZATION`` spelt as
-ED-269 spells it), its ``limitedApplicability`` as the applicability. Circles are built in a
-local metric frame, never in degrees.
+properties. ED-318's zone ``type`` is the restriction (``REQ_AUTHORIZATION`` spelt as ED-269
+spells it), its ``limitedApplicability`` the applicability. Circles are built in metres.
 """
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -27,6 +27,7 @@ from alphafence.geo.frame import LocalFrame
 _UNITS = {"M": 1.0, "FT": 0.3048}
 _CIRCLE_SEGMENTS = 64
 _ED318_MARKS = ("zoneAuthority", "variant", "limitedApplicability", "UASZone", "verticalLayer")
+_SHAPE_ERRORS = (ValueError, TypeError, IndexError, KeyError, AttributeError, OverflowError)
 
 
 def _zone_list(doc):
@@ -176,15 +177,7 @@ def _circle(path, label, center, radius, units):
 def _shape(path, label, gtype, coordinates):
     try:
         return shapely.geometry.shape({"type": gtype, "coordinates": coordinates})
-    except (
-        ValueError,
-        TypeError,
-        IndexError,
-        KeyError,
-        AttributeError,
-        OverflowError,
-        ShapelyError,
-    ) as exc:
+    except (*_SHAPE_ERRORS, ShapelyError) as exc:
         raise InputError(path, f"malformed {gtype} ({exc})", label) from None
 
 
@@ -200,9 +193,7 @@ def _projection(path, label, proj, units=1.0):
 
 
 def _reasons(value):
-    if not value:
-        return []
-    return [value] if isinstance(value, str) else value if isinstance(value, list) else [value]
+    return [] if not value else value if isinstance(value, list) else [value]
 
 
 def _tags(restriction, reasons, name):
@@ -293,18 +284,16 @@ def _ed318_volumes(path, feats):
         reasons = _reasons(props.get("reasons", props.get("reason")))
         tags = _tags(restriction, reasons, _text(props.get("name")))
         geom = feat.get("geometry")
-        if not isinstance(geom, dict):
-            raise InputError(path, "geometry must be an object", label)
-        parts = geom.get("geometries") if geom.get("type") == "GeometryCollection" else [geom]
+        parts = [geom]
+        if isinstance(geom, dict) and geom.get("type") == "GeometryCollection":
+            parts = geom.get("geometries")
         if not isinstance(parts, list) or not parts:
             raise InputError(path, "GeometryCollection needs geometries", label)
         for j, part in enumerate(parts):
             elabel = label if len(parts) == 1 else f"{label} geometry {j}"
             if not isinstance(part, dict):
                 raise InputError(path, "geometry must be an object", elabel)
-            layer = part.get("layer", props.get("verticalLayer"))
-            if layer is None:
-                layer = {}
+            layer = part.get("layer", props.get("verticalLayer")) or {}
             if not isinstance(layer, dict):
                 raise InputError(path, "layer must be an object", elabel)
             units = _unit(path, elabel, layer.get("uom", "m"), "layer uom")
@@ -322,6 +311,40 @@ def _ed318_volumes(path, feats):
             }
             source = str(ident) if len(parts) == 1 else f"{ident}#{j}"
             yield shape, dict(tags), source, lower, upper, zprops
+
+
+def zone_class(properties) -> tuple:
+    """What a zone must share with another, beyond its rule and altitude band, for the two to
+    share one fence: its restriction, when it is in force, and its vertical references.
+
+    Permanent zones are alike however they say so (no applicability, or a ``permanent: YES``
+    period); other applicabilities are compared as canonical JSON. Features that are no
+    ED-269/ED-318 zone (no properties) give ``()``.
+
+    Examples
+    --------
+    >>> zone_class({})
+    ()
+    >>> zone_class({"restriction": "PROHIBITED", "applicability": [{"permanent": "YES"}],
+    ...             "lower_reference": "AGL", "upper_reference": "AMSL"})
+    ('"PROHIBITED"', 'permanent', '"AGL"', '"AMSL"')
+    """
+    if not properties:
+        return ()
+    when = properties.get("applicability")
+    entries = when if isinstance(when, list) else [when]
+    if not when or any(
+        isinstance(e, dict) and str(e.get("permanent", "")).upper() == "YES" for e in entries
+    ):
+        when = "permanent"  # in force at any time, as the monitor reads it
+    else:
+        when = json.dumps(when, sort_keys=True, default=str)
+    return (
+        json.dumps(properties.get("restriction"), default=str),
+        when,
+        json.dumps(properties.get("lower_reference"), default=str),
+        json.dumps(properties.get("upper_reference"), default=str),
+    )
 
 
 def read_ed269_doc(path, doc, rules, repaired, skipped):
