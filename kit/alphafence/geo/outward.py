@@ -77,30 +77,62 @@ def _edge_point(P, prev, nxt, i, reach=math.inf):
     return area, (2.0 * area / base if base > 0 else 0.0), X
 
 
+def _first_ops(P, reach, prune):
+    """Every vertex's operations, no higher than ``prune``, as heap entries: the arithmetic of
+    :func:`_vertex_op` and :func:`_edge_point` (same floats) in one pass; ``len(P) > 3``."""
+    hypot = math.hypot
+    out = []
+    rings = (P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2])
+    for i, (px, py), (ix, iy), (jx, jy), (qx, qy) in zip(range(len(P)), *rings):
+        c = (ix - px) * (jy - py) - (iy - py) * (jx - px)
+        if not c > 0:  # removing reflex vertex i
+            area = -0.5 * c
+            base = hypot(jx - px, jy - py)
+            height = 2.0 * area / base if base > 0 else 0.0
+            if not height > prune:
+                out.append((area, height, 0, i, 0, None))
+        # collapsing edge i -> j onto where edges p -> i and q -> j, extended, meet
+        d1x, d1y, d2x, d2y = ix - px, iy - py, jx - qx, jy - qy
+        den = d1x * d2y - d1y * d2x
+        if abs(den) < _EPS:
+            continue
+        wx, wy = jx - ix, jy - iy
+        t = (wx * d2y - wy * d2x) / den
+        s = (wx * d1y - wy * d1x) / den
+        if t <= 0 or s <= 0 or t * hypot(d1x, d1y) > reach or s * hypot(d2x, d2y) > reach:
+            continue
+        x0, x1 = ix + t * d1x, iy + t * d1y
+        mx, my = 0.5 * (ix + jx), 0.5 * (iy + jy)
+        x0, x1 = x0 + (x0 - mx) * 1e-9, x1 + (x1 - my) * 1e-9
+        c = (jx - ix) * (x1 - iy) - (jy - iy) * (x0 - ix)
+        if c >= 0:
+            continue
+        area = -0.5 * c
+        base = hypot(wx, wy)
+        height = 2.0 * area / base if base > 0 else 0.0
+        if not height > prune:
+            out.append((area, height, 1, i, 0, (x0, x1)))
+    return out
+
+
 def _greedy(pts, max_vertices, tolerance, check):
-    """Greedy outward simplification of a CCW ring; ``check`` verifies simplicity per step."""
+    """Greedy outward simplification of a CCW ring; ``check`` verifies simplicity per step.
+
+    Returns the ring, or None when no operation applies (the ring stays as it is)."""
     n = len(pts)
     P = [tuple(p) for p in pts.tolist()]
     prev = [(k - 1) % n for k in range(n)]
     nxt = [(k + 1) % n for k in range(n)]
     alive = [True] * n
     stamp = [0] * n
-    heap = []
-    span = float(np.ptp(pts, axis=0).max())
+    span = float((pts.max(axis=0) - pts.min(axis=0)).max())
     reach = 2.0 * span + 1.0
-
-    def ops(v):
-        op = _vertex_op(P, prev, nxt, v)
-        if op is not None:
-            yield (op[0], op[1], 0, v, stamp[v], None)
-        op = _edge_point(P, prev, nxt, v, reach)
-        if op is not None:
-            yield (op[0], op[1], 1, v, stamp[v], op[2])
-
-    for v in range(n):
-        heap.extend(ops(v))
+    # once the ring is within max_vertices (it only shrinks), operations higher than the
+    # tolerance are never applied again: they are not even queued
+    heap = _first_ops(P, reach, tolerance if n <= max_vertices else math.inf)
     heapq.heapify(heap)
     count = n
+    changed = False
     while heap and count > 3:
         area, height, kind, i, st, X = heapq.heappop(heap)
         if not alive[i] or stamp[i] != st:
@@ -126,10 +158,18 @@ def _greedy(pts, max_vertices, tolerance, check):
             nxt[i], prev[q] = q, i
             touched = (prev[p], p, i, q)
         count -= 1
+        changed = True
+        prune = tolerance if count <= max_vertices else math.inf
         for v in touched:
             stamp[v] += 1
-            for op in ops(v):
-                heapq.heappush(heap, op)
+            op = _vertex_op(P, prev, nxt, v)
+            if op is not None and not op[1] > prune:
+                heapq.heappush(heap, (op[0], op[1], 0, v, stamp[v], None))
+            op = _edge_point(P, prev, nxt, v, reach)
+            if op is not None and not op[1] > prune:
+                heapq.heappush(heap, (op[0], op[1], 1, v, stamp[v], op[2]))
+    if not changed:
+        return None
     start = alive.index(True)
     out = [P[start]]
     v = nxt[start]
@@ -227,9 +267,11 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
         return ring_covers(out, pts) if outward else (valid_ring(out) and ring_covers(pts, out))
 
     out = _greedy(pts, max_vertices, tolerance, check=False)
-    if not ok(out):
+    if out is None:  # no operation applies (nor would one checked): the ring as it is
+        out = pts
+    elif not ok(out):
         out = _greedy(pts, max_vertices, tolerance, check=True)
-        if not ok(out):  # numerically degenerate input: leave it as it is
+        if out is None or not ok(out):  # numerically degenerate input: leave it as it is
             out = pts
     return out[::-1] if flip else out
 

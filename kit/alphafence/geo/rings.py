@@ -17,17 +17,17 @@ def ring_coords(ring) -> np.ndarray:
     >>> ring_coords(shapely.box(0, 0, 1, 1).exterior).tolist()
     [[1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]
     """
-    pts = np.asarray(
-        shapely.get_coordinates(ring) if not isinstance(ring, np.ndarray) else ring, float
-    )
-    pts = pts[:, :2]
-    if len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+    given = isinstance(ring, np.ndarray)
+    pts = np.asarray(ring if given else shapely.get_coordinates(ring), float)[:, :2]
+    if len(pts) > 1 and pts[0].tolist() == pts[-1].tolist():
         pts = pts[:-1]
     if len(pts) > 1:
-        keep = np.any(pts != np.roll(pts, 1, axis=0), axis=1)
-        keep[0] = True
-        pts = pts[keep]
-    return pts
+        repeat = (pts[1:] == pts[:-1]).all(axis=1)  # a vertex equal to the one before
+        if repeat.any():
+            keep = np.ones(len(pts), bool)
+            keep[1:] = ~repeat
+            return pts[keep]
+    return pts.copy() if given else pts
 
 
 def signed_area(pts) -> float:
@@ -40,7 +40,10 @@ def signed_area(pts) -> float:
     1.0
     """
     x, y = pts[:, 0], pts[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    # np.roll(a, -1) without its overhead: the same arrays, so the same sums
+    y1 = np.concatenate((y[1:], y[:1]))
+    x1 = np.concatenate((x[1:], x[:1]))
+    return 0.5 * float(np.dot(x, y1) - np.dot(x1, y))
 
 
 def valid_ring(pts) -> bool:
