@@ -188,3 +188,22 @@ def test_progress_shows_counts_and_rate(monkeypatch):
     assert "reading zones.geojsonl" in shown and "40000/?" in shown
     assert "fencing tiles" in shown and "25000/40000" in shown
     assert re.search(r"[\d,]+/s", shown)
+
+
+def test_compile_and_the_monitor_take_the_streamed_formats(malta, one_process, tmp_path):
+    pytest.importorskip("pyarrow")
+    from alphafence.monitor.fenceset import FenceSet
+
+    parquet, lines = tmp_path / "fences.parquet", tmp_path / "fences.geojsonl"
+    assert main(["build", str(malta), "-o", str(parquet), "-q"]) == 0
+    assert main(["build", str(malta), "-o", str(lines), "-q"]) == 0
+    plans = {}
+    for src in (one_process, parquet):
+        out = tmp_path / f"{src.suffix[1:]}.plan"
+        args = ["compile", str(src), "--bbox", "14.49,35.87,14.53,35.91", "-o", str(out)]
+        assert main(args) == 0
+        plans[src] = json.loads(out.read_text())["geoFence"]
+    assert plans[one_process] == plans[parquet] and plans[parquet]["polygons"]
+    want, got = FenceSet.from_geojson(one_process), FenceSet.from_geojson(lines)
+    assert [r.site_id for r in want.records] == [r.site_id for r in got.records]
+    assert shapely.equals_exact(want.local, got.local, 1e-6).all()

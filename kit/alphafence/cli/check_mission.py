@@ -31,7 +31,7 @@ def register(sub):
 
 def run(args) -> int:
     """Print the legs near keep-out fences; exit 1 when any leg crosses one, else 0."""
-    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.formats.fence_read import read_fence_file as read_fences
     from alphafence.formats.mission import read_mission
     from alphafence.route.legs import check_legs
 

@@ -52,7 +52,7 @@ def run(args) -> int:
     from alphafence.formats import qgc_plan as plan
     from alphafence.formats import qgc_wpl as waypoints
     from alphafence.formats.atomic import write_all
-    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.formats.fence_read import read_fence_file as read_fences
 
     need(*figure_wants(args.figure))
     records = read_fences(args.fences)

@@ -60,7 +60,7 @@ def run(args) -> int:
     :class:`~alphafence.errors.RoutingError`) when no route exists."""
     from alphafence.formats import qgc_plan as plan
     from alphafence.formats.atomic import write_all
-    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.formats.fence_read import read_fence_file as read_fences
     from alphafence.formats.qgc_plan import mission_items
     from alphafence.formats.qgc_wpl import mission_waypoints_text
     from alphafence.route import FenceRoadmap, NoRoute

@@ -87,7 +87,7 @@ def load_items(args):
     tuple
         ``(items, CompileResult or None)``.
     """
-    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.formats.fence_read import read_fence_file as read_fences
     from alphafence.formats.qgc_plan import read_plan_fence
     from alphafence.formats.qgc_wpl import read_waypoints_fence
 

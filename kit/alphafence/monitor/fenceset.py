@@ -84,7 +84,7 @@ class FenceSet:
         """The fences of a fence GeoJSON file (``alphafence build``'s output); InputError
         when it holds none (a monitor with nothing to watch is a mistake, said at once)."""
         from alphafence.errors import InputError
-        from alphafence.formats.fence_geojson import read_fences
+        from alphafence.formats.fence_read import read_fence_file as read_fences
 
         records = read_fences(path)
         if not records:
