@@ -30,89 +30,44 @@ _EPS = 1e-12
 MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
 
 
-def _vertex_op(P, prev, nxt, i):
-    """Removing reflex vertex i: (area, height) added, or None if i is convex."""
-    p, q = prev[i], nxt[i]
-    (px, py), (ix, iy), (qx, qy) = P[p], P[i], P[q]
-    c = (ix - px) * (qy - py) - (iy - py) * (qx - px)
-    if c > 0:
-        return None
-    area = -0.5 * c
-    base = math.hypot(qx - px, qy - py)
-    return area, (2.0 * area / base if base > 0 else 0.0)
+def _ops(out, i, st, p, a, b, q, reach, prune):
+    """Append vertex ``i``'s operations no higher than ``prune`` to ``out`` as heap entries
+    ``(area, height, kind, i, st, X)``; ``a`` is its position, ``p`` the vertex before it,
+    ``b`` the one after and ``q`` the one after ``b`` (the ring has 3 vertices or more).
 
-
-def _edge_point(P, prev, nxt, i, reach=math.inf):
-    """Where the edges before i and after next[i], extended, meet (outside), or None.
-
-    ``reach`` bounds how far (in multiples of the edge's length) the new vertex may lie
-    from the edge, so nearly parallel neighbours never throw a vertex across the map."""
-    p = prev[i]
-    j = nxt[i]
-    q = nxt[j]
-    if q == i or p == j:
-        return None
-    (px, py), (ix, iy), (jx, jy), (qx, qy) = P[p], P[i], P[j], P[q]
-    d1x, d1y = ix - px, iy - py
-    d2x, d2y = jx - qx, jy - qy
+    Kind 0 removes ``a`` if it is reflex. Kind 1 collapses edge ``a`` -> ``b`` onto ``X``,
+    where edges ``p`` -> ``a`` and ``q`` -> ``b``, extended, meet outside; ``reach`` bounds
+    how far (in multiples of an edge's length) ``X`` may lie from the edge, so nearly
+    parallel neighbours never throw a vertex across the map."""
+    (px, py), (ix, iy), (jx, jy), (qx, qy) = p, a, b, q
+    c = (ix - px) * (jy - py) - (iy - py) * (jx - px)
+    if not c > 0:
+        area = -0.5 * c
+        base = math.hypot(jx - px, jy - py)
+        height = 2.0 * area / base if base > 0 else 0.0
+        if not height > prune:
+            out.append((area, height, 0, i, st, None))
+    d1x, d1y, d2x, d2y = ix - px, iy - py, jx - qx, jy - qy
     den = d1x * d2y - d1y * d2x
     if abs(den) < _EPS:
-        return None
+        return
     wx, wy = jx - ix, jy - iy
     t = (wx * d2y - wy * d2x) / den
     s = (wx * d1y - wy * d1x) / den
-    if t <= 0 or s <= 0:
-        return None
-    if t * math.hypot(d1x, d1y) > reach or s * math.hypot(d2x, d2y) > reach:
-        return None
-    X = (ix + t * d1x, iy + t * d1y)
-    # nudge X a hair further out, so rounding never leaves i or j outside the new edges
+    if t <= 0 or s <= 0 or t * math.hypot(d1x, d1y) > reach or s * math.hypot(d2x, d2y) > reach:
+        return
+    x0, x1 = ix + t * d1x, iy + t * d1y
+    # nudge X a hair further out, so rounding never leaves a or b outside the new edges
     mx, my = 0.5 * (ix + jx), 0.5 * (iy + jy)
-    X = (X[0] + (X[0] - mx) * 1e-9, X[1] + (X[1] - my) * 1e-9)
-    c = (jx - ix) * (X[1] - iy) - (jy - iy) * (X[0] - ix)
+    x0, x1 = x0 + (x0 - mx) * 1e-9, x1 + (x1 - my) * 1e-9
+    c = (jx - ix) * (x1 - iy) - (jy - iy) * (x0 - ix)
     if c >= 0:
-        return None
+        return
     area = -0.5 * c
     base = math.hypot(wx, wy)
-    return area, (2.0 * area / base if base > 0 else 0.0), X
-
-
-def _first_ops(P, reach, prune):
-    """Every vertex's operations, no higher than ``prune``, as heap entries: the arithmetic of
-    :func:`_vertex_op` and :func:`_edge_point` (same floats) in one pass; ``len(P) > 3``."""
-    hypot = math.hypot
-    out = []
-    rings = (P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2])
-    for i, (px, py), (ix, iy), (jx, jy), (qx, qy) in zip(range(len(P)), *rings):
-        c = (ix - px) * (jy - py) - (iy - py) * (jx - px)
-        if not c > 0:  # removing reflex vertex i
-            area = -0.5 * c
-            base = hypot(jx - px, jy - py)
-            height = 2.0 * area / base if base > 0 else 0.0
-            if not height > prune:
-                out.append((area, height, 0, i, 0, None))
-        # collapsing edge i -> j onto where edges p -> i and q -> j, extended, meet
-        d1x, d1y, d2x, d2y = ix - px, iy - py, jx - qx, jy - qy
-        den = d1x * d2y - d1y * d2x
-        if abs(den) < _EPS:
-            continue
-        wx, wy = jx - ix, jy - iy
-        t = (wx * d2y - wy * d2x) / den
-        s = (wx * d1y - wy * d1x) / den
-        if t <= 0 or s <= 0 or t * hypot(d1x, d1y) > reach or s * hypot(d2x, d2y) > reach:
-            continue
-        x0, x1 = ix + t * d1x, iy + t * d1y
-        mx, my = 0.5 * (ix + jx), 0.5 * (iy + jy)
-        x0, x1 = x0 + (x0 - mx) * 1e-9, x1 + (x1 - my) * 1e-9
-        c = (jx - ix) * (x1 - iy) - (jy - iy) * (x0 - ix)
-        if c >= 0:
-            continue
-        area = -0.5 * c
-        base = hypot(wx, wy)
-        height = 2.0 * area / base if base > 0 else 0.0
-        if not height > prune:
-            out.append((area, height, 1, i, 0, (x0, x1)))
-    return out
+    height = 2.0 * area / base if base > 0 else 0.0
+    if not height > prune:
+        out.append((area, height, 1, i, st, (x0, x1)))
 
 
 def _greedy(pts, max_vertices, tolerance, check):
@@ -128,8 +83,11 @@ def _greedy(pts, max_vertices, tolerance, check):
     span = float((pts.max(axis=0) - pts.min(axis=0)).max())
     reach = 2.0 * span + 1.0
     # once the ring is within max_vertices (it only shrinks), operations higher than the
-    # tolerance are never applied again: they are not even queued
-    heap = _first_ops(P, reach, tolerance if n <= max_vertices else math.inf)
+    # tolerance never run: they are not even queued
+    heap = []
+    prune = tolerance if n <= max_vertices else math.inf
+    for i, p, a, b, q in zip(range(n), P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2]):
+        _ops(heap, i, 0, p, a, b, q, reach, prune)
     heapq.heapify(heap)
     count = n
     changed = False
@@ -160,14 +118,13 @@ def _greedy(pts, max_vertices, tolerance, check):
         count -= 1
         changed = True
         prune = tolerance if count <= max_vertices else math.inf
+        new = []
         for v in touched:
             stamp[v] += 1
-            op = _vertex_op(P, prev, nxt, v)
-            if op is not None and not op[1] > prune:
-                heapq.heappush(heap, (op[0], op[1], 0, v, stamp[v], None))
-            op = _edge_point(P, prev, nxt, v, reach)
-            if op is not None and not op[1] > prune:
-                heapq.heappush(heap, (op[0], op[1], 1, v, stamp[v], op[2]))
+            j = nxt[v]
+            _ops(new, v, stamp[v], P[prev[v]], P[v], P[j], P[nxt[j]], reach, prune)
+        for op in new:
+            heapq.heappush(heap, op)
     if not changed:
         return None
     start = alive.index(True)
@@ -285,13 +242,21 @@ def shifted_dp(pts, tol):
     where they are nearly parallel, by a short bevel). Returns the new ring, or None when the
     subset is degenerate; callers verify containment.
     """
+    return _shifted(pts, _dp(shapely.Polygon(pts), tol))
+
+
+def _dp(ring, tol):
+    """The vertices Douglas-Peucker (GEOS, topology preserving) keeps of polygon ``ring``."""
+    return ring_coords(shapely.simplify(ring, tol, preserve_topology=True).exterior)
+
+
+def _shifted(pts, spts, index=None):
+    """:func:`shifted_dp` given the kept vertices ``spts`` (and ``pts``' vertex -> index)."""
     n = len(pts)
-    ring = shapely.Polygon(pts)
-    simple = shapely.simplify(ring, tol, preserve_topology=True)
-    spts = ring_coords(simple.exterior)
     if len(spts) < 3 or len(spts) >= n:
         return None
-    index = {tuple(p): k for k, p in enumerate(pts.tolist())}
+    if index is None:
+        index = {tuple(p): k for k, p in enumerate(pts.tolist())}
     try:
         keep = np.array(sorted(index[tuple(p)] for p in spts.tolist()))
     except KeyError:
@@ -343,10 +308,15 @@ def prereduce(pts, target):
         return pts
     span = float(np.ptp(pts, axis=0).max())
     tol = max(span * 1e-4, 1e-3)
+    ring = shapely.Polygon(pts)
+    index = {tuple(p): k for k, p in enumerate(pts.tolist())}
     while tol < span:
-        cand = shifted_dp(pts, tol)
-        if cand is not None and len(cand) <= target and ring_covers(cand, pts):
-            return cand
+        spts = _dp(ring, tol)
+        # the shifted ring has a vertex or two per kept one: too many kept, too long
+        if len(spts) <= target:
+            cand = _shifted(pts, spts, index)
+            if cand is not None and len(cand) <= target and ring_covers(cand, pts):
+                return cand
         tol *= 2.0
     return pts
 
