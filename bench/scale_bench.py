@@ -258,6 +258,17 @@ def _result(m):
     return text
 
 
+def _failed(m):
+    """Whether a measured build was stopped or failed."""
+    return bool(m["why"] or m["rc"])
+
+
+def _short(m):
+    """A measurement as the peer column."""
+    text = f"{m['wall']:.1f} s, {m['peak'] / GB:.2f} GB"
+    return f"{text} (stopped)" if m["why"] else f"{text} (exit {m['rc']})" if m["rc"] else text
+
+
 # -- the rows ------------------------------------------------------------------------------
 def run(osm, Row, console, sizes=SIZES):
     """A row per size (with its --jobs 1 peer up to 133,000 areas) and the --dask row."""
@@ -295,8 +306,8 @@ def run(osm, Row, console, sizes=SIZES):
             peer, ratio = "-", "-"
             if jobs and n <= PEER_MAX:
                 p = runs[(n, 1)] = build(n, 1)
-                peer = f"--jobs 1 {p['wall']:.1f} s, {p['peak'] / GB:.2f} GB"
-                ratio = f"{p['wall'] / m['wall']:.2f}x"
+                peer = f"--jobs 1 {_short(p)}"
+                ratio = "-" if _failed(m) or _failed(p) else f"{p['wall'] / m['wall']:.2f}x"
             elif jobs:
                 peer = "--jobs 1 not run at this size"
             how = f"--jobs {jobs}" if jobs else "no --jobs yet"
@@ -308,7 +319,7 @@ def run(osm, Row, console, sizes=SIZES):
                     f"<= {t:.3g} s, <= {mem / GB:.1f} GB",
                     peer,
                     ratio,
-                    not m["rc"] and not m["why"] and m["wall"] <= t and m["peak"] <= mem,
+                    not _failed(m) and m["wall"] <= t and m["peak"] <= mem,
                 )
             )
         rows.append(dask_row(Row, console, flags, build, runs))
@@ -386,13 +397,24 @@ def dask_row(Row, console, flags, build, runs):
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
     s = runs.get((DASK_AREAS, 1)) or build(DASK_AREAS, 1)
-    same = not d["rc"] and not s["rc"] and _fences(d["out"]) == _fences(s["out"])
+    if _failed(d) or _failed(s):
+        same, verdict = False, "a build failed: see above"
+    else:
+        a, b = _fences(d["out"]), _fences(s["out"])
+        same = a == b
+        verdict = (
+            f"same {sum(a.values()):,} fences"
+            if same
+            else (
+                f"fences DIFFER ({sum((a - b).values())} only in --dask, "
+                f"{sum((b - a).values())} only in --jobs 1)"
+            )
+        )
     return Row(
         name,
-        f"{d['wall']:.1f} s, {d['peak'] / GB:.2f} GB peak with the cluster, "
-        + ("same fences" if same else "fences DIFFER" if not d["rc"] else _result(d)),
+        f"{d['wall']:.1f} s, {d['peak'] / GB:.2f} GB peak with the cluster, {verdict}",
         "same fences as --jobs 1",
-        f"--jobs 1 {s['wall']:.1f} s, {s['peak'] / GB:.2f} GB",
-        f"{d['wall'] / s['wall']:.2f}x overhead",
+        f"--jobs 1 {_short(s)}",
+        "-" if _failed(d) or _failed(s) else f"{d['wall'] / s['wall']:.2f}x overhead",
         same,
     )
