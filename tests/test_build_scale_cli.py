@@ -207,3 +207,28 @@ def test_compile_and_the_monitor_take_the_streamed_formats(malta, one_process, t
     want, got = FenceSet.from_geojson(one_process), FenceSet.from_geojson(lines)
     assert [r.site_id for r in want.records] == [r.site_id for r in got.records]
     assert shapely.equals_exact(want.local, got.local, 1e-6).all()
+
+
+@pytest.mark.parametrize("name", ["parks.geojson", "parks.geojsonl"])
+def test_a_database_that_adds_nothing_is_said(tmp_path, name):
+    from alphafence.cli.demo import scene_path
+
+    park = {
+        "type": "Feature",
+        "properties": {"leisure": "pitch"},
+        "geometry": {"type": "Point", "coordinates": [14.5, 35.9]},
+    }
+    empty = tmp_path / name
+    if name.endswith(".geojsonl"):
+        empty.write_text(json.dumps(park) + "\n")
+    else:
+        empty.write_text(json.dumps({"type": "FeatureCollection", "features": [park]}))
+    out = tmp_path / "fences.geojson"
+    res = subprocess.run(
+        [*CLI, "build", str(scene_path()), str(empty), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    assert f"{empty}: it holds no restricted features" in " ".join(res.stderr.split())

@@ -397,9 +397,18 @@ def test_demo_scene_ships_with_the_package(rules):
 
 
 def test_oversized_json_is_refused_before_reading(write_json, rules, monkeypatch):
-    path = write_json("big.geojson", QGIS_DOC)
+    path = write_json("big.json", ED269)
     monkeypatch.setenv("ALPHAFENCE_MAX_JSON_MB", "0.0001")  # about 100 bytes
     with pytest.raises(InputError, match=r"more than the 0 MB limit .*ALPHAFENCE_MAX_JSON_MB"):
         read_database([path], rules)
     monkeypatch.delenv("ALPHAFENCE_MAX_JSON_MB")
     assert read_database([path], rules).features
+
+
+def test_geojson_above_the_json_limit_is_streamed(write_json, rules, monkeypatch):
+    path = write_json("big.geojson", QGIS_DOC)
+    whole = read_database([path], rules).features
+    monkeypatch.setenv("ALPHAFENCE_MAX_JSON_MB", "0.0001")  # read whole, it would be refused
+    streamed = read_database([path], rules).features
+    assert [f.source for f in streamed] == [f.source for f in whole]
+    assert all(a.geometry.equals_exact(b.geometry, 0) for a, b in zip(streamed, whole))

@@ -182,7 +182,10 @@ def summary(db, result, opts, written):
         shown = ", ".join(db.repaired[:5]) + (" ..." if len(db.repaired) > 5 else "")
         notes.append(f"repaired {len(db.repaired)} invalid (self-intersecting) polygon(s): {shown}")
     for reason, n in db.skipped.items():
-        notes.append(f"skipped {n} feature(s): {reason}")
+        if reason.startswith("all of "):  # a database that adds nothing: said as such
+            notes.append(f"{reason[len('all of ') :]}; nothing was taken from it")
+        else:
+            notes.append(f"skipped {n} feature(s): {reason}")
     fixed = [r[5] for r in rows if r[4]]
     if fixed:
         notes.append(

@@ -31,16 +31,25 @@ def is_sequence(path) -> bool:
     return str(path).lower().endswith(SEQ_SUFFIXES)
 
 
+# keys of ED-269 and ED-318 zones, which are read whole (and refused above the JSON limit)
+ZONE_MARKERS = ('"UASZoneList"', '"horizontalProjection"', '"zoneAuthority"', '"restriction":')
+
+
 def should_stream(path) -> bool:
-    """True when ``path`` is read as a stream: a text sequence, or a FeatureCollection larger
-    than 64 MB (or than ``$ALPHAFENCE_MAX_JSON_MB``, above which it cannot be read whole)."""
+    """True when ``path`` is read as a stream: a text sequence, or a GeoJSON FeatureCollection
+    larger than 64 MB (or than ``$ALPHAFENCE_MAX_JSON_MB``, above which it cannot be read
+    whole) whose first 64 kB show no ED-269 or ED-318 zone keys."""
     if is_sequence(path):
         return True
     try:
         size = os.path.getsize(path)
+        if size <= min(STREAM_ABOVE_BYTES, max_json_bytes()):
+            return False
+        with open(path, "rb") as fh:
+            head = fh.read(65536).decode("utf-8", "replace").replace(" ", "")
     except OSError:
         return False
-    return size > min(STREAM_ABOVE_BYTES, max_json_bytes())
+    return '"FeatureCollection"' in head and not any(m in head for m in ZONE_MARKERS)
 
 
 def sequence_records(fh, path):
