@@ -33,7 +33,9 @@ __version__ = "0.1.0"
 _EXPORTS = {
     "BuildOptions": "alphafence.build.pipeline",
     "build_fences": "alphafence.build.pipeline",
+    "build_tiled": "alphafence.build.tiled",
     "read_database": "alphafence.formats.database",
+    "DatabaseStream": "alphafence.formats.database",
     "load_rules": "alphafence.formats.rules",
 }
 

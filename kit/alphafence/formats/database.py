@@ -154,6 +154,11 @@ class DatabaseStream:
                 (".json", ".geojson", *SEQ_SUFFIXES)
             ):
                 parts = iter_geojson(path, self.rules, self.repaired, self.skipped)
+            elif str(path).lower().endswith(OSM_SUFFIXES):
+                need(*osm_wants([path]))
+                from alphafence.formats.osm import iter_osm  # pyosmium, only when OSM is read
+
+                parts = iter_osm(path, self.rules, self.repaired, self.skipped)
             else:
                 parts = [read_file(path, self.rules, self.repaired, self.skipped)]
             before = self.count

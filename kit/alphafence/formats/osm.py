@@ -19,7 +19,8 @@ from alphafence.formats.features import Feature, check_coordinates, flag_invalid
 
 
 def read_osm(path, rules, repaired, skipped):
-    """The restricted features of an OSM file (``.osm.pbf``, ``.osm``...), streamed.
+    """The restricted features of an OSM file (``.osm.pbf``, ``.osm``...), streamed; all of
+    them in one list (see :func:`iter_osm` for batches).
 
     Parameters
     ----------
@@ -40,12 +41,30 @@ def read_osm(path, rules, repaired, skipped):
     InputError
         No such file, or not readable as OSM.
     """
+    return [f for batch in iter_osm(path, rules, repaired, skipped) for f in batch]
+
+
+def iter_osm(path, rules, repaired, skipped, batch=20_000):
+    """The restricted features of an OSM file in batches (lists of Feature) as the file is
+    read, so a country's features need not be held at once.
+
+    Parameters
+    ----------
+    path, rules, repaired, skipped
+        As for :func:`read_osm`.
+    batch : int
+        Features per batch.
+
+    Yields
+    ------
+    list of Feature
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "no such file")
     keys = rules.keys
     if not keys:
-        return []
+        return
     wkb = osmium.geom.WKBFactory()
     blobs, tags_list, sources, rule_list = [], [], [], []
     try:
@@ -87,10 +106,16 @@ def read_osm(path, rules, repaired, skipped):
             tags_list.append(dict(tags))
             sources.append(source)
             rule_list.append(rule)
+            if len(blobs) >= batch:
+                yield _features(path, blobs, tags_list, sources, rule_list, repaired, skipped)
+                blobs, tags_list, sources, rule_list = [], [], [], []
     except (RuntimeError, ValueError, OSError) as exc:
         raise InputError(path, f"not a readable OSM file ({exc})") from None
-    if not blobs:
-        return []
+    if blobs:
+        yield _features(path, blobs, tags_list, sources, rule_list, repaired, skipped)
+
+
+def _features(path, blobs, tags_list, sources, rule_list, repaired, skipped):
     geoms = shapely.from_wkb(np.array(blobs, dtype=object))
     check_coordinates(path, geoms, lambda i: sources[i])
     geoms = flag_invalid(geoms, sources, repaired)
