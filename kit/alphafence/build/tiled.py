@@ -20,6 +20,7 @@ from alphafence.build.sites import feature_widths, site_class
 from alphafence.build.spool import Spool
 from alphafence.build.tile_jobs import JobInput, run_dask, run_local, run_processes
 from alphafence.build.tiles import TARGET_FEATURES, TILE_DEG, plan_jobs
+from alphafence.mavlink.items import MAX_POLYGON_VERTICES
 
 
 def default_jobs() -> int:
@@ -43,6 +44,69 @@ def job_size(features: int, workers: int) -> int:
 
 
 @dataclass
+class FenceStats:
+    """What the build's summary says about its fences, gathered job by job in constant
+    memory per category and kind (a million fences' rows would not be).
+
+    Attributes
+    ----------
+    fences : int
+    by_kind : dict
+        ``(category, kind)`` -> ``[fences, area_m2, Counter(vertices -> fences)]``.
+    repaired : list of str
+        Site ids of fences re-united with their site (first 20).
+    repaired_count : int
+    oversized : list of str
+        Site ids of polygons over ArduPilot's 255 vertices (first 20).
+    oversized_count : int
+    items : int
+        Fence items the keep-out and keep-in fences make.
+    """
+
+    fences: int = 0
+    by_kind: dict = field(default_factory=dict)
+    repaired: list = field(default_factory=list)
+    repaired_count: int = 0
+    oversized: list = field(default_factory=list)
+    oversized_count: int = 0
+    items: int = 0
+
+    def add(self, rows, max_vertices=MAX_POLYGON_VERTICES):
+        """Count a job's rows (:func:`alphafence.build.tile_jobs.fence_rows`)."""
+        for category, kind, vertices, area, repaired, site_id, circle, items in rows:
+            entry = self.by_kind.setdefault((category, kind), [0, 0.0, Counter()])
+            entry[0] += 1
+            entry[1] += area
+            entry[2][vertices] += 1
+            self.fences += 1
+            self.items += items
+            if repaired:
+                self.repaired_count += 1
+                if len(self.repaired) < 20:
+                    self.repaired.append(site_id)
+            if kind != "warning" and not circle and vertices > max_vertices:
+                self.oversized_count += 1
+                if len(self.oversized) < 20:
+                    self.oversized.append(site_id)
+
+
+def median_of(counts) -> float:
+    """The median of values given as a Counter (value -> how many).
+
+    Examples
+    --------
+    >>> median_of(Counter({4: 1, 10: 2})), median_of(Counter({4: 1, 10: 1}))
+    (10.0, 7.0)
+    """
+    values = sorted(counts)
+    n = sum(counts.values())
+    cum = np.cumsum([counts[v] for v in values])
+    lo = values[int(np.searchsorted(cum, (n - 1) // 2 + 1))]
+    hi = values[int(np.searchsorted(cum, n // 2 + 1))]
+    return (lo + hi) / 2.0
+
+
+@dataclass
 class TiledResult:
     """What :func:`build_tiled` made.
 
@@ -53,8 +117,8 @@ class TiledResult:
     sites : int
     site_kinds : collections.Counter
         ``(category, kind)`` -> sites.
-    rows : list of tuple
-        Per fence, as :func:`alphafence.build.tile_jobs.fence_rows` gives them.
+    stats : FenceStats
+        What the summary says about the fences.
     jobs : int
         Tile jobs run.
     fences, site_objects : list, optional
@@ -66,7 +130,7 @@ class TiledResult:
     features: int = 0
     sites: int = 0
     site_kinds: Counter = field(default_factory=Counter)
-    rows: list = field(default_factory=list)
+    stats: FenceStats = field(default_factory=FenceStats)
     jobs: int = 0
     fences: list | None = None
     site_objects: list | None = None
@@ -127,7 +191,7 @@ def build_tiled(
     >>> rules = load_rules()
     >>> scene = str(resources.files("alphafence").joinpath("data/demo-scene.geojson"))
     >>> result = build_tiled(DatabaseStream(scene, rules), rules, BuildOptions(), jobs=1)
-    >>> result.features, result.sites, len(result.rows)
+    >>> result.features, result.sites, result.stats.fences
     (16, 11, 19)
     """
     jobs = default_jobs() if jobs is None else max(1, int(jobs))
@@ -181,7 +245,7 @@ def build_tiled(
                 writer.write(payload)
             result.sites += out.sites
             result.site_kinds.update(out.site_kinds)
-            result.rows.extend(out.rows)
+            result.stats.add(out.rows)
             if keep:
                 result.fences.extend(out.fences)
                 result.site_objects.extend(out.site_objects)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections import defaultdict
-
 from rich.table import Table
 
 from alphafence.build import METHODS
@@ -149,13 +147,12 @@ def phases(prog, what):
 def summary(db, result, opts, written):
     """Print the fences built per category and kind, and notes on repairs, skipped features
     and what does not fit a vehicle."""
-    import numpy as np
-
+    from alphafence.build.tiled import median_of
     from alphafence.mavlink.items import MAX_POLYGON_VERTICES
     from alphafence.mavlink.storage import PROFILES
 
     copter_items = PROFILES["copter"].items
-    rows = result.rows
+    stats = result.stats
     seconds = sum(result.seconds.values())
     table = Table(
         title=f"{result.sites} sites from {result.features} restricted features "
@@ -163,18 +160,14 @@ def summary(db, result, opts, written):
     )
     for col in ("category", "kind", "sites", "fences", "vertices (median / max)", "area km²"):
         table.add_column(col, justify="right" if col not in ("category", "kind") else "left")
-    groups = defaultdict(list)
-    for row in rows:
-        groups[(row[0], row[1])].append(row)
-    for (cat, kind), rs in sorted(groups.items()):
-        v = [r[2] for r in rs]
+    for (cat, kind), (count, area, vertices) in sorted(stats.by_kind.items()):
         table.add_row(
             cat,
             kind,
             str(result.site_kinds.get((cat, kind), "")),
-            str(len(rs)),
-            f"{np.median(v):.0f} / {max(v)}",
-            f"{sum(r[3] for r in rs) / 1e6:.3f}",
+            str(count),
+            f"{median_of(vertices):.0f} / {max(vertices)}",
+            f"{area / 1e6:.3f}",
         )
     out_console.print(table)
     notes = []
@@ -186,18 +179,19 @@ def summary(db, result, opts, written):
             notes.append(f"{reason[len('all of ') :]}; nothing was taken from it")
         else:
             notes.append(f"skipped {n} feature(s): {reason}")
-    fixed = [r[5] for r in rows if r[4]]
-    if fixed:
+    if stats.repaired_count:
         notes.append(
-            f"{len(fixed)} fence(s) re-united with their site after a containment check: {', '.join(fixed[:5])}"
+            f"{stats.repaired_count} fence(s) re-united with their site after a containment "
+            f"check: {', '.join(stats.repaired[:5])}"
         )
-    items = sum(r[7] for r in rows)
-    big = [r[5] for r in rows if r[1] != "warning" and not r[6] and r[2] > MAX_POLYGON_VERTICES]
-    if big:
-        notes.append(f"{len(big)} polygon(s) exceed ArduPilot's 255 vertices: {', '.join(big[:3])}")
-    if items > copter_items:
+    if stats.oversized_count:
         notes.append(
-            f"{items} fence items: more than a Copter holds ({copter_items}); "
+            f"{stats.oversized_count} polygon(s) exceed ArduPilot's {MAX_POLYGON_VERTICES} "
+            f"vertices: {', '.join(stats.oversized[:3])}"
+        )
+    if stats.items > copter_items:
+        notes.append(
+            f"{stats.items} fence items: more than a Copter holds ({copter_items}); "
             "compile an onboard subset for the operating area before uploading"
         )
     for n in notes:
