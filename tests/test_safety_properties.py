@@ -293,3 +293,44 @@ def test_onboard_fences_contain_their_fences_for_every_profile_and_corridor(
             continue
         for part in shapely.get_parts(local):
             assert contained(part, polys, discs), f"{rec.site_id} is not inside the onboard fences"
+
+
+# coordinates as written: 1e-8 degrees (PAD_M of slack) only if rounding is round()'s
+halfway = st.builds(
+    lambda k, d: (k + 0.5 + d) / 1e8,
+    st.integers(-18_000_000_000, 18_000_000_000),
+    st.sampled_from([0.0, 1e-9, -1e-9, 1e-7, -1e-7, 1e-5]),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.floats(-180, 180), halfway), min_size=1, max_size=40))
+def test_geojson_coordinates_are_rounded_as_round_rounds_them(values):
+    from alphafence.formats.fence_geojson import DECIMALS, _round_array
+
+    got = _round_array(np.array(values).reshape(-1, 2 if len(values) % 2 == 0 else 1))
+    assert got.ravel().tolist() == [round(v, DECIMALS) for v in values]
+
+
+def test_geojson_features_are_geos_geojson_rounded():
+    """fence_features builds the GeoJSON itself: the same as GEOS's text, rounded, for
+    polygons and multipolygons with holes, fences sharing a frame or not."""
+    import json
+
+    from alphafence.build.fences import Fence
+    from alphafence.formats.fence_geojson import _round, fence_features
+
+    holed = shapely.Polygon([(0, 0), (90, 0), (90, 90), (0, 90)], [[(10, 10), (20, 10), (20, 30)]])
+    multi = shapely.MultiPolygon([holed, shapely.box(200, 0, 230, 40)])
+    here, there = LocalFrame(14.5, 35.9), LocalFrame(179.9999, -60.0)
+    fences = [
+        Fence(f"s/{k}", None, "s", "keep_out", "exact", 0.0, None, None, [], frame, geom)
+        for k, (frame, geom) in enumerate(
+            [(here, holed), (here, multi), (there, multi), (there, holed), (here, holed)]
+        )
+    ]
+    for got, f in zip(fence_features(fences), fences):
+        want = json.loads(shapely.to_geojson(f.geometry))
+        want["coordinates"] = _round(want["coordinates"])
+        assert got["geometry"] == want
+        assert got["properties"]["site_id"] == f.site_id

@@ -125,6 +125,8 @@ class Fence:
         """Vertices of its outer rings (1 for a circle)."""
         if self.circle is not None:
             return 1
+        if type(self.local) is shapely.Polygon and not self.local.is_empty:
+            return int(shapely.get_num_points(self.local.exterior)) - 1
         rings = shapely.get_exterior_ring(shapely.get_parts(self.local))
         return int(np.sum(shapely.get_num_points(rings) - 1))
 

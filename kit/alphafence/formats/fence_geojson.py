@@ -191,16 +191,89 @@ def fences_geojson(fences, meta: dict | None = None) -> dict:
     dict
         Ready for :func:`dumps`.
     """
-    features = []
-    for f in fences:
-        gj = json.loads(shapely.to_geojson(f.geometry))
-        gj["coordinates"] = _round(gj["coordinates"])
-        features.append({"type": "Feature", "properties": fence_properties(f), "geometry": gj})
     doc = {"type": "FeatureCollection", "generator": f"alphafence {__version__}"}
     if meta:
         doc["alphafence"] = meta
-    doc["features"] = features
+    doc["features"] = fence_features(fences)
     return doc
+
+
+def fence_features(fences) -> list:
+    """The GeoJSON Features of built fences: :func:`fence_properties` and the WGS84 geometry,
+    coordinates rounded to ``DECIMALS`` places exactly as ``round(v, DECIMALS)`` rounds them.
+
+    The fences' coordinates are taken together: each frame's in one transformation (a site's
+    fences share its frame), all of them rounded in one vectorised step.
+
+    Parameters
+    ----------
+    fences : list of Fence
+
+    Returns
+    -------
+    list of dict
+        One ``{"type": "Feature", "properties": ..., "geometry": ...}`` per fence, in order.
+    """
+    fences = list(fences)
+    if not fences:
+        return []
+    local = np.array([f.local for f in fences], dtype=object)
+    kinds = shapely.get_type_id(local)
+    parts, owner = shapely.get_parts(local, return_index=True)
+    if not (np.all((kinds == 3) | (kinds == 6)) and np.all(~shapely.is_empty(parts))) or np.any(
+        shapely.has_z(local)
+    ):  # anything but flat (multi)polygons of non-empty parts: GEOS writes them, then rounded
+        return [_feature(f, json.loads(shapely.to_geojson(f.geometry))) for f in fences]
+    counts = shapely.get_num_coordinates(local)
+    local_xy = shapely.get_coordinates(local)
+    xy = np.empty_like(local_xy)
+    ends = np.cumsum(counts)
+    start = 0
+    for k, f in enumerate(fences):  # runs of fences sharing one frame: one transformation
+        if k + 1 < len(fences) and fences[k + 1].frame is f.frame:
+            continue
+        stop = int(ends[k])
+        lon, lat = f.frame.to_wgs84(local_xy[start:stop, 0], local_xy[start:stop, 1])
+        xy[start:stop, 0], xy[start:stop, 1] = lon, lat
+        start = stop
+    flat = _round_array(xy).tolist()
+    rings, ring_part = shapely.get_rings(parts, return_index=True)
+    size = shapely.get_num_coordinates(rings).tolist()
+    part_rings = [[] for _ in parts]
+    at = 0
+    for p, n in zip(ring_part.tolist(), size):
+        part_rings[p].append(flat[at : at + n])
+        at += n
+    polygons = [[] for _ in fences]
+    for f, rs in zip(owner.tolist(), part_rings):
+        polygons[f].append(rs)
+    out = []
+    for f, kind, polys in zip(fences, kinds.tolist(), polygons):
+        if kind == 3:
+            geometry = {"type": "Polygon", "coordinates": polys[0]}
+        else:
+            geometry = {"type": "MultiPolygon", "coordinates": polys}
+        out.append({"type": "Feature", "properties": fence_properties(f), "geometry": geometry})
+    return out
+
+
+def _feature(f, geometry):
+    geometry["coordinates"] = _round(geometry["coordinates"])
+    return {"type": "Feature", "properties": fence_properties(f), "geometry": geometry}
+
+
+def _round_array(a):
+    """``round(v, DECIMALS)`` of every element of float array ``a``, vectorised: the scaled
+    value's nearest integer is Python's unless the scaling's own rounding could have moved
+    it across a half, and those few are rounded by Python."""
+    scale = 10.0**DECIMALS
+    y = a * scale
+    out = np.rint(y) / scale
+    with np.errstate(invalid="ignore"):
+        doubt = ~(np.abs(y - np.floor(y) - 0.5) > 4.0 * np.spacing(np.abs(y)))
+    for k in zip(*np.nonzero(doubt)):
+        out[k] = round(float(a[k]), DECIMALS)
+    return out
 
 
 def _round(c):
