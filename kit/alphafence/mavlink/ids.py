@@ -21,10 +21,27 @@ MAV_CMD_NAV_LOITER_TIME = 19
 MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
 MAV_CMD_NAV_LAND = 21
 MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_NAV_LAND_LOCAL = 23
+MAV_CMD_NAV_TAKEOFF_LOCAL = 24
+MAV_CMD_NAV_FOLLOW = 25
+MAV_CMD_NAV_CONTINUE_AND_CHANGE_ALT = 30
 MAV_CMD_NAV_LOITER_TO_ALT = 31
+MAV_CMD_NAV_ROI = 80
+MAV_CMD_NAV_PATHPLANNING = 81
 MAV_CMD_NAV_SPLINE_WAYPOINT = 82
+MAV_CMD_NAV_ALTITUDE_WAIT = 83
 MAV_CMD_NAV_VTOL_TAKEOFF = 84
 MAV_CMD_NAV_VTOL_LAND = 85
+MAV_CMD_NAV_GUIDED_ENABLE = 92
+MAV_CMD_NAV_DELAY = 93
+MAV_CMD_NAV_PAYLOAD_PLACE = 94
+MAV_CMD_NAV_LAST = 95  # NAV commands are numbered below this
+MAV_CMD_NAV_RALLY_POINT = 5100
+
+# -- MAV_CMD: mission flow ----------------------------------------------------------------
+MAV_CMD_DO_JUMP = 177
+MAV_CMD_JUMP_TAG = 600
+MAV_CMD_DO_JUMP_TAG = 601
 
 # -- MAV_CMD: fence items (mission type FENCE) ------------------------------------------
 MAV_CMD_NAV_FENCE_RETURN_POINT = 5000
@@ -179,13 +196,56 @@ NAV_POSITION_COMMANDS = frozenset(
         MAV_CMD_NAV_LOITER_TIME,
         MAV_CMD_NAV_LAND,
         MAV_CMD_NAV_TAKEOFF,
+        MAV_CMD_NAV_FOLLOW,
         MAV_CMD_NAV_LOITER_TO_ALT,
+        MAV_CMD_NAV_PATHPLANNING,
         MAV_CMD_NAV_SPLINE_WAYPOINT,
         MAV_CMD_NAV_VTOL_TAKEOFF,
         MAV_CMD_NAV_VTOL_LAND,
+        MAV_CMD_NAV_PAYLOAD_PLACE,
     }
 )
 """NAV commands whose params 5-7 are a position the vehicle flies to."""
+
+NAV_NOT_FLOWN = frozenset(
+    {
+        MAV_CMD_NAV_RETURN_TO_LAUNCH,  # flies home: no position of its own
+        MAV_CMD_NAV_LAND_LOCAL,  # params 5-7 are metres in a local frame
+        MAV_CMD_NAV_TAKEOFF_LOCAL,
+        MAV_CMD_NAV_CONTINUE_AND_CHANGE_ALT,  # an altitude only
+        MAV_CMD_NAV_ROI,  # where the camera looks, not where the vehicle flies
+        MAV_CMD_NAV_ALTITUDE_WAIT,
+        MAV_CMD_NAV_GUIDED_ENABLE,
+        MAV_CMD_NAV_DELAY,
+        MAV_CMD_NAV_LAST,
+    }
+)
+"""NAV commands (below MAV_CMD_NAV_LAST) that move the vehicle to no position of their own."""
+
+
+def flies_to_position(command) -> bool:
+    """Whether a mission item of this command flies the vehicle to its params 5-7.
+
+    Every NAV command with a position (:data:`NAV_POSITION_COMMANDS`) does; so does any other
+    command numbered below ``MAV_CMD_NAV_LAST`` that is not known to move to no position of
+    its own (:data:`NAV_NOT_FLOWN`), such as a NAV command newer than this table: a mission
+    check then checks its leg rather than skipping it.
+
+    Examples
+    --------
+    >>> flies_to_position(MAV_CMD_NAV_PAYLOAD_PLACE), flies_to_position(MAV_CMD_NAV_ROI)
+    (True, False)
+    >>> flies_to_position(36), flies_to_position(MAV_CMD_DO_JUMP)  # NAV_ARC_WAYPOINT, a DO
+    (True, False)
+    """
+    if command in NAV_POSITION_COMMANDS:
+        return True
+    return (
+        isinstance(command, int)
+        and 0 <= command < MAV_CMD_NAV_LAST
+        and command not in NAV_NOT_FLOWN
+    )
+
 
 NAV_COMMAND_NAMES = {
     MAV_CMD_NAV_WAYPOINT: "waypoint",
@@ -195,12 +255,18 @@ NAV_COMMAND_NAMES = {
     MAV_CMD_NAV_RETURN_TO_LAUNCH: "RTL",
     MAV_CMD_NAV_LAND: "land",
     MAV_CMD_NAV_TAKEOFF: "takeoff",
+    MAV_CMD_NAV_FOLLOW: "follow",
     MAV_CMD_NAV_LOITER_TO_ALT: "loiter to alt",
+    MAV_CMD_NAV_PATHPLANNING: "path planning",
     MAV_CMD_NAV_SPLINE_WAYPOINT: "spline waypoint",
     MAV_CMD_NAV_VTOL_TAKEOFF: "VTOL takeoff",
     MAV_CMD_NAV_VTOL_LAND: "VTOL land",
+    MAV_CMD_NAV_PAYLOAD_PLACE: "payload place",
+    MAV_CMD_DO_JUMP: "jump",
+    MAV_CMD_JUMP_TAG: "jump tag",
+    MAV_CMD_DO_JUMP_TAG: "jump to tag",
 }
-"""Short operator-facing names of the NAV commands, for messages."""
+"""Short operator-facing names of the mission commands, for messages."""
 
 
 def command_name(command) -> str:
