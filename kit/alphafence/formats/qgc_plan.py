@@ -1,5 +1,6 @@
-"""QGroundControl .plan files (JSON, lat, lon order): the version-2 geoFence section written
-and read as fence items, and missions written from a route.
+"""QGroundControl .plan files (JSON, lat, lon order): the geoFence section written (version 2)
+and read (versions 1 and 2, with its breach return point) as fence items, and missions written
+from a route.
 
 Missions are read as positions by ``formats.mission``.
 """
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -20,6 +22,7 @@ from alphafence.mavlink.items import (
     CIRCLE_INCLUSION,
     POLYGON_EXCLUSION,
     POLYGON_INCLUSION,
+    RETURN_POINT,
     FenceItem,
 )
 
@@ -131,46 +134,118 @@ def _latlon_pair(path, where, pair):
     if not (
         isinstance(pair, list)
         and len(pair) >= 2
-        and all(isinstance(v, (int, float)) for v in pair[:2])
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pair[:2])
     ):
         raise InputError(path, f"expected [lat, lon], got {pair!r}", where)
     return checked_position(path, where, float(pair[0]), float(pair[1]))
 
 
-def read_plan_fence(path):
-    """The geoFence of a QGroundControl plan as FenceItems (polygons, then circles).
+@dataclass(frozen=True)
+class PlanFence:
+    """The geoFence section of a QGroundControl plan.
 
-    Raises a one-line InputError naming the polygon or circle that is malformed.
+    Attributes
+    ----------
+    items : list of FenceItem
+        Its polygons (consecutive vertices), then its circles.
+    return_point : tuple or None
+        ``(lon, lat)`` of its ``breachReturn``.
+    version : int
+        The section's layout: 1 (one inclusion polygon, QGroundControl 3.2 and before) or 2.
+    """
+
+    items: list
+    return_point: tuple | None
+    version: int
+
+    @property
+    def upload_items(self) -> list:
+        """The items an upload sends: the return point first (as ``compile`` emits it), then
+        the polygons and circles."""
+        if self.return_point is None:
+            return list(self.items)
+        return [FenceItem(RETURN_POINT, 0.0, *self.return_point), *self.items]
+
+
+def _version(path, fence):
+    """The geoFence layout: the ``version`` QGroundControl wrote, or, without one, the layout
+    its keys show (current QGroundControl ignores such a section: read, not dropped)."""
+    v = fence.get("version")
+    if v is None:
+        return 1 if "polygon" in fence else 2
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or v not in (1, 2):
+        raise InputError(path, f"geoFence version {v!r}: known versions are 1 and 2")
+    return int(v)
+
+
+def _polygon(path, where, pts, inclusion):
+    if not isinstance(pts, list) or len(pts) < 3:
+        raise InputError(path, "a polygon needs at least 3 vertices", where)
+    cmd = POLYGON_INCLUSION if inclusion else POLYGON_EXCLUSION
+    return [FenceItem(cmd, float(len(pts)), *_latlon_pair(path, where, p)) for p in pts]
+
+
+def read_plan_geofence(path) -> PlanFence:
+    """The geoFence of a QGroundControl plan, in either layout QGroundControl has written.
+
+    Version 2 (``GeoFenceController`` since QGroundControl 3.3): ``polygons`` and ``circles``,
+    each with ``inclusion``. Version 1 (QGroundControl 3.2, and a section without a version
+    that has its key): one ``polygon`` of ``[lat, lon]`` vertices, which ArduPilot and PX4
+    fenced as an inclusion. Both may carry ``breachReturn``, ``[lat, lon]`` or
+    ``[lat, lon, alt]``.
+
+    Raises
+    ------
+    InputError
+        One line naming the polygon, circle or key that is malformed, or an unknown version.
     """
     doc = read_json(path)
     fence = doc.get("geoFence") if isinstance(doc, dict) else None
     if not isinstance(fence, dict):
         raise InputError(path, "no geoFence section (not a QGroundControl plan?)")
+    version = _version(path, fence)
     items = []
-    for k, poly in enumerate(fence.get("polygons", [])):
-        where = f"geoFence polygon {k}"
-        pts = poly.get("polygon") if isinstance(poly, dict) else None
-        if not isinstance(pts, list) or len(pts) < 3:
-            raise InputError(path, "a polygon needs at least 3 vertices", where)
-        cmd = POLYGON_INCLUSION if poly.get("inclusion") else POLYGON_EXCLUSION
-        for pair in pts:
-            lon, lat = _latlon_pair(path, where, pair)
-            items.append(FenceItem(cmd, float(len(pts)), lon, lat))
-    for k, circ in enumerate(fence.get("circles", [])):
-        where = f"geoFence circle {k}"
-        c = circ.get("circle") if isinstance(circ, dict) else None
-        if not isinstance(c, dict):
-            raise InputError(path, "circle entry without 'circle'", where)
-        lon, lat = _latlon_pair(path, where, c.get("center"))
-        r = c.get("radius")
-        if not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0:
-            raise InputError(path, f"radius must be a positive number, not {r!r}", where)
-        items.append(
-            FenceItem(
-                CIRCLE_INCLUSION if circ.get("inclusion") else CIRCLE_EXCLUSION, float(r), lon, lat
-            )
-        )
-    return items
+    if version == 1:
+        pts = fence.get("polygon", [])
+        if pts:
+            items += _polygon(path, "geoFence polygon", pts, inclusion=True)
+    else:
+        polygons, circles = fence.get("polygons", []), fence.get("circles", [])
+        for key, value in (("polygons", polygons), ("circles", circles)):
+            if not isinstance(value, list):
+                raise InputError(path, f"geoFence {key} must be a list, not {value!r}")
+        for k, poly in enumerate(polygons):
+            where = f"geoFence polygon {k}"
+            if not isinstance(poly, dict):
+                raise InputError(path, "a polygon must be an object", where)
+            items += _polygon(path, where, poly.get("polygon"), bool(poly.get("inclusion")))
+        for k, circ in enumerate(circles):
+            items.append(_circle(path, f"geoFence circle {k}", circ))
+    ret = None
+    if fence.get("breachReturn") is not None:
+        ret = _latlon_pair(path, "geoFence breachReturn", fence["breachReturn"])
+    return PlanFence(items, ret, version)
+
+
+def _circle(path, where, circ):
+    c = circ.get("circle") if isinstance(circ, dict) else None
+    if not isinstance(c, dict):
+        raise InputError(path, "circle entry without 'circle'", where)
+    lon, lat = _latlon_pair(path, where, c.get("center"))
+    r = c.get("radius")
+    if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0:
+        raise InputError(path, f"radius must be a positive number, not {r!r}", where)
+    cmd = CIRCLE_INCLUSION if circ.get("inclusion") else CIRCLE_EXCLUSION
+    return FenceItem(cmd, float(r), lon, lat)
+
+
+def read_plan_fence(path):
+    """The polygons and circles of a QGroundControl plan's geoFence as FenceItems (polygons,
+    then circles; the breach return point is :func:`read_plan_geofence`'s).
+
+    Raises a one-line InputError naming the polygon or circle that is malformed.
+    """
+    return read_plan_geofence(path).items
 
 
 # -- missions ---------------------------------------------------------------------------

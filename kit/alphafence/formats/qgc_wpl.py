@@ -7,6 +7,8 @@ reports them; a mission's line 0 is home. This module writes and reads both.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from alphafence.errors import InputError
 from alphafence.geo.coords import checked_position, latlon
 from alphafence.mavlink import ids
@@ -59,8 +61,21 @@ def mission_waypoints_text(items, home_lonlat) -> str:
     return rows_text(rows)
 
 
-def wpl_rows(path):
-    """The rows of a QGC WPL file: ``(where, seq, command, param1, lat, lon)``.
+class WplRow(NamedTuple):
+    """One line of a QGC WPL file, as read (``where`` names the line for messages)."""
+
+    where: str
+    seq: int
+    frame: int
+    command: int
+    params: tuple  # param1..param4
+    lat: float
+    lon: float
+    alt: float
+
+
+def wpl_records(path):
+    """The rows of a QGC WPL file as :class:`WplRow`, in file order.
 
     Unreadable files, a missing header, wrong field counts and non-numbers raise a one-line
     InputError naming the line.
@@ -82,9 +97,22 @@ def wpl_rows(path):
         if len(f) != 12:
             raise InputError(path, f"expected 12 fields, got {len(f)}", where)
         try:
-            yield where, int(f[0]), int(f[3]), float(f[4]), float(f[8]), float(f[9])
+            seq, frame, command = int(f[0]), int(f[2]), int(f[3])
+            params = tuple(float(v) for v in f[4:8])
+            lat, lon, alt = float(f[8]), float(f[9]), float(f[10])
         except ValueError:
             raise InputError(path, "non-numeric field", where) from None
+        yield WplRow(where, seq, frame, command, params, lat, lon, alt)
+
+
+def wpl_rows(path):
+    """The rows of a QGC WPL file: ``(where, seq, command, param1, lat, lon)``.
+
+    Unreadable files, a missing header, wrong field counts and non-numbers raise a one-line
+    InputError naming the line.
+    """
+    for r in wpl_records(path):
+        yield r.where, r.seq, r.command, r.params[0], r.lat, r.lon
 
 
 def read_waypoints_fence(path):
