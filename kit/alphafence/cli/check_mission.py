@@ -1,4 +1,5 @@
-"""alphafence check-mission: which legs of a mission cross or graze keep-out fences."""
+"""alphafence check-mission: which legs of a mission cross or graze keep-out fences, or leave
+keep-in fences."""
 
 from __future__ import annotations
 
@@ -14,8 +15,11 @@ def register(sub):
         "check-mission",
         help="check a mission's legs against fences",
         description="List the legs of a mission (QGroundControl .plan or QGC WPL waypoint "
-        "file) that cross a keep-out fence or come within --clearance of one. Exit code 1 "
-        "when any leg crosses a keep-out fence, 2 on bad input, else 0.",
+        "file) that cross a keep-out fence or come within --clearance of one, or leave a "
+        "keep-in fence or come within --clearance of its edge. Every NAV command with a "
+        "position is a leg's end; DO_JUMP is followed (each leg checked once). Exit code 1 "
+        "when any leg crosses a keep-out fence or leaves a keep-in fence, 2 on bad input, "
+        "else 0.",
     )
     p.add_argument("mission", metavar="MISSION", help="QGroundControl .plan or QGC WPL file")
     p.add_argument("--fences", required=True, metavar="FENCES", help="fence GeoJSON")
@@ -24,13 +28,23 @@ def register(sub):
         type=non_negative("--clearance"),
         default=20.0,
         metavar="M",
-        help="legs closer than M metres graze a fence (default 20)",
+        help="legs closer than M metres to a fence (or a keep-in fence's edge) graze it "
+        "(default 20)",
     )
     p.set_defaults(func=run)
 
 
+def _verdict(issue, clearance) -> str:
+    if issue.keep_in:
+        return (
+            "[red]LEAVES[/]" if issue.crosses else f"[yellow]near its edge[/] (< {clearance:g} m)"
+        )
+    return "[red]CROSSES[/]" if issue.crosses else f"[yellow]grazes[/] (< {clearance:g} m)"
+
+
 def run(args) -> int:
-    """Print the legs near keep-out fences; exit 1 when any leg crosses one, else 0."""
+    """Print the legs near keep-out fences and keep-in fences' edges; exit 1 when any leg
+    crosses a keep-out fence or leaves a keep-in fence, else 0."""
     from alphafence.formats.fence_read import read_fence_file as read_fences
     from alphafence.formats.mission import read_mission
     from alphafence.route.legs import check_legs
@@ -38,10 +52,11 @@ def run(args) -> int:
     records = read_fences(args.fences)
     waypoints = read_mission(args.mission)
     issues, legs, warning_legs = check_legs(waypoints, records, args.clearance)
-    crossing = {i.leg for i in issues if i.crosses}
-    grazing = {i.leg for i in issues if not i.crosses} - crossing
+    crossing = {i.leg for i in issues if i.crosses and not i.keep_in}
+    leaving = {i.leg for i in issues if i.crosses and i.keep_in} - crossing
+    grazing = {i.leg for i in issues if not i.crosses} - crossing - leaving
     if issues:
-        t = Table(title=f"{args.mission}: legs near keep-out fences")
+        t = Table(title=f"{args.mission}: legs near keep-out fences or keep-in fences' edges")
         for col in ("leg", "from", "to", "fence", "distance m", "verdict"):
             t.add_column(col, justify="right" if col in ("leg", "distance m") else "left")
         for i in issues:
@@ -49,9 +64,9 @@ def run(args) -> int:
                 str(i.leg),
                 i.start,
                 i.end,
-                i.fence,
+                i.fence + (" (keep-in)" if i.keep_in else ""),
                 f"{i.distance_m:.1f}",
-                "[red]CROSSES[/]" if i.crosses else f"[yellow]grazes[/] (< {args.clearance:g} m)",
+                _verdict(i, args.clearance),
             )
         out_console.print(t)
     if warning_legs:
@@ -59,8 +74,9 @@ def run(args) -> int:
             f"[yellow]note:[/] leg(s) {', '.join(map(str, sorted(warning_legs)))} "
             "pass through warning layers"
         )
+    clear = len(legs) - len(crossing) - len(leaving) - len(grazing)
     out_console.print(
         f"{len(legs)} legs: {len(crossing)} cross a keep-out fence, {len(grazing)} graze one "
-        f"(within {args.clearance:g} m), {len(legs) - len(crossing) - len(grazing)} clear"
+        f"(within {args.clearance:g} m), {len(leaving)} leave a keep-in fence, {clear} clear"
     )
-    return 1 if crossing else 0
+    return 1 if crossing or leaving else 0
