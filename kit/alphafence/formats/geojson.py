@@ -124,7 +124,7 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
     return features_of(path, enumerate(raw), rules, repaired, skipped)
 
 
-def features_of(path, numbered, rules, repaired, skipped):
+def features_of(path, numbered, rules, repaired, skipped, parsed=None):
     """The restricted features among GeoJSON Feature objects.
 
     Parameters
@@ -135,14 +135,18 @@ def features_of(path, numbered, rules, repaired, skipped):
         Each parsed Feature with its index in the file.
     rules, repaired, skipped
         As for :func:`read_geojson_doc`.
+    parsed : sequence of shapely geometry or None, optional
+        Each Feature's geometry as GEOS read it from the text (``shapely.from_geojson``, in
+        one vectorised call), or None where it could not: those are read from the parsed
+        object, which also gives their error message.
 
     Returns
     -------
     list of Feature
     """
     geoms, tags_list, sources, rule_list = [], [], [], []
-    for i, feat in numbered:
-        found = _restricted(path, i, feat, rules, skipped)
+    for k, (i, feat) in enumerate(numbered):
+        found = _restricted(path, i, feat, rules, skipped, None if parsed is None else parsed[k])
         if found is not None:
             geoms.append(found[0])
             tags_list.append(found[1])
@@ -160,7 +164,7 @@ def features_of(path, numbered, rules, repaired, skipped):
     ]
 
 
-def _restricted(path, i, feat, rules, skipped):
+def _restricted(path, i, feat, rules, skipped, parsed=None):
     """(geometry, tags, source, rule) of one restricted Feature, or None when it is not one."""
     label = f"feature {i}"
     if not isinstance(feat, dict) or feat.get("type") != "Feature":
@@ -175,7 +179,7 @@ def _restricted(path, i, feat, rules, skipped):
     if not isinstance(gj, dict) or not isinstance(gj.get("type"), str):
         raise InputError(path, "geometry must be an object with a type", label)
     try:
-        geom = shapely.geometry.shape(gj)
+        geom = parsed if parsed is not None else shapely.geometry.shape(gj)
     except GeometryTypeError:
         raise InputError(path, f"unknown geometry type {gj.get('type')!r}", label) from None
     except (ValueError, TypeError, IndexError, KeyError, AttributeError, ShapelyError) as exc:
