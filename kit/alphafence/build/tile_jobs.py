@@ -108,7 +108,7 @@ def run_job(job: JobInput) -> JobOutput:
     -------
     JobOutput
     """
-    from alphafence.formats.fence_geojson import fences_geojson
+    from alphafence.formats.fence_geojson import fence_features
 
     features = Spool.decode(job.records, job.rule_table, job.origins)
     sites = []
@@ -120,7 +120,7 @@ def run_job(job: JobInput) -> JobOutput:
         fences.extend(site_fences(site, job.options))
     encoded = []
     if job.encoders:
-        docs = fences_geojson(fences)["features"]
+        docs = fence_features(fences)
         encoded = [encode(docs) for encode in job.encoders]
     return JobOutput(
         job.number,
