@@ -1,5 +1,10 @@
 """alphafence upload: compile (if needed), upload, verify by reading back, set fence parameters.
 
+An onboard ``.plan`` (its geoFence, either version, with its breach return point) or
+``.waypoints`` file is checked as ArduPilot would check it and against the ``--profile``'s
+storage (items and bytes, and ``--items``) before anything is sent, as a compiled fence GeoJSON
+is; a dry run prints the items it would send (``--figure``: draws them).
+
 With a file-backed storage profile (``--profile navio2``, ``sd-fence``) the vehicle's
 ``BRD_SD_FENCE`` is read first: too small, and the upload stops before anything is sent, or
 with ``--reboot`` (disarmed only) it is set and the vehicle rebooted before the upload.
@@ -8,6 +13,8 @@ with ``--reboot`` (disarmed only) it is set and the vehicle rebooted before the 
 from __future__ import annotations
 
 import asyncio
+
+from rich.table import Table
 
 from alphafence.cli.common import (
     add_link_option,
@@ -18,9 +25,15 @@ from alphafence.cli.common import (
     signing_key,
     unsigned_hint,
 )
-from alphafence.cli.options import add_compile_options, bbox, compile_from_args, storage_profile
+from alphafence.cli.options import (
+    add_compile_options,
+    bbox,
+    compile_from_args,
+    figure_wants,
+    storage_profile,
+)
 from alphafence.cli.tables import compile_report
-from alphafence.errors import InputError, VehicleError
+from alphafence.errors import InputError, VehicleError, need
 from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
 
 # MAVSDK's results for a fence the vehicle has no room for (too many items; too many bytes)
@@ -70,6 +83,12 @@ def register(sub):
         "set it and reboot the vehicle (only while disarmed), then upload",
     )
     p.add_argument("--dry-run", action="store_true", help="compile and check, but do not connect")
+    p.add_argument(
+        "--figure",
+        metavar="PNG",
+        help="draw the fence items it sends: polygons and circles (inclusion green, exclusion "
+        "red) and the return point",
+    )
     add_trust_options(p)
     add_signing_option(p)
     add_link_option(p)
@@ -82,18 +101,21 @@ def register(sub):
 def load_items(args):
     """The fence items to upload and, for a fence GeoJSON, the compilation that made them.
 
+    An onboard ``.plan`` gives its geoFence's items with its breach return point first; a
+    ``.waypoints`` file its items as they are.
+
     Returns
     -------
     tuple
         ``(items, CompileResult or None)``.
     """
     from alphafence.formats.fence_read import read_fence_file as read_fences
-    from alphafence.formats.qgc_plan import read_plan_fence
+    from alphafence.formats.qgc_plan import read_plan_geofence
     from alphafence.formats.qgc_wpl import read_waypoints_fence
 
     name = args.fences.lower()
     if name.endswith(".plan"):
-        return read_plan_fence(args.fences), None
+        return read_plan_geofence(args.fences).upload_items, None
     if name.endswith((".waypoints", ".txt")):
         return read_waypoints_fence(args.fences), None
     if not (args.area or args.bbox):
@@ -104,12 +126,92 @@ def load_items(args):
     return result.items, result
 
 
+def check_items(path, items, profile, max_items=None):
+    """Check fence items read from a file as ArduPilot's loader checks them and against the
+    storage they are for, as a compilation fits its items to it.
+
+    Parameters
+    ----------
+    path : str
+        The file, for messages.
+    items : list of FenceItem
+    profile : Profile
+        The vehicle's fence storage.
+    max_items : int, optional
+        ``--items``: at most this many.
+
+    Returns
+    -------
+    list of OnboardFence
+        The polygons and circles the items make.
+
+    Raises
+    ------
+    InputError
+        One line: an item ArduPilot refuses, no polygon or circle at all (the upload would
+        leave the vehicle without a fence), or more items or bytes than the storage holds.
+    """
+    from alphafence.mavlink.storage import storage_bytes
+    from alphafence.onboard.decode import decode_fence
+
+    fences = decode_fence(items, source=path)
+    if not fences:
+        raise InputError(
+            path, "no polygon or circle: uploading it would leave the vehicle without a fence"
+        )
+    used = storage_bytes(items)
+    if max_items is not None and len(items) > max_items:
+        raise InputError(
+            path, f"{len(items)} fence items: --items allows at most {max_items} items"
+        )
+    if len(items) > profile.items or used > profile.bytes:
+        raise InputError(
+            path,
+            f"{len(items)} fence items, {used} bytes: the {profile.name} profile holds "
+            f"{profile.items} items and {profile.bytes} bytes (choose its --profile, or compile "
+            "the fences for it)",
+        )
+    return fences
+
+
+def items_report(items, fences, profile) -> None:
+    """Print the items an upload sends: one row per polygon or circle, and the return point."""
+    from alphafence.mavlink.items import RETURN_POINT
+    from alphafence.mavlink.storage import CIRCLE_BYTES, RETURN_BYTES, polygon_bytes, storage_bytes
+
+    t = Table(
+        title=f"{len(items)} items, {storage_bytes(items)} of {profile.bytes} bytes "
+        f"({profile.name}), at most {profile.items} items"
+    )
+    for col in ("sent as", "fence", "size", "bytes", "first position (lat, lon)"):
+        t.add_column(col, justify="right" if col == "bytes" else "left")
+    for k, it in enumerate(items):
+        if it.command == RETURN_POINT:
+            pos = f"{it.lat:.7f}, {it.lon:.7f}"
+            t.add_row(f"item {k}", "return point", "", str(RETURN_BYTES), pos)
+    for f in fences:
+        lon, lat = f.lonlat[0]
+        polygon = f.shape == "polygon"
+        t.add_row(
+            f.items,
+            f"{f.kind} {f.shape} {f.number}",
+            f"{len(f.lonlat)} vertices" if polygon else f"radius {f.radius_m:g} m",
+            str(polygon_bytes(len(f.lonlat)) if polygon else CIRCLE_BYTES),
+            f"{lat:.7f}, {lon:.7f}",
+        )
+    out_console.print(t)
+
+
 def run(args) -> int:
-    """Check the fences' signature, compile if needed, upload, read back, set parameters.
+    """Check the fences' signature, compile if needed (or check a plan's or waypoint file's
+    items against the storage), upload, read back, set parameters.
 
     Exit status 0, or 3 when the vehicle or the link fails (a
     :class:`~alphafence.errors.VehicleError`, mapped by :func:`alphafence.cli.main`).
     """
+    from alphafence.onboard.decode import decode_fence
+
+    need(*figure_wants(args.figure))
     check_trust(args, args.fences)
     profile = storage_profile(args)
     if args.reboot and not profile.file_backed:
@@ -121,6 +223,18 @@ def run(args) -> int:
     items, compiled = load_items(args)
     if compiled is not None:
         compile_report(compiled)
+        fences = decode_fence(items, source=args.fences)
+    else:
+        fences = check_items(args.fences, items, profile, args.items)
+        if args.dry_run:
+            items_report(items, fences, profile)
+    if args.figure:
+        from alphafence.mavlink.items import RETURN_POINT
+        from alphafence.plots.items import fence_items_figure
+
+        ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
+        title = f"{args.fences}: {len(items)} fence items ({profile.name})"
+        fence_items_figure(fences, ret, args.figure, title)
     if args.dry_run:
         out_console.print(f"dry run: {len(items)} fence items ready; nothing sent")
         return 0
