@@ -98,6 +98,7 @@ OPTIONAL = {
     "pymavlink": ("pymavlink", "companion", None, None),
     "mavsdk": ("mavsdk", "vehicle", None, None),
     "pyarrow": ("pyarrow", "parquet", None, "17.0"),
+    "lxml": ("lxml", "kml", "python3-lxml", None),
 }
 
 

@@ -1,4 +1,4 @@
-"""Read a geofence database: OSM (.osm.pbf, .osm), GeoJSON, ED-269 JSON."""
+"""Read a geofence database: OSM (.osm.pbf, .osm), GeoJSON, ED-269 JSON, KML/KMZ, OpenAir."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from collections import Counter
 from pathlib import Path
 
 from alphafence.errors import InputError, need
+from alphafence.formats import kml, openair
 from alphafence.formats.ed269 import looks_like_ed269, read_ed269_doc
 from alphafence.formats.features import Database, select_bbox
 from alphafence.formats.geojson import read_geojson_doc
@@ -31,7 +32,8 @@ def osm_wants(paths):
 
 def read_file(path, rules, repaired, skipped):
     """The restricted features of one file, read by its suffix: OSM through pyosmium, JSON
-    as ED-269 when it looks like it, else as GeoJSON.
+    as ED-269 when it looks like it, else as GeoJSON; KML/KMZ; OpenAir (``.openair``, or a
+    ``.txt`` that starts with an ``AC`` record).
 
     Parameters
     ----------
@@ -59,6 +61,10 @@ def read_file(path, rules, repaired, skipped):
         from alphafence.formats.osm import read_osm  # pyosmium, only when OSM is read
 
         features = read_osm(path, rules, repaired, skipped)
+    elif name.endswith(kml.SUFFIXES):
+        features = kml.read_kml(path, rules, repaired, skipped)
+    elif name.endswith(openair.SUFFIXES) or name.endswith(".txt") and openair.sniff(path):
+        features = openair.read_openair(path, rules, repaired, skipped)
     elif should_stream(path):
         features = [f for batch in iter_geojson(path, rules, repaired, skipped) for f in batch]
     elif name.endswith((".geojson", ".json")):
@@ -70,7 +76,8 @@ def read_file(path, rules, repaired, skipped):
     else:
         raise InputError(
             path,
-            "unknown database format (expected .osm.pbf, .osm, .geojson, .geojsonl or ED-269 .json)",
+            "unknown database format (expected .osm.pbf, .osm, .geojson, .geojsonl, ED-269 .json, "
+            ".kml, .kmz or OpenAir .openair/.txt)",
         )
     if not features:
         skipped[f"all of {path}: it holds no restricted features (rules: {rules.source})"] += (

@@ -1,0 +1,381 @@
+"""KML and KMZ (Google Earth, QGroundControl's KML import, national drone-zone exports such as
+the UK's 3D airspace KMZ), read with lxml (the ``kml`` extra).
+
+Each Placemark's Polygon, LinearRing, LineString or Point (alone or in a MultiGeometry) makes
+volumes. Altitudes come from the coordinates when ``altitudeMode`` is ``absolute`` (AMSL) or
+``relativeToGround`` (AGL); ``clampToGround`` (the default) has none:
+
+* an extruded geometry reaches down to the ground: the band is ground up to its highest point;
+* the other polygons of a placemark are one volume: their footprints united (vertical walls,
+  which have no footprint, only add their altitudes), the band from the lowest to the highest
+  coordinate; a flat polygon (one altitude) has no band (a keep-out at every height).
+
+Pseudo-tags for the rules: ``airspace:format`` (``kml``), ``name``, ``kml:style`` (the
+styleUrl without ``#``), ``kml:folder`` (the innermost Folder's name), ``airspace:class`` (an
+ExtendedData ``class``), and every ExtendedData field by its name (``alphafence:kind =
+keep_in`` makes an operating area). A Point with an ExtendedData ``radius`` (metres) is a
+circle. A KMZ is a zip: its ``doc.kml`` (else its first ``.kml``) is read, never more than
+``ALPHAFENCE_MAX_JSON_MB`` however well it compresses.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import shapely
+from shapely.errors import ShapelyError
+
+from alphafence.errors import InputError, need
+from alphafence.formats.airspace import circle_polygon, features_from_volumes, fences_from_volumes
+from alphafence.formats.jsonfile import max_json_bytes, read_limited
+
+SUFFIXES = (".kml", ".kmz")
+MAX_KMZ_ENTRIES = 10_000
+_GEOMETRIES = ("Point", "LineString", "LinearRing", "Polygon", "MultiGeometry")
+_REFERENCES = {"absolute": "AMSL", "relativeToGround": "AGL"}
+_CLASS_KEYS = ("airspace:class", "class", "airspace_class", "airspaceclass")
+_WALL = 1e-6  # a polygon whose area is below this times its perimeter squared is a wall
+
+
+def looks_like_kml(head: bytes) -> bool:
+    """Whether the first bytes of a file are a KMZ (zip) or a KML document.
+
+    Examples
+    --------
+    >>> looks_like_kml(b'<?xml version="1.0"?><kml xmlns="http://www.opengis.net/kml/2.2">')
+    True
+    >>> looks_like_kml(b'{"type": "FeatureCollection"}')
+    False
+    """
+    return head[:4] == b"PK\x03\x04" or b"<kml" in head[:1024]
+
+
+def read_document(path):
+    """The parsed KML document of a ``.kml`` or ``.kmz`` file (its root element).
+
+    Raises
+    ------
+    InputError
+        Unreadable, too large, not a zip or without a ``.kml`` inside (KMZ), malformed XML or
+        not KML, in one line.
+    MissingDependency
+        lxml is not installed.
+    """
+    need(("lxml.etree", f"reading {path}"))
+    from lxml import etree
+
+    limit = max_json_bytes()
+    data = read_limited(path, limit, "larger than ALPHAFENCE_MAX_JSON_MB")
+    if data[:4] == b"PK\x03\x04" or str(path).lower().endswith(".kmz"):
+        data = _kmz_document(path, limit)
+    parser = etree.XMLParser(
+        resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
+    )
+    try:
+        root = etree.fromstring(data, parser)
+    except etree.XMLSyntaxError as exc:
+        raise InputError(path, f"malformed XML at line {exc.lineno}: {exc.msg}") from None
+    except ValueError as exc:  # e.g. an encoding lxml does not know
+        raise InputError(path, f"malformed XML ({exc})") from None
+    if _local(root) != "kml":
+        raise InputError(path, f"not a KML document (its root is <{_local(root)}>, not <kml>)")
+    return root
+
+
+def _kmz_document(path, limit):
+    import zipfile
+    import zlib
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            if len(infos) > MAX_KMZ_ENTRIES:
+                raise InputError(path, f"a KMZ of {len(infos)} files (at most {MAX_KMZ_ENTRIES})")
+            kmls = [i for i in infos if i.filename.lower().endswith(".kml") and not i.is_dir()]
+            if not kmls:
+                raise InputError(path, "a KMZ without a .kml document inside")
+            root = [i for i in kmls if "/" not in i.filename]
+            doc = next((i for i in kmls if i.filename.lower() == "doc.kml"), (root or kmls)[0])
+            if doc.file_size > limit:
+                raise InputError(path, f"{doc.filename} is larger than ALPHAFENCE_MAX_JSON_MB")
+            with zf.open(doc) as fh:
+                data = fh.read(limit + 1)  # whatever the header says: never more than this
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError) as exc:
+        raise InputError(path, f"not a readable KMZ (zip) archive ({exc})") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc})") from None
+    if len(data) > limit:
+        raise InputError(path, f"{doc.filename} is larger than ALPHAFENCE_MAX_JSON_MB")
+    return data
+
+
+def _local(el):
+    tag = el.tag
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
+
+
+def _children(el, name):
+    return [c for c in el if _local(c) == name]
+
+
+def _text(el, name):
+    for c in el:
+        if _local(c) == name:
+            return (c.text or "").strip() or None
+    return None
+
+
+def placemarks(root):
+    """``(placemark element, innermost Folder's name)`` of every Placemark, in document order
+    (inside Documents and Folders at any depth)."""
+    out = []
+    for el in root.iter():
+        if _local(el) == "Placemark":
+            folders = (a for a in el.iterancestors() if _local(a) == "Folder")
+            out.append((el, next((_text(a, "name") for a in folders), None)))
+    return out
+
+
+def _coordinates(path, label, el):
+    """An (n, 3) array (altitude NaN where absent) from a ``<coordinates>`` element's text."""
+    text = re.sub(r"\s*,\s*", ",", (el.text or "").strip())
+    rows = []
+    for token in text.split():
+        fields = token.split(",")
+        try:
+            values = [float(v) for v in fields]
+        except ValueError:
+            values = []
+        if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
+            raise InputError(path, f"malformed coordinates {token[:60]!r}", label)
+        rows.append(values if len(values) == 3 else [*values, math.nan])
+    if not rows:
+        raise InputError(path, "empty coordinates", label)
+    return np.array(rows, float)
+
+
+def _ring(path, label, el):
+    """The coordinates of the LinearRing inside ``el`` (or of ``el`` itself)."""
+    ring = el if _local(el) == "LinearRing" else next(iter(_children(el, "LinearRing")), None)
+    coords = None if ring is None else next(iter(_children(ring, "coordinates")), None)
+    if coords is None:
+        raise InputError(path, "a ring without coordinates", label)
+    return _coordinates(path, label, coords)
+
+
+def _primitives(path, label, el, out):
+    """(kind, shapely 2-D geometry, z values, altitudeMode, extrude) of a geometry element."""
+    name = _local(el)
+    if name == "MultiGeometry":
+        for child in el:
+            if _local(child) in _GEOMETRIES:
+                _primitives(path, label, child, out)
+        return
+    mode = _text(el, "altitudeMode") or "clampToGround"
+    extrude = (_text(el, "extrude") or "0").lower() in ("1", "true")
+    try:
+        if name == "Polygon":
+            outer = [_ring(path, label, b) for b in _children(el, "outerBoundaryIs")]
+            if len(outer) != 1:
+                raise InputError(path, "a Polygon needs one outerBoundaryIs", label)
+            inners = [
+                _ring(path, label, r)
+                for b in _children(el, "innerBoundaryIs")
+                for r in _children(b, "LinearRing")
+            ]
+            geom = shapely.Polygon(outer[0][:, :2], [h[:, :2] for h in inners])
+            zs = np.concatenate([outer[0][:, 2], *[h[:, 2] for h in inners]])
+            out.append(("area", geom, zs, mode, extrude))
+        elif name == "LinearRing":
+            coords = _ring(path, label, el)
+            out.append(("area", shapely.Polygon(coords[:, :2]), coords[:, 2], mode, extrude))
+        else:
+            node = next(iter(_children(el, "coordinates")), None)
+            if node is None:
+                raise InputError(path, f"a {name} without coordinates", label)
+            coords = _coordinates(path, label, node)
+            if name == "Point":
+                geom = shapely.Point(coords[0, :2])
+            else:
+                geom = shapely.LineString(coords[:, :2])
+            out.append(("point" if name == "Point" else "line", geom, coords[:, 2], mode, extrude))
+    except (ShapelyError, ValueError) as exc:
+        raise InputError(path, f"malformed {name} ({exc})", label) from None
+
+
+def _band(prims, extruded):
+    """``(lower, upper, reference)`` of primitives that share one altitudeMode, else no band."""
+    modes = {p[3] for p in prims}
+    zs = np.concatenate([p[2] for p in prims]) if prims else np.array([])
+    if len(modes) != 1 or (ref := _REFERENCES.get(modes.pop())) is None:
+        return None, None, None
+    if zs.size == 0 or np.isnan(zs).any():
+        return None, None, None
+    low, high = float(zs.min()), float(zs.max())
+    if extruded:
+        return (0.0, high, ref) if high > 0 else (None, None, None)
+    return (low, high, ref) if high > low else (None, None, None)
+
+
+def _is_wall(geom):
+    length = geom.length
+    return length == 0 or geom.area <= _WALL * length * length
+
+
+def _radius(path, label, ext):
+    value = ext.get("radius", ext.get("radius_m"))
+    if value is None:
+        return None
+    try:
+        r = float(value)
+    except ValueError:
+        r = math.nan
+    if not (math.isfinite(r) and r > 0):
+        raise InputError(path, f"radius must be a positive number of metres, not {value!r}", label)
+    return r
+
+
+def _extended(pm):
+    """ExtendedData fields by name: ``<Data name><value>`` and ``<SimpleData name>``."""
+    out = {}
+    for ext in _children(pm, "ExtendedData"):
+        for data in ext.iter():
+            name = data.get("name") if isinstance(data.tag, str) else None
+            if not name:
+                continue
+            if _local(data) == "Data":
+                value = _text(data, "value")
+            elif _local(data) == "SimpleData":
+                value = (data.text or "").strip() or None
+            else:
+                continue
+            if value is not None:
+                out[name] = value
+    return out
+
+
+def _tags(name, style, folder, ext):
+    tags = {k: v for k, v in ext.items()}
+    tags["airspace:format"] = "kml"
+    for key, value in (("name", name), ("kml:style", style), ("kml:folder", folder)):
+        if value:
+            tags[key] = value
+    cls = next((v for k, v in ext.items() if k.lower() in _CLASS_KEYS), None)
+    if cls:
+        tags["airspace:class"] = cls
+    return tags
+
+
+def _placemark_volumes(path, index, pm, folder, skipped):
+    name = _text(pm, "name")
+    label = f"placemark {index}" + (f" ({name})" if name else "")
+    style = _text(pm, "styleUrl")
+    style = style.rsplit("#", 1)[-1] if style else None
+    ext = _extended(pm)
+    tags = _tags(name, style, folder, ext)
+    prims = []
+    for el in pm:
+        if _local(el) in _GEOMETRIES:
+            _primitives(path, label, el, prims)
+    if not prims:
+        if skipped is not None:
+            skipped["KML placemark without a Polygon, LinearRing, LineString or Point"] += 1
+        return []
+    ident = pm.get("id") or f"placemark/{index}"
+    parts = []  # (geometry, lower, upper, lower reference, upper reference, extra properties)
+    for p in prims:
+        if p[4] or p[0] != "area":  # extruded, points and lines: each its own volume
+            lower, upper, ref = _band([p], p[4])
+            geom, extra = p[1], {}
+            radius = _radius(path, label, ext) if p[0] == "point" else None
+            if radius is not None:
+                lon, lat = p[1].x, p[1].y
+                geom, extra = circle_polygon(lon, lat, radius), {"circle": [lon, lat, radius]}
+            parts.append((geom, lower, upper, ref and ("AGL" if p[4] else ref), ref, extra))
+    rest = [p for p in prims if not p[4] and p[0] == "area"]
+    if rest:
+        lower, upper, ref = _band(rest, False)
+        parts.append((_footprint(path, label, rest), lower, upper, ref, ref, {}))
+    volumes = []
+    for k, (geom, lower, upper, lref, uref, extra) in enumerate(parts):
+        props = {"lower_reference": lref, "upper_reference": uref, **extra} if uref else extra
+        source = ident if len(parts) == 1 else f"{ident}#{k}"
+        volumes.append((geom, dict(tags), source, lower, upper, props))
+    return volumes
+
+
+def _footprint(path, label, prims):
+    """The area under a placemark's polygons: floors and ceilings united (an identical floor
+    and ceiling are one), or, with walls only, the outline they stand on."""
+    floors = [p[1] for p in prims if not _is_wall(p[1])]
+    unique = list({shapely.normalize(f).wkb: f for f in floors}.values())
+    if len(unique) == 1:
+        return unique[0]
+    if not unique:
+        rings = shapely.polygonize([shapely.boundary(p[1]) for p in prims])
+        geom = shapely.union_all(shapely.get_parts(rings))
+    else:
+        try:
+            geom = shapely.union_all(unique)
+        except ShapelyError:
+            geom = shapely.union_all(shapely.make_valid(np.array(unique, dtype=object)))
+    if geom.is_empty:
+        raise InputError(path, "a polygon without area", label)
+    return geom
+
+
+def read_volumes(path, skipped=None):
+    """The placemarks of a KML or KMZ file as volumes (see :mod:`alphafence.formats.airspace`).
+
+    Parameters
+    ----------
+    path : str or Path
+    skipped : collections.Counter, optional
+        Placemarks without a geometry read here are counted.
+
+    Returns
+    -------
+    list of tuple
+
+    Raises
+    ------
+    InputError
+        One line naming the placemark that is malformed.
+    """
+    root = read_document(path)
+    volumes = []
+    for index, (pm, folder) in enumerate(placemarks(root)):
+        volumes.extend(_placemark_volumes(path, index, pm, folder, skipped))
+    return volumes
+
+
+def read_kml(path, rules, repaired, skipped):
+    """The restricted features of a KML or KMZ file, matched against ``rules`` by the
+    pseudo-tags above (by default every zone is a keep-out ``airspace``).
+
+    Returns
+    -------
+    list of Feature
+
+    Raises
+    ------
+    InputError
+        One line naming the placemark that is malformed.
+    MissingDependency
+        lxml is not installed.
+    """
+    volumes = read_volumes(path, skipped)
+    return features_from_volumes(path, volumes, rules, repaired, skipped, "KML placemark")
+
+
+def read_kml_fences(path):
+    """The placemarks of a KML or KMZ file as fences: keep-out unless ExtendedData
+    ``alphafence:kind`` says ``keep_in`` or ``warning``; bands as above.
+
+    Returns
+    -------
+    list of FenceRecord
+    """
+    return fences_from_volumes(path, read_volumes(path), "kml")
