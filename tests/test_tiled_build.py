@@ -169,3 +169,12 @@ def test_malta_on_a_local_dask_cluster_is_the_untiled_build(malta_untiled):
             )
     assert tiled.jobs > 2
     assert_same_build(untiled, tiled)
+
+
+def test_item_counts_are_what_fence_items_makes(malta_untiled):
+    from alphafence.mavlink.items import fence_items, item_count
+
+    _, _, untiled = malta_untiled
+    counted = [item_count(f) for f in untiled.fences]
+    assert counted == [len(fence_items([f])) for f in untiled.fences]
+    assert sum(counted) > 0 and 0 in counted  # polygons, circles' kin and warning layers

@@ -80,7 +80,7 @@ class JobOutput:
 
 def fence_rows(fences):
     """The numbers the build's summary needs per fence (see :attr:`JobOutput.rows`)."""
-    from alphafence.mavlink.items import fence_items
+    from alphafence.mavlink.items import item_count
 
     return [
         (
@@ -91,7 +91,7 @@ def fence_rows(fences):
             f.repaired,
             f.site_id,
             f.circle is not None,
-            len(fence_items([f])),
+            item_count(f),
         )
         for f in fences
     ]

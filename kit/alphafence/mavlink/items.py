@@ -35,6 +35,24 @@ def polygon_lonlat(poly) -> np.ndarray:
     return np.asarray(ring.coords)[:-1, :2]
 
 
+def item_count(fence) -> int:
+    """How many items :func:`fence_items` makes of one fence, without making them: a circle is
+    one, a polygon one per exterior vertex of each part, a warning layer none.
+
+    The vertices are counted on the fence's metric geometry (``local``) when it has one: the
+    same vertices as its WGS84 geometry, without transforming them.
+    """
+    if fence.kind not in ("keep_out", "keep_in"):
+        return 0
+    if fence.circle is not None:
+        return 1
+    geom = getattr(fence, "local", None)
+    if geom is None:
+        geom = fence.geometry
+    rings = shapely.get_exterior_ring(shapely.get_parts(geom))
+    return int((shapely.get_num_coordinates(rings) - 1).sum())
+
+
 def fence_items(fences):
     """Items for the fences a vehicle can hold: keep-out as exclusions, keep-in as
     inclusions. Warning layers have no onboard equivalent and are left to the companion."""
