@@ -156,7 +156,7 @@ def fences_from_volumes(path, volumes, what):
     geoms = make_valid_polygonal(geoms)
     out = []
     for g, (_, tags, source, lower, upper, props) in zip(geoms, volumes):
-        label = f"{what} {source}"
+        label = f"{source} ({tags['name']})" if tags.get("name") else source
         g = polygonal(g)
         if g is None:
             raise InputError(

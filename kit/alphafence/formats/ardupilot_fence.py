@@ -33,29 +33,25 @@ _PAIR = re.compile(r"^\s*(\S+)\s+(\S+)\s*$")
 
 
 def looks_like_legacy_fence(text: str) -> bool:
-    """Whether every line that is no comment is two numbers (``lat lon``), and there are some.
+    """Whether the first line that is no comment is two numbers (``lat lon``).
 
     Examples
     --------
-    >>> looks_like_legacy_fence("-35.3637\\t149.1636\\n-35.3587\\t149.1651\\n")
+    >>> looks_like_legacy_fence("# CMAC\n-35.3637\t149.1636\n-35.3587\t149.1651\n")
     True
-    >>> looks_like_legacy_fence("QGC WPL 110\\n")
+    >>> looks_like_legacy_fence("QGC WPL 110\n")
     False
     """
-    seen = False
     for line in text.splitlines():
         line = line.strip()
         if not line or line.startswith("#"):
             continue
         m = _PAIR.match(line)
-        if not m:
-            return False
         try:
-            float(m.group(1)), float(m.group(2))
+            return m is not None and all(math.isfinite(float(v)) for v in m.groups())
         except ValueError:
             return False
-        seen = True
-    return seen
+    return False
 
 
 def read_legacy_points(path):

@@ -1,5 +1,8 @@
 """Fence files of any output format read back as ``fence_geojson.FenceRecord``: the kit's fence
-GeoJSON, GeoJSON text sequences (RS-separated or one Feature per line) and GeoParquet.
+GeoJSON, GeoJSON text sequences (RS-separated or one Feature per line) and GeoParquet; and the
+fence files other tools write, read as they are: a QGroundControl plan's geoFence, a fence
+``.waypoints`` file and ArduPilot's legacy fence file (inclusion -> keep-in, exclusion ->
+keep-out, circles kept as circles), KML/KMZ and OpenAir zones (keep-out, their bands kept).
 
 A sequence is read one record at a time and a GeoParquet file one row group batch at a time,
 so neither is ever held whole as text; each record is checked as ``fence_geojson`` checks a
@@ -22,6 +25,13 @@ from alphafence.formats.jsonfile import max_json_bytes
 SEQ_SUFFIXES = (".geojsonl", ".geojsons", ".geojsonseq")
 GEOJSON_SUFFIXES = (".geojson", ".json")
 PARQUET_SUFFIXES = (".parquet",)
+OTHER_SUFFIXES = {
+    ".plan": "plan",
+    ".waypoints": "waypoints",
+    ".kml": "kml",
+    ".kmz": "kml",
+    ".openair": "openair",
+}
 CHUNK = 1 << 20
 
 
@@ -29,8 +39,10 @@ def read_fence_file(path) -> list:
     """The fences of a fence file, whatever format ``alphafence build`` wrote it in.
 
     The format is told by the suffix (``.geojson``/``.json``, ``.geojsonl``/``.geojsons``/
-    ``.geojsonseq``, ``.parquet``); any other suffix by the first bytes (RS: a sequence,
-    ``PAR1``: Parquet, else GeoJSON).
+    ``.geojsonseq``, ``.parquet``, ``.plan``, ``.waypoints``, ``.kml``/``.kmz``, ``.openair``);
+    any other suffix (``.txt``) by the first bytes (RS: a sequence, ``PAR1``: Parquet, a zip or
+    ``<kml``: KML, ``QGC WPL``: waypoints, a ``geoFence`` key: a plan, ``lat lon`` lines:
+    ArduPilot's legacy fence, an ``AC`` record: OpenAir, else GeoJSON).
 
     Parameters
     ----------
@@ -46,14 +58,31 @@ def read_fence_file(path) -> list:
     InputError
         One line naming the file and the feature (or record, or row) that is malformed.
     MissingDependency
-        A ``.parquet`` file without pyarrow installed.
+        A ``.parquet`` file without pyarrow installed, or a KML file without lxml.
     """
     kind = _kind(path)
     if kind == "seq":
         return read_sequence(path)
     if kind == "parquet":
         return read_geoparquet(path)
-    return fence_geojson.read_fences(path)
+    if kind == "geojson":
+        return fence_geojson.read_fences(path)
+    return _other(path, kind)
+
+
+def _other(path, kind):
+    """The fences of a fence file another tool wrote."""
+    from alphafence.formats import ardupilot_fence, kml, openair, qgc_plan, qgc_wpl
+
+    if kind == "plan":
+        return ardupilot_fence.item_fences(path, qgc_plan.read_plan_fence(path), "plan")
+    if kind == "waypoints":
+        return ardupilot_fence.item_fences(path, qgc_wpl.read_waypoints_fence(path), "waypoints")
+    if kind == "kml":
+        return kml.read_kml_fences(path)
+    if kind == "openair":
+        return openair.read_openair_fences(path)
+    return ardupilot_fence.read_legacy_fence(path)
 
 
 def _kind(path):
@@ -65,14 +94,36 @@ def _kind(path):
         return "parquet"
     if suffix in GEOJSON_SUFFIXES:
         return "geojson"
+    if suffix in OTHER_SUFFIXES:
+        return OTHER_SUFFIXES[suffix]
     try:
         with open(path, "rb") as fh:
-            head = fh.read(4)
+            head = fh.read(CHUNK)
     except OSError:
         return "geojson"  # its reader says what is wrong with the path
+    return _sniff(head)
+
+
+def _sniff(head):
+    """The format of a file by its first bytes."""
+    from alphafence.formats.ardupilot_fence import looks_like_legacy_fence
+    from alphafence.formats.kml import looks_like_kml
+    from alphafence.formats.openair import looks_like_openair
+
     if head[:1] == b"\x1e":
         return "seq"
-    return "parquet" if head == b"PAR1" else "geojson"
+    if head[:4] == b"PAR1":
+        return "parquet"
+    if looks_like_kml(head):
+        return "kml"
+    text = head.decode("latin-1")
+    if text.lstrip().startswith("QGC WPL"):
+        return "waypoints"
+    if text.lstrip().startswith("{"):
+        return "plan" if '"geoFence"' in text else "geojson"
+    if looks_like_legacy_fence(text):
+        return "legacy"
+    return "openair" if looks_like_openair(text) else "geojson"
 
 
 def fence_record(path, props, geometry, label, index):
