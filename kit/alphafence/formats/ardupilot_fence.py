@@ -39,7 +39,7 @@ def looks_like_legacy_fence(text: str) -> bool:
     --------
     >>> looks_like_legacy_fence("# CMAC\\n-35.3637\\t149.1636\\n-35.3587\\t149.1651\\n")
     True
-    >>> looks_like_legacy_fence("QGC WPL 110\n")
+    >>> looks_like_legacy_fence("QGC WPL 110\\n")
     False
     """
     for line in text.splitlines():
