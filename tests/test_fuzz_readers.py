@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 from alphafence.errors import InputError
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.formats.mission import read_mission
+from alphafence.formats.qgc_plan import read_plan_fence, read_plan_geofence
 from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.formats.rules import load_rules
 
@@ -299,6 +300,71 @@ def test_plan_reader(doc):
 
 @FUZZ
 @given(
+    st.one_of(st.sampled_from([1, 2, 3]), st.none(), scalars),
+    st.one_of(st.lists(coords, max_size=5), json_values),
+    st.one_of(coords, st.none(), scalars),
+)
+def test_plan_reader_version_1(version, polygon, breach_return):
+    # QGroundControl 3.2's geoFence: one "polygon" and a breachReturn without an altitude
+    fence = {"version": version, "polygon": polygon, "breachReturn": breach_return}
+    doc = {"fileType": "Plan", "geoFence": {k: v for k, v in fence.items() if v is not None}}
+    only_input_errors(read_plan_geofence, write(".plan", json.dumps(doc)))
+
+
+param_values = st.one_of(st.floats(-200, 200), st.integers(-2, 8), scalars)
+plan_items = st.lists(
+    st.fixed_dictionaries(
+        {
+            "type": st.sampled_from(["SimpleItem", "missionItem", "ComplexItem"]),
+            "command": st.one_of(st.sampled_from([16, 20, 22, 36, 80, 94, 177, 600, 601]), scalars),
+            "doJumpId": st.one_of(st.integers(0, 8), scalars),
+            "params": st.one_of(st.lists(param_values, max_size=8), scalars),
+        },
+        optional={
+            "coordinate": coords,
+            "param1": param_values,
+            "param2": param_values,
+            "param3": scalars,
+            "param4": scalars,
+            "TransectStyleComplexItem": json_values,
+        },
+    ),
+    max_size=8,
+)
+
+
+@FUZZ
+@given(plan_items, st.one_of(coords, json_values))
+def test_plan_mission_reader(items, home):
+    # every item form QGroundControl reads, DO_JUMPs by doJumpId to anywhere, loops for ever
+    doc = {"mission": {"items": items, "plannedHomePosition": home}}
+    only_input_errors(lambda p: read_mission(p, 1), write(".plan", json.dumps(doc)))
+
+
+@FUZZ
+@given(
+    st.lists(
+        st.tuples(
+            st.integers(0, 9),
+            st.sampled_from(["16", "20", "22", "94", "177", "600", "601", "5000", "x"]),
+            st.sampled_from(["0", "1", "2", "-1", "3.5", "nan", "1e12"]),
+            st.sampled_from(["0", "2", "-1", "nan", "inf", "5"]),
+            st.sampled_from(["35.9", "0", "nan", "95", "-35.9"]),
+            st.sampled_from(["14.5", "0", "200", "-14.5"]),
+        ),
+        max_size=8,
+    )
+)
+def test_waypoints_mission_reader(rows):
+    lines = ["QGC WPL 110"] + [
+        "\t".join([str(seq), "0", "3", cmd, p1, p2, "0", "0", lat, lon, "30", "1"])
+        for seq, cmd, p1, p2, lat, lon in rows
+    ]
+    only_input_errors(lambda p: read_mission(p, 1), write(".waypoints", "\n".join(lines) + "\n"))
+
+
+@FUZZ
+@given(
     st.lists(
         st.lists(
             st.one_of(
@@ -336,3 +402,202 @@ def test_truncated_pbf_at_many_lengths(tmp_path):
     data = MONACO.read_bytes()
     for cut in (0, 1, 17, 100, 4096, 65_537, len(data) // 3, len(data) - 1):
         only_input_errors(lambda p: read_database([p], RULES), write(".osm.pbf", data[:cut]))
+
+
+# -- KML/KMZ, OpenAir, ArduPilot's legacy fences; fence files as fences -------------------
+
+openair_args = st.one_of(
+    st.sampled_from(
+        [
+            "R",
+            "SFC",
+            "GND",
+            "FL65",
+            "FL 999",
+            "1000ft AGL",
+            "UNL",
+            "-5m",
+            "600 m MSL",
+            "1e400",
+            "X=52:00:00 N 001:00:00 W",
+            "X=52:00.5N 001:00.5E",
+            "X=99:00:00 N 200:00:00 E",
+            "D=-",
+            "D=+",
+            "D=?",
+            "W=5",
+            "52:00:00 N 001:00:00 W",
+            "52:10:00N 001:10:00E",
+            "52:00:00 N 001:00:00 W, 52:01:00 N 001:00:00 W",
+            "52:00:61 N 001:00:00 W",
+            "2,0,90",
+            "2, 90, 0",
+            "0.5",
+            "0",
+            "-1",
+            "nan",
+            "1e12",
+            "5,0,360",
+            "1e12,0,180",
+        ]
+    ),
+    st.text(max_size=12),
+)
+openair_records = st.lists(
+    st.tuples(
+        st.sampled_from(
+            ["AC", "AN", "AY", "AL", "AH", "V", "DP", "DA", "DB", "DC", "DY", "SP", "AT", "*"]
+        ),
+        openair_args,
+    ),
+    max_size=14,
+)
+
+
+@FUZZ
+@given(openair_records, st.sampled_from([".openair", ".txt"]))
+def test_openair_reader(records, suffix):
+    from alphafence.formats.fence_read import read_fence_file
+
+    text = "AC R\n" + "".join(f"{cmd} {arg}\n" for cmd, arg in records)
+    for read in (lambda p: read_database([p], RULES), read_fence_file):
+        only_input_errors(read, write(suffix, text))
+
+
+def _xml_text(value):
+    return str(value).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+kml_tuples = st.lists(
+    st.lists(
+        st.one_of(st.floats(-200, 200), st.integers(-1000, 1000), st.sampled_from(["nan", "x"])),
+        min_size=1,
+        max_size=4,
+    ).map(lambda t: ",".join(map(str, t))),
+    max_size=6,
+).map(" ".join)
+kml_common = st.tuples(
+    st.sampled_from(["", "absolute", "relativeToGround", "clampToGround", "relativeToSeaFloor"]),
+    st.sampled_from(["", "0", "1", "true"]),
+)
+
+
+def _kml_geometry(kind, coords, mode, extrude, inner=""):
+    head = f"<altitudeMode>{mode}</altitudeMode><extrude>{extrude}</extrude>"
+    ring = f"<LinearRing><coordinates>{coords}</coordinates></LinearRing>"
+    if kind == "Polygon":
+        body = f"<outerBoundaryIs>{ring}</outerBoundaryIs>{inner}"
+    elif kind == "LinearRing":
+        body = f"<coordinates>{coords}</coordinates>"
+    elif kind == "Empty":
+        return "<Polygon/>"
+    else:
+        body = f"<coordinates>{coords}</coordinates>"
+    return f"<{kind}>{head}{body}</{kind}>"
+
+
+kml_geometry = st.builds(
+    _kml_geometry,
+    st.sampled_from(["Point", "LineString", "LinearRing", "Polygon", "Empty", "Model"]),
+    kml_tuples,
+    *[st.sampled_from(v) for v in (["", "absolute", "relativeToGround"], ["0", "1"])],
+    st.sampled_from(
+        [
+            "",
+            "<innerBoundaryIs><LinearRing><coordinates>1,1 2,2</coordinates>"
+            "</LinearRing></innerBoundaryIs>",
+        ]
+    ),
+)
+kml_placemark = st.builds(
+    lambda name, data, geoms, multi: (
+        f"<Placemark><name>{_xml_text(name)}</name><ExtendedData>"
+        + "".join(f'<Data name="{k}"><value>{_xml_text(v)}</value></Data>' for k, v in data)
+        + "</ExtendedData>"
+        + (f"<MultiGeometry>{''.join(geoms)}</MultiGeometry>" if multi else "".join(geoms[:1]))
+        + "</Placemark>"
+    ),
+    st.text(max_size=6),
+    st.lists(
+        st.tuples(
+            st.sampled_from(["radius", "alphafence:kind", "class"]),
+            st.one_of(
+                st.sampled_from(["150", "-1", "nan", "keep_in", "bogus", "1e400"]),
+                st.text(max_size=4),
+            ),
+        ),
+        max_size=2,
+    ),
+    st.lists(kml_geometry, max_size=3),
+    st.booleans(),
+)
+
+
+@FUZZ
+@given(
+    st.one_of(
+        st.lists(kml_placemark, max_size=4).map(
+            lambda pms: (
+                '<?xml version="1.0"?><kml xmlns="http://www.opengis.net/kml/2.2">'
+                f"<Document><Folder><name>f</name>{''.join(pms)}</Folder></Document></kml>"
+            )
+        ),
+        st.binary(max_size=300),
+    ),
+    st.sampled_from([".kml", ".kmz"]),
+)
+def test_kml_reader(doc, suffix):
+    import io
+    import zipfile
+
+    from alphafence.formats.fence_read import read_fence_file
+
+    data = doc.encode("utf-8", "surrogatepass") if isinstance(doc, str) else doc
+    if suffix == ".kmz" and isinstance(doc, str):
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("doc.kml", data)
+        data = buf.getvalue()
+    for read in (lambda p: read_database([p], RULES), read_fence_file):
+        only_input_errors(read, write(suffix, data))
+
+
+fence_item_rows = st.lists(
+    st.tuples(
+        st.sampled_from(["5000", "5001", "5002", "5003", "5004"]),
+        st.sampled_from(["0", "3", "4", "2.5", "nan", "-1", "80", "1e400"]),
+        st.sampled_from(["-35.36", "-35.35", "nan", "95"]),
+        st.sampled_from(["149.16", "149.17", "200"]),
+    ),
+    max_size=9,
+)
+
+
+@FUZZ
+@given(
+    st.lists(
+        st.lists(
+            st.one_of(
+                st.sampled_from(["-35.36", "149.16", "-35.35", "149.17", "nan", "95", "# c"]),
+                st.text(max_size=5),
+            ),
+            max_size=3,
+        ).map(" ".join),
+        max_size=8,
+    ),
+    st.booleans(),
+    fence_item_rows,
+)
+def test_legacy_fence_and_fence_items_as_fences(lines, close, rows):
+    """ArduPilot's legacy fence files, and fence .waypoints files read as fences (their
+    polygon counts must be checked: a count of 0 would never advance)."""
+    from alphafence.formats.fence_read import read_fence_file
+
+    if close and len(lines) > 1:
+        lines = lines + [lines[1]]
+    only_input_errors(read_fence_file, write(".txt", "\n".join(lines) + "\n"))
+    wpl = ["QGC WPL 110"] + [
+        "\t".join([str(k), "0", "0", cmd, p1, "0", "0", "0", lat, lon, "0", "1"])
+        for k, (cmd, p1, lat, lon) in enumerate(rows)
+    ]
+    only_input_errors(read_fence_file, write(".waypoints", "\n".join(wpl) + "\n"))

@@ -97,7 +97,8 @@ def read_mission(path, min_positions=2):
 def _flatten(items):
     for it in items:
         if isinstance(it, dict) and it.get("type") == "ComplexItem":
-            inner = (it.get("TransectStyleComplexItem") or {}).get("Items")
+            transect = it.get("TransectStyleComplexItem")
+            inner = transect.get("Items") if isinstance(transect, dict) else None
             if not isinstance(inner, list):
                 inner = it.get("Items") if isinstance(it.get("Items"), list) else None
             yield (it, inner)
