@@ -337,3 +337,22 @@ def test_a_mission_inside_the_keep_in_fence_near_its_edge(tmp_path, capsys):
 def test_waypoint_fence_files_still_carry_their_return_point():
     items = read_waypoints_fence(DATA / "fence-76-items.waypoints")
     assert items[0].command == RETURN_POINT and len(items) == 76
+
+
+def test_a_jump_repeated_a_billion_times_is_bounded_and_then_passed(tmp_path):
+    # the loop's legs are all flown once it has gone round; after MAX_POSITIONS positions
+    # the jump is passed, so what follows it is still checked
+    from alphafence.formats.mission import MAX_POSITIONS
+
+    text = (
+        (DATA / "jump-forever.waypoints")
+        .read_text()
+        .replace("\t2.000000\t-1.000000\t", "\t2.000000\t1000000000.000000\t")
+    )
+    path = tmp_path / "billion.waypoints"
+    path.write_text(text)
+    waypoints = read_mission(path)
+    assert MAX_POSITIONS <= len(waypoints) < MAX_POSITIONS + 10
+    legs = legs_of(waypoints)
+    assert ("seq 5 (waypoint)", "seq 7 (waypoint)") in legs  # passed at last
+    assert ("seq 7 (waypoint)", "seq 8 (RTL) -> home") in legs and len(legs) == 7
