@@ -21,8 +21,10 @@ from alphafence.geo.coords import checked_position
 from alphafence.mavlink import ids
 from alphafence.mavlink.ids import command_name
 
-MAX_POSITIONS = 100_000
-"""Positions flown before every jump still to come is passed instead of taken."""
+MAX_POSITIONS = 10_000
+"""Positions flown before every jump still to come is passed instead of taken (a loop flown
+again flies legs already flown; the bound keeps a flight path that ``compile --area`` buffers
+short)."""
 
 JUMPS = (ids.MAV_CMD_DO_JUMP, ids.MAV_CMD_DO_JUMP_TAG)
 
