@@ -601,3 +601,202 @@ def test_legacy_fence_and_fence_items_as_fences(lines, close, rows):
         for k, (cmd, p1, lat, lon) in enumerate(rows)
     ]
     only_input_errors(read_fence_file, write(".waypoints", "\n".join(wpl) + "\n"))
+
+
+# -- KML/KMZ, OpenAir, ArduPilot's legacy fences; fence files as fences -------------------
+
+openair_args = st.one_of(
+    st.sampled_from(
+        [
+            "R",
+            "SFC",
+            "GND",
+            "FL65",
+            "FL 999",
+            "1000ft AGL",
+            "UNL",
+            "-5m",
+            "600 m MSL",
+            "1e400",
+            "X=52:00:00 N 001:00:00 W",
+            "X=52:00.5N 001:00.5E",
+            "X=99:00:00 N 200:00:00 E",
+            "D=-",
+            "D=+",
+            "D=?",
+            "W=5",
+            "52:00:00 N 001:00:00 W",
+            "52:10:00N 001:10:00E",
+            "52:00:00 N 001:00:00 W, 52:01:00 N 001:00:00 W",
+            "52:00:61 N 001:00:00 W",
+            "2,0,90",
+            "2, 90, 0",
+            "0.5",
+            "0",
+            "-1",
+            "nan",
+            "1e12",
+            "5,0,360",
+            "1e12,0,180",
+        ]
+    ),
+    st.text(max_size=12),
+)
+openair_records = st.lists(
+    st.tuples(
+        st.sampled_from(
+            ["AC", "AN", "AY", "AL", "AH", "V", "DP", "DA", "DB", "DC", "DY", "SP", "AT", "*"]
+        ),
+        openair_args,
+    ),
+    max_size=14,
+)
+
+
+@FUZZ
+@given(openair_records, st.sampled_from([".openair", ".txt"]))
+def test_openair_reader(records, suffix):
+    from alphafence.formats.fence_read import read_fence_file
+
+    text = "AC R\n" + "".join(f"{cmd} {arg}\n" for cmd, arg in records)
+    for read in (lambda p: read_database([p], RULES), read_fence_file):
+        only_input_errors(read, write(suffix, text))
+
+
+def _xml_text(value):
+    return str(value).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+kml_tuples = st.lists(
+    st.lists(
+        st.one_of(st.floats(-200, 200), st.integers(-1000, 1000), st.sampled_from(["nan", "x"])),
+        min_size=1,
+        max_size=4,
+    ).map(lambda t: ",".join(map(str, t))),
+    max_size=6,
+).map(" ".join)
+kml_common = st.tuples(
+    st.sampled_from(["", "absolute", "relativeToGround", "clampToGround", "relativeToSeaFloor"]),
+    st.sampled_from(["", "0", "1", "true"]),
+)
+
+
+def _kml_geometry(kind, coords, mode, extrude, inner=""):
+    head = f"<altitudeMode>{mode}</altitudeMode><extrude>{extrude}</extrude>"
+    ring = f"<LinearRing><coordinates>{coords}</coordinates></LinearRing>"
+    if kind == "Polygon":
+        body = f"<outerBoundaryIs>{ring}</outerBoundaryIs>{inner}"
+    elif kind == "LinearRing":
+        body = f"<coordinates>{coords}</coordinates>"
+    elif kind == "Empty":
+        return "<Polygon/>"
+    else:
+        body = f"<coordinates>{coords}</coordinates>"
+    return f"<{kind}>{head}{body}</{kind}>"
+
+
+kml_geometry = st.builds(
+    _kml_geometry,
+    st.sampled_from(["Point", "LineString", "LinearRing", "Polygon", "Empty", "Model"]),
+    kml_tuples,
+    *[st.sampled_from(v) for v in (["", "absolute", "relativeToGround"], ["0", "1"])],
+    st.sampled_from(
+        [
+            "",
+            "<innerBoundaryIs><LinearRing><coordinates>1,1 2,2</coordinates>"
+            "</LinearRing></innerBoundaryIs>",
+        ]
+    ),
+)
+kml_placemark = st.builds(
+    lambda name, data, geoms, multi: (
+        f"<Placemark><name>{_xml_text(name)}</name><ExtendedData>"
+        + "".join(f'<Data name="{k}"><value>{_xml_text(v)}</value></Data>' for k, v in data)
+        + "</ExtendedData>"
+        + (f"<MultiGeometry>{''.join(geoms)}</MultiGeometry>" if multi else "".join(geoms[:1]))
+        + "</Placemark>"
+    ),
+    st.text(max_size=6),
+    st.lists(
+        st.tuples(
+            st.sampled_from(["radius", "alphafence:kind", "class"]),
+            st.one_of(
+                st.sampled_from(["150", "-1", "nan", "keep_in", "bogus", "1e400"]),
+                st.text(max_size=4),
+            ),
+        ),
+        max_size=2,
+    ),
+    st.lists(kml_geometry, max_size=3),
+    st.booleans(),
+)
+
+
+@FUZZ
+@given(
+    st.one_of(
+        st.lists(kml_placemark, max_size=4).map(
+            lambda pms: (
+                '<?xml version="1.0"?><kml xmlns="http://www.opengis.net/kml/2.2">'
+                f"<Document><Folder><name>f</name>{''.join(pms)}</Folder></Document></kml>"
+            )
+        ),
+        st.binary(max_size=300),
+    ),
+    st.sampled_from([".kml", ".kmz"]),
+)
+def test_kml_reader(doc, suffix):
+    import io
+    import zipfile
+
+    from alphafence.formats.fence_read import read_fence_file
+
+    data = doc.encode("utf-8", "surrogatepass") if isinstance(doc, str) else doc
+    if suffix == ".kmz" and isinstance(doc, str):
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("doc.kml", data)
+        data = buf.getvalue()
+    for read in (lambda p: read_database([p], RULES), read_fence_file):
+        only_input_errors(read, write(suffix, data))
+
+
+fence_item_rows = st.lists(
+    st.tuples(
+        st.sampled_from(["5000", "5001", "5002", "5003", "5004"]),
+        st.sampled_from(["0", "3", "4", "2.5", "nan", "-1", "80", "1e400"]),
+        st.sampled_from(["-35.36", "-35.35", "nan", "95"]),
+        st.sampled_from(["149.16", "149.17", "200"]),
+    ),
+    max_size=9,
+)
+
+
+@FUZZ
+@given(
+    st.lists(
+        st.lists(
+            st.one_of(
+                st.sampled_from(["-35.36", "149.16", "-35.35", "149.17", "nan", "95", "# c"]),
+                st.text(max_size=5),
+            ),
+            max_size=3,
+        ).map(" ".join),
+        max_size=8,
+    ),
+    st.booleans(),
+    fence_item_rows,
+)
+def test_legacy_fence_and_fence_items_as_fences(lines, close, rows):
+    """ArduPilot's legacy fence files, and fence .waypoints files read as fences (their
+    polygon counts must be checked: a count of 0 would never advance)."""
+    from alphafence.formats.fence_read import read_fence_file
+
+    if close and len(lines) > 1:
+        lines = lines + [lines[1]]
+    only_input_errors(read_fence_file, write(".txt", "\n".join(lines) + "\n"))
+    wpl = ["QGC WPL 110"] + [
+        "\t".join([str(k), "0", "0", cmd, p1, "0", "0", "0", lat, lon, "0", "1"])
+        for k, (cmd, p1, lat, lon) in enumerate(rows)
+    ]
+    only_input_errors(read_fence_file, write(".waypoints", "\n".join(wpl) + "\n"))
