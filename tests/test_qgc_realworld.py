@@ -356,3 +356,13 @@ def test_a_jump_repeated_a_billion_times_is_bounded_and_then_passed(tmp_path):
     legs = legs_of(waypoints)
     assert ("seq 5 (waypoint)", "seq 7 (waypoint)") in legs  # passed at last
     assert ("seq 7 (waypoint)", "seq 8 (RTL) -> home") in legs and len(legs) == 7
+
+
+def test_a_downloaded_fence_written_as_a_plan_keeps_its_return_point(tmp_path):
+    # download writes what the vehicle holds: its return point item becomes the breachReturn
+    from alphafence.formats import qgc_plan
+
+    held = read_waypoints_fence(DATA / "fence-76-items.waypoints")
+    path = tmp_path / "downloaded.plan"
+    path.write_text(qgc_plan.dumps(qgc_plan.plan_document(held)))
+    assert read_plan_geofence(path).upload_items == held

@@ -72,14 +72,23 @@ def plan_document(items, home_lonlat=None, mission_items=None, breach_return=Non
     mission_items : list of dict, optional
         QGC SimpleItems (``mission_items``).
     breach_return : tuple, optional
-        ``(lon, lat)`` of the fence's breach return point.
+        ``(lon, lat)`` of the fence's breach return point; by default the return point item
+        among ``items`` (as a vehicle's fence holds it), if any.
 
     Returns
     -------
     dict
         Ready for :func:`dumps`.
+
+    Examples
+    --------
+    >>> doc = plan_document([FenceItem(5000, 0.0, 14.5, 35.9), FenceItem(5004, 50.0, 14.6, 35.8)])
+    >>> doc["geoFence"]["breachReturn"], len(doc["geoFence"]["circles"])
+    ([35.9, 14.5, 0], 1)
     """
     polygons, circles = group_polygons(items)
+    if breach_return is None:
+        breach_return = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
     if home_lonlat is None:
         pts = [p for _, poly in polygons for p in poly] + [(c.lon, c.lat) for c in circles]
         home_lonlat = tuple(np.mean(np.asarray(pts), axis=0)) if pts else (0.0, 0.0)
