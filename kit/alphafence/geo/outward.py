@@ -209,9 +209,17 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     >>> len(octagon.exterior.coords) - 1, octagon.covers(disc)
     (8, True)
     """
-    pts = ring_coords(pts)
+    return _simplify(ring_coords(pts), max_vertices, tolerance, outward)[0]
+
+
+def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False):
+    """:func:`simplify_ring` of clean vertices ``pts``: the vertices, and their polygon when
+    one was built (else None). ``given``, a polygon of ``pts``' vertices (any orientation),
+    spares building one for the check; if ``same``, its exterior holds ``pts`` as they are
+    and it is the polygon of a ring left as it is."""
+    kept = given if same else None
     if len(pts) <= 3:
-        return pts
+        return pts, kept
     area = signed_area(pts)
     flip = (area < 0) if outward else (area > 0)
     if flip:
@@ -225,12 +233,21 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
 
     out = _greedy(pts, max_vertices, tolerance, check=False)
     if out is None:  # no operation applies (nor would one checked): the ring as it is
-        out = pts
-    elif not ok(out):
-        out = _greedy(pts, max_vertices, tolerance, check=True)
-        if out is None or not ok(out):  # numerically degenerate input: leave it as it is
-            out = pts
-    return out[::-1] if flip else out
+        return (pts[::-1] if flip else pts), kept
+    final = out[::-1] if flip else out
+    # ok(out) first on the result's own polygon: validity and covers do not depend on
+    # orientation, so when they hold ok(out) holds; when they fail, ok(out) decides
+    poly = shapely.Polygon(final)
+    if poly.is_valid:
+        inner = given if given is not None else shapely.Polygon(pts)
+        if poly.covers(inner) if outward else inner.is_valid and inner.covers(poly):
+            return final, poly
+    if ok(out):
+        return final, poly
+    out = _greedy(pts, max_vertices, tolerance, check=True)
+    if out is None or not ok(out):  # numerically degenerate input: leave it as it is
+        return (pts[::-1] if flip else pts), kept
+    return (out[::-1] if flip else out), None
 
 
 def shifted_dp(pts, tol):
@@ -354,13 +371,21 @@ def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = 
     >>> disc.covers(inner), round(inner.area)
     (True, 27810)
     """
-    pts = ring_coords(poly.exterior)
+    ring = poly.exterior
+    pts = ring_coords(ring)
+    given = poly if shapely.get_num_interior_rings(poly) == 0 else None
     if outward and len(pts) > 2 * max_vertices:
         if signed_area(pts) < 0:
             pts = pts[::-1]
-        pts = prereduce(pts, 2 * max_vertices)
-    pts = simplify_ring(pts, max_vertices, tolerance, outward)
-    result = shapely.Polygon(pts)
+        pts = ring_coords(prereduce(pts, 2 * max_vertices))
+        given = None
+    elif len(pts) > 1 and pts[0].tolist() == pts[-1].tolist():
+        pts = ring_coords(pts)  # what simplify_ring's own ring_coords would do
+    same = given is not None and len(pts) + 1 == shapely.get_num_coordinates(ring)
+    same = same and not shapely.has_z(poly)
+    pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same)
+    if result is None:
+        result = shapely.Polygon(pts)
     if outward and len(pts) > max_vertices:
         hull = ring_coords(shapely.convex_hull(result).exterior)
         pts = simplify_ring(hull, max_vertices, tolerance, True)
