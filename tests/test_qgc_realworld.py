@@ -366,3 +366,10 @@ def test_a_downloaded_fence_written_as_a_plan_keeps_its_return_point(tmp_path):
     path = tmp_path / "downloaded.plan"
     path.write_text(qgc_plan.dumps(qgc_plan.plan_document(held)))
     assert read_plan_geofence(path).upload_items == held
+
+
+def test_a_compiled_upload_draws_its_items_too(tmp_path, capsys):
+    figure = tmp_path / "compiled.png"
+    argv = ["upload", str(fence_file(tmp_path)), "--bbox=14.44,35.87,14.46,35.89", "--dry-run"]
+    assert main([*argv, "--allow-unsigned", "--figure", str(figure)]) == 0
+    assert figure.read_bytes().startswith(PNG) and "nothing sent" in capsys.readouterr().out

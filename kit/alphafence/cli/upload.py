@@ -223,7 +223,7 @@ def run(args) -> int:
     items, compiled = load_items(args)
     if compiled is not None:
         compile_report(compiled)
-        fences = decode_fence(items, source=args.fences)
+        fences = decode_fence(items, source=args.fences) if args.figure else None
     else:
         fences = check_items(args.fences, items, profile, args.items)
         if args.dry_run:
