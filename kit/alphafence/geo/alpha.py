@@ -31,6 +31,10 @@ def outer_polygons(geom):
     >>> outer_polygons(shapely.GeometryCollection([shapely.Point(0, 0), holed]))[0].area
     100.0
     """
+    if type(geom) is shapely.Polygon and not geom.is_empty and not geom.interiors:
+        out = np.empty(1, dtype=object)  # the common case, without four array calls
+        out[0] = geom
+        return out
     parts = shapely.get_parts(geom)
     parts = parts[shapely.get_type_id(parts) == 3]
     return shapely.polygons(shapely.get_exterior_ring(parts))
