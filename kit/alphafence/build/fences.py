@@ -17,6 +17,7 @@ from shapely.ops import polylabel
 
 from alphafence.build import METHODS
 from alphafence.build.sites import circle_steps
+from alphafence.build.zone_circle import zone_circle
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
 from alphafence.geo.outward import simplify_polygon
 
@@ -287,16 +288,21 @@ def site_fences(site, opts: FenceOptions):
     )
     geometry = site.geometry
     margin = site.margin_m if opts.margin_m is None else opts.margin_m
+    zone = zone_circle(site, margin, PAD_M)  # one circle zone: one circle item onboard
     if site.kind == "keep_in":
-        return [_keep_in(site, geometry, margin, opts, base)]
+        return [_keep_in(site, geometry, margin, opts, base, zone)]
     region = required_region(geometry, margin)
-    local, circle, alpha = outer_fence(region, opts)
+    method = opts.method if zone is None else "circle"
+    if zone is None:
+        local, circle, alpha = outer_fence(region, opts)
+    else:
+        local, circle, alpha = circle_polygon(*zone), zone, None
     repaired = False
     if not covers_required(local, circle, geometry, margin):
         local, circle, repaired = fill_holes(shapely.union(local, region)), None, True
     main = Fence(
         kind=site.kind,
-        method=opts.method,
+        method=method,
         margin_m=margin,
         local=local,
         circle=circle,
@@ -348,8 +354,14 @@ def _warning_layer(main, geometry, opts, base):
     )
 
 
-def _keep_in(site, geometry, margin, opts, base):
-    """A keep-in fence lies inside the area shrunk by the margin (inward simplification)."""
+def _keep_in(site, geometry, margin, opts, base, zone=None):
+    """A keep-in fence lies inside the area shrunk by the margin (inward simplification); a
+    circle zone's is the circle ``zone`` (a disc inside it)."""
+    if zone is not None:
+        disc = shapely.Point(zone[0], zone[1]).buffer(zone[2], quad_segs=16)
+        return Fence(
+            kind="keep_in", method="circle", margin_m=margin, local=disc, circle=zone, **base
+        )
     d = (margin + PAD_M) * circle_steps(QUAD_SEGS)
     inner = shapely.buffer(geometry, -d, quad_segs=QUAD_SEGS)
     circle = None
