@@ -601,3 +601,70 @@ def test_legacy_fence_and_fence_items_as_fences(lines, close, rows):
         for k, (cmd, p1, lat, lon) in enumerate(rows)
     ]
     only_input_errors(read_fence_file, write(".waypoints", "\n".join(wpl) + "\n"))
+
+
+def _flight_logs():
+    """A small valid .tlog and .BIN (a flight through a fence), and that fence."""
+    from tests.test_check_flight import WALL, feature, track, write_bin, write_tlog
+
+    d = Path(tempfile.mkdtemp())
+    tr = track([(0, 150), (0, 300)], rate=2.0)
+    logs = {".tlog": write_tlog(d / "f.tlog", tr).read_bytes()}
+    logs[".BIN"] = write_bin(d / "f.BIN", tr).read_bytes()
+    fences = d / "fences.geojson"
+    fences.write_text(
+        json.dumps({"type": "FeatureCollection", "features": [feature("w/1", "keep_out", WALL)]})
+    )
+    return logs, fences
+
+
+FLIGHT_LOGS = None
+DF_CHARS = "abBhHiIfdnNZcCeELMqQg"
+
+
+def _checked_flight(path):
+    from alphafence.formats.flight_log import FlightLog
+    from alphafence.monitor.postflight import check_flight, load_fences
+
+    json.dumps(
+        check_flight(FlightLog(path), load_fences(FLIGHT_LOGS[1])).to_json(), allow_nan=False
+    )
+
+
+def _hostile_fmt(fmt, cols, body):
+    """A DataFlash log whose POS has a random declaration and body."""
+    import struct
+
+    size = 3 + sum(struct.calcsize(s) for s in (
+        {"a": "64s", "n": "4s", "N": "16s", "Z": "64s", "q": "q", "Q": "Q", "d": "d"}.get(c, "i") for c in fmt
+    ))  # fmt: skip
+    head = b"\xa3\x95\x80" + struct.pack(
+        "<BB4s16s64s", 132, size % 256, b"POS", fmt.encode(), cols.encode()
+    )
+    return head + (b"\xa3\x95\x84" + body.ljust(size, b"\x00")[: max(size - 3, 0)]) * 3
+
+
+@FUZZ
+@given(
+    st.sampled_from([".tlog", ".BIN"]),
+    st.integers(0, 4000),
+    st.lists(st.tuples(st.integers(0, 4000), st.integers(0, 255)), max_size=8),
+    st.binary(max_size=40),
+    st.tuples(
+        st.text(DF_CHARS, max_size=8),
+        st.lists(
+            st.sampled_from(["TimeUS", "Lat", "Lng", "Alt", "RelHomeAlt", "I", "x"]), max_size=8
+        ),
+        st.binary(max_size=120),
+    ),
+)
+def test_flight_log_readers_and_the_check(suffix, cut, flips, tail, hostile):
+    global FLIGHT_LOGS
+    FLIGHT_LOGS = FLIGHT_LOGS or _flight_logs()
+    data = bytearray(FLIGHT_LOGS[0][suffix][:cut])
+    for at, byte in flips:
+        if at < len(data):
+            data[at] = byte
+    only_input_errors(_checked_flight, write(suffix, bytes(data) + tail))
+    fmt, cols, body = hostile
+    only_input_errors(_checked_flight, write(".BIN", _hostile_fmt(fmt, ",".join(cols), body)))

@@ -28,6 +28,7 @@ VERBS = (
     "sitl",
     "route",
     "check-mission",
+    "check-flight",
 )
 
 

@@ -23,6 +23,7 @@ A log that ends within a message (logging stopped mid-write) is read up to there
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +35,7 @@ from alphafence.formats import dataflash
 
 CHUNK = 2048  # positions per chunk
 PLAUSIBLE_UNIX = 946684800  # 2000-01-01: an earlier tlog timestamp is not a wall clock
+LATEST_UNIX = 4102444800  # 2100-01-01: a later time is a corrupt one
 
 
 @dataclass
@@ -102,6 +104,21 @@ class LogInfo:
     bad_bytes: int = 0
     truncated: bool = False
     notes: list = field(default_factory=list)
+
+
+def usable(t, lat, lon, rel, amsl) -> bool:
+    """Is this a position to check: finite, on the globe, not 0,0 (a GPS without a fix yet),
+    at a time from 1970 to 2100?
+
+    Examples
+    --------
+    >>> usable(1.7e9, 35.9, 14.5, 50.0, 150.0), usable(1.7e9, 0.0, 0.0, 0.0, 0.0)
+    (True, False)
+    """
+    values = (t, lat, lon, rel, amsl)
+    if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in values):
+        return False
+    return 0 <= t < LATEST_UNIX and abs(lat) <= 90 and abs(lon) <= 180 and (lat, lon) != (0, 0)
 
 
 class _Chunks:
@@ -227,15 +244,15 @@ def _tlog(path, info, sysid, size):
                 others.add(src)
                 continue
             t = float(m._timestamp)
-            if m.time_boot_ms == last_ms or (m.lat == 0 and m.lon == 0) or t < last_t:
-                info.skipped += 1  # a repeat (two links), no fix yet, or out of order
+            row = (t, m.lat * 1e-7, m.lon * 1e-7, m.relative_alt * 1e-3, m.alt * 1e-3)
+            if m.time_boot_ms == last_ms or not usable(*row) or t < last_t:
+                info.skipped += 1  # a repeat (two links), no fix yet, out of order
                 continue
             last_ms, last_t = m.time_boot_ms, t
             if info.positions == 0 and t < PLAUSIBLE_UNIX:
                 info.clock = "boot"
                 info.notes.append("the log's timestamps are not wall-clock times")
             info.positions += 1
-            row = (t, m.lat * 1e-7, m.lon * 1e-7, m.relative_alt * 1e-3, m.alt * 1e-3)
             if out.add(*row, m.vx * 1e-2, m.vy * 1e-2):
                 yield out.take()
         info.truncated = info.messages > 0 and os.path.getsize(path) > end
@@ -255,65 +272,81 @@ def _tlog(path, info, sysid, size):
 
 
 # -- DataFlash ----------------------------------------------------------------------------
-def _dataflash_survey(path, info):
+def _number(fmt, v, column, default=None):
+    """A numeric field, or ``default`` when the type has no such column; ValueError when the
+    field is not a number (a corrupt or foreign FMT)."""
+    if column not in fmt.columns:
+        return default
+    if not isinstance(v[fmt.columns[column][0]], (int, float)):
+        raise ValueError(column)
+    return dataflash.value(fmt, v, column)
+
+
+def _dataflash_survey(path):
     """A first pass: the UTC time of boot (from GPS time), whether the log has POS, and
     home's altitude (ORGN type 1) for logs without a height above home."""
-    boot_utc = has_pos = home = None
+    boot_utc = home = None
+    has_pos = False
     for fmt, v in dataflash.messages(path, LogInfo(path, "dataflash"), ("GPS", "POS", "ORGN")):
-        c = fmt.columns
-        if fmt.name == "POS" and {"TimeUS", "Lat", "Lng", "Alt"} <= c.keys():
-            has_pos = has_pos or (v[c["Lat"][0]] != 0 or v[c["Lng"][0]] != 0)
-        elif fmt.name == "GPS" and boot_utc is None and {"TimeUS", "GWk", "GMS"} <= c.keys():
-            if v[c["GWk"][0]] > 0 and ("I" not in c or v[c["I"][0]] == 0):
-                gps = dataflash.gps_utc(v[c["GWk"][0]], v[c["GMS"][0]])
-                boot_utc = gps - v[c["TimeUS"][0]] * 1e-6
-        elif fmt.name == "ORGN" and home is None and {"Type", "Alt"} <= c.keys():
-            if v[c["Type"][0]] == 1:
-                home = dataflash.value(fmt, v, "Alt")
+        try:
+            if fmt.name == "POS":
+                has_pos = has_pos or bool(_number(fmt, v, "Lat", 0) or _number(fmt, v, "Lng", 0))
+            elif fmt.name == "GPS" and boot_utc is None and _number(fmt, v, "I", 0) == 0:
+                week, ms, us = (_number(fmt, v, k) for k in ("GWk", "GMS", "TimeUS"))
+                if None not in (week, ms, us) and week > 0:
+                    boot_utc = dataflash.gps_utc(week, ms) - us * 1e-6
+            elif fmt.name == "ORGN" and home is None and _number(fmt, v, "Type") == 1:
+                home = _number(fmt, v, "Alt")
+        except (ValueError, OverflowError):
+            continue
         if boot_utc is not None and has_pos and home is not None:
             break
-    return boot_utc, bool(has_pos), home
+    return boot_utc, has_pos, home
+
+
+def _dataflash_position(fmt, v, boot_utc):
+    """``(t, lat, lon, height above home or None, AMSL, vn, ve)`` of a POS or GPS message, or
+    None for one without a position (another GPS instance, no 3D fix)."""
+    if _number(fmt, v, "I", 0) != 0 or _number(fmt, v, "Status", 3) < 3:
+        return None
+    t, lat, lon, amsl = (_number(fmt, v, k) for k in ("TimeUS", "Lat", "Lng", "Alt"))
+    if None in (t, lat, lon, amsl):
+        return None
+    rel = _number(fmt, v, "RelHomeAlt", _number(fmt, v, "RelAlt"))
+    vn = ve = float("nan")
+    spd, crs = _number(fmt, v, "Spd"), _number(fmt, v, "GCrs")
+    if spd is not None and crs is not None:
+        vn, ve = spd * math.cos(math.radians(crs)), spd * math.sin(math.radians(crs))
+    return t * 1e-6 + (boot_utc or 0.0), lat, lon, rel, amsl, vn, ve
 
 
 def _dataflash(path, info, sysid, size):
-    boot_utc, has_pos, home = _dataflash_survey(path, info)
+    boot_utc, has_pos, home = _dataflash_survey(path)
     info.source = "POS" if has_pos else "GPS"
     if boot_utc is None:
         info.clock = "boot"
         info.notes.append("no GPS time in the log: times are seconds since boot")
     out = _Chunks(size)
-    last_t, nan = -np.inf, float("nan")
+    last_t = -np.inf
     for fmt, v in dataflash.messages(path, info, (info.source,)):
-        c = fmt.columns
-        if not {"TimeUS", "Lat", "Lng", "Alt"} <= c.keys():
+        try:
+            p = _dataflash_position(fmt, v, boot_utc)
+        except (ValueError, OverflowError):
+            p = None
+            info.skipped += 1
+        if p is None:
             continue
-        lat, lon, amsl = (
-            dataflash.value(fmt, v, "Lat"),
-            dataflash.value(fmt, v, "Lng"),
-            dataflash.value(fmt, v, "Alt"),
-        )
-        t = v[c["TimeUS"][0]] * 1e-6 + (boot_utc or 0.0)
-        if fmt.name == "GPS" and (
-            ("I" in c and v[c["I"][0]] != 0)
-            or ("Status" in c and v[c["Status"][0]] < 3)  # no 3D fix
-        ):
-            continue
-        if (lat == 0 and lon == 0) or t <= last_t:
+        t, lat, lon, rel, amsl, vn, ve = p
+        if rel is None:  # an old log: no height above home
+            if home is None and usable(t, lat, lon, 0.0, amsl):
+                home = amsl  # the first fix: the vehicle on the ground before take-off
+                info.notes.append(
+                    "no height above home in the log: home taken as the first fix's altitude"
+                )
+            rel = amsl - (home if home is not None else amsl)
+        if not usable(t, lat, lon, rel, amsl) or t <= last_t:
             info.skipped += 1
             continue
-        rel_col = "RelHomeAlt" if "RelHomeAlt" in c else "RelAlt" if "RelAlt" in c else None
-        rel = dataflash.value(fmt, v, rel_col) if rel_col else nan
-        vn = ve = nan
-        if {"Spd", "GCrs"} <= c.keys():
-            spd, crs = dataflash.value(fmt, v, "Spd"), np.radians(dataflash.value(fmt, v, "GCrs"))
-            vn, ve = spd * np.cos(crs), spd * np.sin(crs)
-        if home is None and rel_col is None:
-            home = amsl  # the first fix: the vehicle on the ground before take-off
-            info.notes.append(
-                "no height above home in the log: home taken as the first fix's altitude"
-            )
-        if rel_col is None:
-            rel = amsl - home
         last_t = t
         info.positions += 1
         if out.add(t, lat, lon, rel, amsl, vn, ve):
