@@ -334,3 +334,26 @@ def test_geojson_features_are_geos_geojson_rounded():
         want["coordinates"] = _round(want["coordinates"])
         assert got["geometry"] == want
         assert got["properties"]["site_id"] == f.site_id
+
+
+@settings(max_examples=60, deadline=None)
+@given(lon0, lat0, st.floats(1e-4, 0.5), st.integers(0, 2**32 - 1))
+def test_frames_are_the_deg_to_rad_aeqd_pipeline_bit_for_bit(lon, lat, span, seed):
+    """LocalFrame builds the projection alone and scales degrees itself: the numbers must be
+    those of the PROJ pipeline "unitconvert deg -> rad, then aeqd", both ways."""
+    import pyproj
+
+    pipeline = pyproj.Transformer.from_pipeline(
+        "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+        f"+step +proj=aeqd +lat_0={lat!r} +lon_0={lon!r} +ellps=WGS84"
+    )
+    frame = LocalFrame(lon, lat)
+    rng = np.random.default_rng(seed)
+    lons = lon + rng.uniform(-span, span, 64)
+    lats = np.clip(lat + rng.uniform(-span, span, 64), -90, 90)
+    assert np.array_equal(frame.to_local(lons, lats), pipeline.transform(lons, lats))
+    x, y = rng.uniform(-span, span, (2, 64)) * 111e3
+    lon_w, lat_w = pipeline.transform(x, y, direction="INVERSE")
+    got = frame.to_wgs84(x, y)
+    assert np.array_equal(got[0], np.where(np.abs(lon_w) > 180, (lon_w + 180) % 360 - 180, lon_w))
+    assert np.array_equal(got[1], lat_w)
