@@ -12,6 +12,7 @@ import numpy as np
 import shapely
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
+from pyproj import Geod
 
 from alphafence.build.fences import METHODS
 from alphafence.build.outputs import render
@@ -31,6 +32,7 @@ from alphafence.onboard.corridor import flight_path
 from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
 from .test_compile import contained, fence_sets, onboard_geometry, validate_like_ardupilot
 
+GEOD = Geod(ellps="WGS84")
 RULES_DOC = {
     "defaults": {"point_radius_m": 15.0, "line_width_m": 6.0},
     "rule": [
@@ -357,3 +359,101 @@ def test_frames_are_the_deg_to_rad_aeqd_pipeline_bit_for_bit(lon, lat, span, see
     got = frame.to_wgs84(x, y)
     assert np.array_equal(got[0], np.where(np.abs(lon_w) > 180, (lon_w + 180) % 360 - 180, lon_w))
     assert np.array_equal(got[1], lat_w)
+
+
+# -- circle zones (ED-269, ED-318): one circle fence, the zone plus margin inside it -------
+
+
+def circle_zone_doc(lon, lat, radius, uom, ed318):
+    """One circle zone as ED-269 (``uomDimensions``) or ED-318 (a Point with a Circle extent)
+    writes it."""
+    if ed318:
+        layer = {"lower": 0, "upper": 120, "uom": "m"}
+        geom = {"type": "Point", "coordinates": [lon, lat], "layer": layer}
+        geom["extent"] = {"subType": "Circle", "radius": radius}
+        props = {"identifier": "Z", "type": "PROHIBITED", "variant": "COMMON"}
+        return {
+            "type": "FeatureCollection",
+            "features": [{"type": "Feature", "properties": props, "geometry": geom}],
+        }
+    projection = {"type": "Circle", "center": [lon, lat], "radius": radius}
+    entry = {
+        "uomDimensions": uom,
+        "lowerLimit": 0,
+        "upperLimit": 120,
+        "horizontalProjection": projection,
+    }
+    return {"features": [{"identifier": "Z", "restriction": "PROHIBITED", "geometry": [entry]}]}
+
+
+def true_circle(lon, lat, radius_m, n=720):
+    """Points of the zone's geodesic circle (pyproj's Geod, not the kit's frames)."""
+    az = np.linspace(-180.0, 180.0, n, endpoint=False)
+    lons, lats, _ = GEOD.fwd(np.full(n, lon), np.full(n, lat), az, np.full(n, radius_m))
+    return lons, lats
+
+
+def circle_holds(circle_lonlat_r, zone_pts, margin):
+    """Every point of the zone at least ``margin`` inside the circle, geodesically."""
+    clon, clat, r = circle_lonlat_r
+    lons, lats = zone_pts
+    n = len(lons)
+    d = GEOD.inv(np.full(n, clon), np.full(n, clat), lons, lats)[2]
+    return bool(np.all(d + margin <= r + 1e-6))
+
+
+@example(
+    lon=179.999, lat=89.5, radius=20_000.0, uom="FT", ed318=False, margin=100.0, method="exact"
+)
+@example(lon=-180.0, lat=-89.5, radius=20_000.0, uom="M", ed318=True, margin=0.0, method="alpha")
+@example(lon=180.0, lat=0.0, radius=1.0, uom="M", ed318=False, margin=0.0, method="circle")
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    lon=lon0,
+    lat=lat0,
+    radius=st.one_of(st.floats(1, 500), st.floats(500, 20_000)),
+    uom=st.sampled_from(["M", "FT"]),
+    ed318=st.booleans(),
+    margin=st.sampled_from([0.0, 0.5, 10.0, 100.0]),
+    method=st.sampled_from(METHODS),
+)
+def test_a_circle_zone_is_one_circle_fence_holding_it_plus_margin_in_every_format(
+    lon, lat, radius, uom, ed318, margin, method
+):
+    from collections import Counter
+
+    from alphafence.formats.ed269 import read_ed269_doc
+
+    rules = parse_rules(
+        {"rule": [{"category": "zone", "kind": "keep_out", "tags": {"ed269:restriction": "*"}}]}
+    )
+    doc = circle_zone_doc(lon, lat, radius, uom, ed318)
+    features = read_ed269_doc("zone.json", doc, rules, [], Counter())
+    radius_m = radius * (0.3048 if uom == "FT" and not ed318 else 1.0)
+    opts = BuildOptions(method=method, margin_m=margin, warn_distance_m=20.0)
+    result = build_fences(features, rules, opts)
+    zone = true_circle(lon, lat, radius_m)
+    assert [f.kind for f in result.fences] == ["keep_out", "warning"]
+    for fence in result.fences:
+        assert fence.circle is not None and not fence.repaired
+        assert circle_holds(fence.circle_wgs84, zone, fence.margin_m), fence.kind
+        # its polygon (drawn in GeoJSON) holds it too, in an independent frame
+        verify = VerifyFrame(lon, lat)
+        x, y = verify.xy(*zone)
+        pts = shapely.points(np.column_stack([x, y]))
+        poly = verify.local(fence.geometry)
+        assert np.all(shapely.covers(poly, pts))
+        assert float(np.min(shapely.distance(poly.exterior, pts))) >= fence.margin_m - 1e-6
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = [str(Path(tmp) / n) for n in ("f.geojson", "f.plan", "f.waypoints")]
+        from alphafence.formats.atomic import write_all
+
+        write_all(render(result.fences, {}, *paths))
+        for props, _ in geojson_fences(Path(paths[0]).read_text()):
+            circle = (*props["center"], props["radius_m"])
+            assert circle_holds(circle, zone, props["margin_m"]), "GeoJSON"
+        for items in (read_plan_fence(paths[1]), read_waypoints_fence(paths[2])):
+            polygons, circles = group_polygons(items)
+            assert not polygons and len(circles) == 1  # one circle item: 13 bytes onboard
+            (c,) = circles
+            assert circle_holds((c.lon, c.lat, c.param1), zone, margin), "plan/waypoints"
