@@ -48,13 +48,15 @@ def register(sub):
     p = sub.add_parser(
         "upload",
         help="upload fences to a vehicle and verify them",
-        description="Upload fences (a fence GeoJSON, compiled here, or an onboard .plan / "
-        ".waypoints) with the MAVLink mission protocol, read them back and compare.",
+        description="Upload fences (a fence file compiled here, or an onboard .plan / "
+        ".waypoints / ArduPilot legacy fence file) with the MAVLink mission protocol, read them "
+        "back and compare.",
     )
     p.add_argument(
         "fences",
         metavar="FENCES",
-        help="fences .geojson (compiled first), or onboard .plan / .waypoints",
+        help="fences to compile (.geojson, KML, OpenAir...), or onboard .plan / .waypoints / "
+        "ArduPilot legacy fence file (lat lon lines, often .txt)",
     )
     p.add_argument(
         "--connect",
@@ -102,13 +104,16 @@ def load_items(args):
     """The fence items to upload and, for a fence GeoJSON, the compilation that made them.
 
     An onboard ``.plan`` gives its geoFence's items with its breach return point first; a
-    ``.waypoints`` file its items as they are.
+    ``.waypoints`` file (or a QGC WPL file of another suffix, ``.txt``) its items as they are;
+    ArduPilot's legacy fence file (``lat lon`` lines, told by its content) its return point
+    and its inclusion polygon. Any other file is compiled for ``--area`` or ``--bbox``.
 
     Returns
     -------
     tuple
         ``(items, CompileResult or None)``.
     """
+    from alphafence.formats.ardupilot_fence import read_legacy_items
     from alphafence.formats.fence_read import read_fence_file as read_fences
     from alphafence.formats.qgc_plan import read_plan_geofence
     from alphafence.formats.qgc_wpl import read_waypoints_fence
@@ -116,14 +121,35 @@ def load_items(args):
     name = args.fences.lower()
     if name.endswith(".plan"):
         return read_plan_geofence(args.fences).upload_items, None
-    if name.endswith((".waypoints", ".txt")):
+    kind = "waypoints" if name.endswith(".waypoints") else onboard_kind(args.fences)
+    if kind == "waypoints":
         return read_waypoints_fence(args.fences), None
+    if kind == "legacy":
+        return read_legacy_items(args.fences), None
     if not (args.area or args.bbox):
         raise InputError(
-            args.fences, "a fence GeoJSON needs an operating area: --area MISSION.plan or --bbox"
+            args.fences,
+            "fences to compile (fence GeoJSON, KML, OpenAir...) need an operating area: "
+            "--area MISSION.plan or --bbox",
         )
     result = compile_from_args(args, read_fences(args.fences))
     return result.items, result
+
+
+def onboard_kind(path):
+    """``"waypoints"`` (a QGC WPL file) or ``"legacy"`` (ArduPilot's legacy fence file) for an
+    onboard fence file told by its first bytes, whatever its suffix (both are often ``.txt``),
+    else None (fences to compile, or no such file: their reader says so)."""
+    from alphafence.formats.ardupilot_fence import looks_like_legacy_fence
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16).decode("latin-1")
+    except OSError:
+        return None
+    if head.lstrip().startswith("QGC WPL"):
+        return "waypoints"
+    return "legacy" if looks_like_legacy_fence(head) else None
 
 
 def check_items(path, items, profile, max_items=None):

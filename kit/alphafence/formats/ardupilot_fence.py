@@ -26,6 +26,8 @@ from alphafence.mavlink.items import (
     POLYGON_EXCLUSION,
     POLYGON_INCLUSION,
     RETURN_POINT,
+    FenceItem,
+    polygon_lonlat,
 )
 
 MAX_BYTES = 16 * 1024 * 1024  # ArduPilot holds at most a few hundred fence points
@@ -129,6 +131,28 @@ def read_legacy_fence(path):
             "legacy/polygon", "keep_in", polygon, 0.0, None, "operating_area", properties=props
         )
     ]
+
+
+def read_legacy_items(path):
+    """The legacy fence as the items an upload sends: its return point, then its polygon as
+    inclusion vertices (without the closing repeat, counter-clockwise; an outline that crosses
+    itself as the polygons of its area).
+
+    Returns
+    -------
+    list of FenceItem
+
+    Raises
+    ------
+    InputError
+        As :func:`read_legacy_fence`.
+    """
+    (rec,) = read_legacy_fence(path)
+    items = [FenceItem(RETURN_POINT, 0.0, *rec.properties["return_point"])]
+    for part in shapely.get_parts(rec.geometry):
+        ring = polygon_lonlat(part)
+        items.extend(FenceItem(POLYGON_INCLUSION, float(len(ring)), lon, lat) for lon, lat in ring)
+    return items
 
 
 def item_fences(path, items, what):
