@@ -1,7 +1,8 @@
 """``upload`` tells an onboard fence file by its content, not by a ``.txt`` suffix: ArduPilot's
 legacy fence file (``lat lon`` lines, as MAVProxy's ``fence save`` and ArduPilot's autotest
 write it, usually ``.txt``) is sent as its return point and inclusion polygon; a QGC WPL file
-named ``.txt`` is read as waypoints; other ``.txt`` files (OpenAir) are compiled."""
+named ``.txt`` is read as waypoints; other ``.txt`` files (OpenAir) are compiled. And
+``check-mission --fences`` says it takes any fence file."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import argparse
 import shutil
 from pathlib import Path
 
+import pytest
 import shapely
 
 from alphafence.cli import main
@@ -68,3 +70,13 @@ def test_an_openair_txt_is_compiled_for_the_area(tmp_path, capsys):
     assert "need an operating area" in capsys.readouterr().err
     assert main([*argv, "--bbox", "-1.5,52.1,-1.2,52.25"]) == 0
     assert "fence items ready" in capsys.readouterr().out
+
+
+def test_check_mission_help_names_every_fence_file_it_reads(capsys):
+    """``check-mission --fences`` reads any fence file read_fence_file reads, not only GeoJSON."""
+    with pytest.raises(SystemExit):
+        main(["check-mission", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "fence GeoJSON" not in text
+    for fmt in (".plan", ".waypoints", "legacy fence", "KML", "OpenAir", "GeoParquet"):
+        assert fmt in text, fmt

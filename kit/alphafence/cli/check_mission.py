@@ -22,7 +22,13 @@ def register(sub):
         "else 0.",
     )
     p.add_argument("mission", metavar="MISSION", help="QGroundControl .plan or QGC WPL file")
-    p.add_argument("--fences", required=True, metavar="FENCES", help="fence GeoJSON")
+    p.add_argument(
+        "--fences",
+        required=True,
+        metavar="FENCES",
+        help="fence file: the kit's GeoJSON (or sequence, GeoParquet), a QGroundControl .plan "
+        "geoFence, a fence .waypoints file, ArduPilot's legacy fence file, KML/KMZ or OpenAir",
+    )
     p.add_argument(
         "--clearance",
         type=non_negative("--clearance"),
