@@ -409,3 +409,116 @@ def test_the_tlog_reader_keeps_one_vehicle_and_its_times(tmp_path):
 def test_a_missing_log_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="cannot read"):
         FlightLog(tmp_path / "none.tlog")
+
+
+# -- a real flight: ArduPilot SITL, its own DataFlash log and a ground station's tlog ------
+SQUARE = shapely.box(-20, 130, 20, 170)  # metres east/north of SITL's home: on the way north
+GOAL_NORTH = 300.0
+
+
+def _fly_through(sitl, tlog, timeout=90.0):
+    """Fly SITL's copter (pymavlink, GUIDED) from home to 300 m north at 30 m, through SQUARE
+    (not uploaded: nothing stops it), and land; every message received is written to ``tlog``
+    as a ground station writes it."""
+    import time
+
+    from pymavlink import mavutil
+
+    frame = LocalFrame(sitl.home.lon, sitl.home.lat)
+    deadline = time.monotonic() + timeout
+    conn = mavutil.mavlink_connection(sitl.pymavlink_url, source_system=250)
+    out = open(tlog, "wb")  # as MAVProxy writes its tlog: arrival time, then the packet
+
+    def record(_, m):
+        if m.get_type() != "BAD_DATA":
+            out.write(struct.pack(">Q", int(time.time() * 1e6)) + m.get_msgbuf())
+
+    conn.message_hooks.append(record)
+
+    def wait(what, ok, kind="GLOBAL_POSITION_INT"):
+        while time.monotonic() < deadline:
+            m = conn.recv_match(type=kind, blocking=True, timeout=1.0)
+            if m is not None and ok(m):
+                return m
+        raise AssertionError(f"SITL: no {what} within {timeout:g} s")
+
+    try:
+        conn.wait_heartbeat(timeout=10)
+        sys_, comp = conn.target_system, conn.target_component
+        conn.mav.command_long_send(sys_, comp, 511, 0, 33, 100_000, 0, 0, 0, 0, 0)  # 10 Hz
+        conn.set_mode("GUIDED")
+        wait("GUIDED", lambda m: m.custom_mode == 4, "HEARTBEAT")
+        while not conn.motors_armed() and time.monotonic() < deadline:
+            conn.arducopter_arm()
+            wait("heartbeat", lambda m: True, "HEARTBEAT")
+        conn.mav.command_long_send(sys_, comp, 22, 0, 0, 0, 0, 0, 0, 0, 30.0)  # NAV_TAKEOFF
+        wait("climb to 27 m", lambda m: m.relative_alt > 27_000)
+        lon, lat = frame.to_wgs84(0.0, GOAL_NORTH)
+        conn.mav.set_position_target_global_int_send(
+            0,
+            sys_,
+            comp,
+            6,
+            0b110111111000,
+            int(lat * 1e7),
+            int(lon * 1e7),
+            30.0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+        )  # fmt: skip  (MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, position only)
+
+        def north(m):
+            return float(frame.to_local(m.lon * 1e-7, m.lat * 1e-7)[1])
+
+        wait("arrival 300 m north", lambda m: north(m) > GOAL_NORTH - 5)
+        conn.set_mode("LAND")
+        wait("landed and disarmed", lambda m: not (m.base_mode & 128), "HEARTBEAT")
+    finally:
+        conn.close()
+        out.close()
+    return frame
+
+
+@pytest.mark.sitl
+@pytest.mark.parametrize("sitl", [{"home": "egham", "speedup": 5}], indirect=True)
+async def test_a_sitl_flight_through_a_zone_is_caught_in_both_its_logs(sitl, tmp_path, capsys):
+    import asyncio
+
+    from pymavlink import DFReader
+
+    tlog = tmp_path / "flight.tlog"
+    frame = await asyncio.to_thread(_fly_through, sitl, tlog)
+    fences = tmp_path / "fences.geojson"
+    g = frame.geom_to_wgs84(SQUARE)
+    feat = {"type": "Feature", "properties": {"site_id": "square", "kind": "keep_out"}}
+    feat["geometry"] = shapely.geometry.mapping(g)
+    fences.write_text(json.dumps({"type": "FeatureCollection", "features": [feat]}))
+    (binary,) = sorted((sitl.workdir / "logs").glob("*.BIN"))[-1:]  # ArduPilot's own log
+    entries = {}
+    for log in (tlog, binary):
+        code, doc = as_json([log, "--fences", fences], capsys)
+        assert code == 1 and doc["log"]["clock"] == "utc", doc["log"]
+        (hit,) = doc["incursions"]
+        assert hit["fence"] == "square" and hit["positions"] > 10
+        x, y = (float(v) for v in frame.to_local(hit["lon"], hit["lat"]))
+        assert abs(x) < 5 and 130 <= y < 134, (log, x, y)  # the square's south edge, flying north
+        assert hit["alt_m"] == pytest.approx(30, abs=3)
+        entries[log.suffix] = hit
+    # the streamed DataFlash reader reads the real log as pymavlink's DFReader does
+    log = FlightLog(binary)
+    got = np.concatenate([np.column_stack([c.t, c.lat, c.lon, c.alt_amsl]) for c in log.chunks()])
+    ref, rows = DFReader.DFReader_binary(str(binary)), []
+    while (m := ref.recv_match(type="POS")) is not None:
+        if m.Lat != 0 or m.Lng != 0:
+            rows.append((m._timestamp, m.Lat, m.Lng, m.Alt))
+    rows = np.array(rows)
+    assert log.info.source == "POS" and len(got) == len(rows) > 100
+    np.testing.assert_allclose(got[:, 0], rows[:, 0], atol=1e-6)
+    np.testing.assert_array_equal(got[:, 1:3], rows[:, 1:3])
+    np.testing.assert_allclose(got[:, 3], rows[:, 3], atol=1e-3)

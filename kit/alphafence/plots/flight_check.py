@@ -23,13 +23,13 @@ def _clock(report, t):
 
 
 def _near(report):
-    """The closest approaches to keep-out fences not entered: the few closest."""
+    """The closest approaches to keep-out fences in force and not entered: the few closest."""
     fs, entered = report.fences, {i.fence for i in report.incursions}
     return sorted(
         (
             a
             for k, a in report.closest.items()
-            if k not in entered and fs.records[k].kind == "keep_out"
+            if k not in entered and a.in_force and fs.records[k].kind == "keep_out"
         ),
         key=lambda a: a.distance_m,
     )[:LABELLED_APPROACHES]
@@ -98,14 +98,20 @@ def flight_check_figure(report, path, title=None, note=None):
         ax.plot([ax_, bx], [ay, by], ":", color="#1565c0", lw=1.2, zorder=5)
         ax.annotate(f"{a.distance_m:.0f} m", ((ax_ + bx) / 2, (ay + by) / 2), xytext=(4, 4),
                     textcoords="offset points", fontsize=8, color="#0d47a1", zorder=7)  # fmt: skip
+    kinds = {fs.records[k].kind for k in shown.tolist() if report.in_force.get(k) != "no"}
+    labels = {"keep_out": "keep-out fence", "warning": "warning layer", "keep_in": "keep-in fence"}
     handles = [
-        Line2D([], [], color=KIND_STYLE["keep_out"]["edgecolor"], label="keep-out fence"),
-        Line2D([], [], color=KIND_STYLE["warning"]["edgecolor"], ls="--", label="warning layer"),
-        Line2D([], [], color="#212121", marker="^", label="track (from the log's start)"),
-        Line2D([], [], color="#c62828", lw=3.2, label="in a keep-out / out of a keep-in fence"),
+        Line2D([], [], color=KIND_STYLE[k]["edgecolor"], ls=KIND_STYLE[k].get("ls", "-"), label=v)
+        for k, v in labels.items()
+        if k in kinds
     ]
-    if any(fs.records[k].kind == "keep_in" for k in shown.tolist()):
-        handles.insert(2, Line2D([], [], color=KIND_STYLE["keep_in"]["edgecolor"], label="keep-in"))
+    handles.append(
+        Line2D([], [], color="#212121", marker="^", label="track (from the log's start)")
+    )
+    if track[:, 4].any():
+        handles.append(
+            Line2D([], [], color="#c62828", lw=3.2, label="in a keep-out / out of a keep-in fence")
+        )
     if off:
         handles.append(Line2D([], [], color="#9e9e9e", ls=":", label="not in force then"))
     if near:
