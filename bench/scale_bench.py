@@ -252,7 +252,8 @@ def _result(m):
     if m["pss"] < 0.95 * m["peak"]:  # forked workers share pages: RSS counts them per process
         text += f" (PSS {m['pss'] / GB:.2f} GB)"
     if m["why"]:
-        return f"{text} ({m['why']})"
+        done = f", {m['written'] / 1e6:.0f} MB of output written" if m.get("written") else ""
+        return f"{text} ({m['why']}{done})"
     if m["rc"]:
         return f"{text} (exit {m['rc']}: {m['err'][0][:60]})"
     return text
@@ -296,6 +297,8 @@ def run(osm, Row, console, sizes=SIZES):
             t, m = targets(n)
             m = measure(argv, max(LIMIT_FACTOR * t, MIN_LIMIT_S), LIMIT_FACTOR * m, extra_roots)
             m["out"] = out
+            # a stopped build leaves its output's temporary file: how far it got
+            m["written"] = sum(f.stat().st_size for f in out.parent.glob(f".{out.name}.*.tmp"))
             console.print(f"scale: {' '.join(argv[1:])}: {_result(m)}")
             return m
 
