@@ -522,3 +522,60 @@ async def test_a_sitl_flight_through_a_zone_is_caught_in_both_its_logs(sitl, tmp
     np.testing.assert_allclose(got[:, 0], rows[:, 0], atol=1e-6)
     np.testing.assert_array_equal(got[:, 1:3], rows[:, 1:3])
     np.testing.assert_allclose(got[:, 3], rows[:, 3], atol=1e-3)
+
+
+def test_it_needs_pymavlink_alone_and_says_so_without_it(fences, tmp_path):
+    from tests.test_imports import NO_EXTRAS, _run
+
+    log = write_tlog(tmp_path / "f.tlog", track([(0, 1), (0, 500)]))
+    png = tmp_path / "f.png"
+    code, modules, err = _run(["check-flight", str(log), "--fences", str(fences)], NO_EXTRAS)
+    assert code == 1, err  # entered: the check ran with no extra but pymavlink
+    assert "pymavlink" in modules and not {"scipy", "matplotlib", "osmium"} & modules
+    argv = ["check-flight", str(log), "--fences", str(fences), "--figure", str(png)]
+    code, _, err = _run(argv, NO_EXTRAS + ",pymavlink")
+    (line,) = err.strip().splitlines()
+    assert code == 2 and not png.exists()
+    assert f"reading {log} needs pymavlink" in line and "f.png needs matplotlib" in line, line
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_incursions_are_what_each_position_says(tmp_path, seed):
+    """Random walks among fences of every kind: the incursions (after the walk's shortcuts far
+    from the fences) are the runs of positions each full check finds inside (keep-in: outside)."""
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.monitor.postflight import check_flight, load_fences
+
+    rng = np.random.default_rng(seed)
+    path = fence_file(
+        tmp_path,
+        feature("a/1", "keep_out", shapely.box(-50, 100, 50, 160)),
+        feature("a/1", "warning", shapely.box(-80, 70, 80, 190)),
+        feature("b/2", "keep_out", shapely.Point(200, -50).buffer(40), alt_min_m=20, alt_max_m=60),
+        feature("c/3", "keep_in", shapely.box(-300, -300, 300, 300)),
+    )
+    steps = np.zeros((3000, 2))  # a walk drawn to each fence in turn, and out of the keep-in
+    goals = np.array([(0, 130), (200, -50), (330, 0)])
+    for i in range(1, len(steps)):
+        pull = steps[i - 1] - goals[(i // 300) % 3]
+        steps[i] = steps[i - 1] + rng.normal(0, 6, 2) - 0.03 * pull
+    lon, lat = FRAME.to_wgs84(steps[:, 0], steps[:, 1])
+    t = WEDNESDAY + np.arange(len(steps)) * 0.5
+    rel = np.clip(40 + rng.normal(0, 2, len(t)).cumsum(), 0, 120)
+    tr = dict(t=t, lat=np.asarray(lat), lon=np.asarray(lon), rel=rel, amsl=rel + HOME_AMSL)
+    rep = check_flight(FlightLog(write_tlog(tmp_path / "w.tlog", tr)), load_fences(path))
+    fs = FenceSet(load_fences(path).records)
+    runs = {}
+    for i in range(len(t)):
+        lo, la = tr["lon"][i], tr["lat"][i]
+        x, y = fs.frame.to_local(round(lo, 7), round(la, 7))
+        c = fs.check(float(x), float(y), round(rel[i], 3))
+        for k in c.inside_keep_out + c.inside_warning + c.outside_keep_in:
+            runs.setdefault(k, []).append(i)
+    expect = sorted((k, len(v)) for k, v in runs.items())
+    got = {}
+    for inc in rep.incursions:
+        if not inc.between_samples:
+            got[inc.fence] = got.get(inc.fence, 0) + inc.samples
+    assert sorted(got.items()) == expect
+    assert {k for k, _ in expect} >= {0, 1, 2, 3}, expect  # the walk met every fence

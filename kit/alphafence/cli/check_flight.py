@@ -146,7 +146,7 @@ def run(args) -> int:
     from alphafence.formats.flight_log import FlightLog
     from alphafence.monitor.postflight import check_flight, load_fences
 
-    need(*figure_wants(args.figure))
+    need(("pymavlink", f"reading {args.log}"), *figure_wants(args.figure))
     log = FlightLog(args.log, sysid=args.sysid)
     fences = load_fences(args.fences)
     rep = check_flight(log, fences, near_m=args.near)

@@ -19,6 +19,7 @@ KIND_NAMES = {KEEP_OUT: "keep_out", WARNING: "warning", KEEP_IN: "keep_in"}
 ALERT_RANK = {"CLEAR": 0, "WARNING": 1, "IMMINENT": 2, "BREACH": 3}
 MAX_ALERTS = 1000
 TRACK_POINTS = 20_000  # positions kept for a figure (every n-th of a longer flight)
+NOTHING = frozenset()
 
 
 @dataclass
@@ -86,6 +87,7 @@ class Walker:
         self.home = None  # home AMSL, when the log gives no height above home
         self.seen = {}  # timed fence -> set of in-force states seen
         self.track, self.kept, self.stride, self.count = [], 0, 1, 0
+        self.room = None  # (x, y, clearance, fences' version) of a position outside all
 
     # -- positions --------------------------------------------------------------------
     def chunk(self, c):
@@ -113,10 +115,8 @@ class Walker:
                 fs.set_time(datetime.fromtimestamp(t, timezone.utc))
                 self.next_time = math.floor(t) + 1.0
             self.heights.update(float(c.alt_amsl[i] - alt[i]))
-            check = fs.check(float(x[i]), float(y[i]), float(alt[i]))
-            inside[i] = frozenset(check.inside_keep_out + check.inside_warning)
-            left[i] = frozenset(check.outside_keep_in)
-            breach[i] = bool(check.inside_keep_out or check.outside_keep_in)
+            inside[i], left[i] = self._check(float(x[i]), float(y[i]), float(alt[i]))
+            breach[i] = bool(left[i] or any(fs.kind[k] == KEEP_OUT for k in inside[i]))
             active[i] = fs.active[timed]
             self._positions(t, c.lat[i], c.lon[i], alt[i], x[i], y[i], inside[i] | left[i])
             lat, lon, amsl = float(c.lat[i]), float(c.lon[i]), float(c.alt_amsl[i])
@@ -134,6 +134,24 @@ class Walker:
         self._segments(x, y, t, alt, inside, left, active)
         self.prev = dict(x=x[-1], y=y[-1], t=t[-1], a=alt[-1], inside=inside[-1], left=left[-1])
         self.prev["active"] = active[-1:]
+
+    def _check(self, x, y, alt):
+        """The fences a position is in and the keep-in fences it has left. Within the
+        clearance of a position outside every fence (any kind, any altitude) nothing can have
+        changed while nothing went in or out of force: no query (see ``clearance``)."""
+        fs, room = self.fs, self.room
+        if (
+            room is not None
+            and room[3] == fs.version
+            and math.hypot(x - room[0], y - room[1]) < room[2]
+        ):
+            return NOTHING, NOTHING
+        check = fs.check(x, y, alt)
+        inside = frozenset(check.inside_keep_out + check.inside_warning)
+        left = frozenset(check.outside_keep_in)
+        clear = 0.0 if inside or left else fs.clearance(x, y)
+        self.room = (x, y, clear, fs.version) if clear > 0 else None
+        return inside, left
 
     def _velocity(self, c, x, y):
         if np.isfinite(c.vn).all() and np.isfinite(c.ve).all():
