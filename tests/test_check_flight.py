@@ -89,7 +89,7 @@ def _fmt(ftype, name, fmt, cols):
     return b"\xa3\x95\x80" + FMT.pack(ftype, length, name.encode(), fmt.encode(), cols.encode())
 
 
-def write_bin(path, tr, pos=True, leap=18):
+def write_bin(path, tr, pos=True, leap=18, gps_time=True):
     """A DataFlash log: FMT for FMT, GPS, POS and an IMU-like message, then messages in the
     order ArduPilot writes them (GPS with GPS week and milliseconds, POS, IMU)."""
     boot = tr["t"][0] - 40.0
@@ -104,6 +104,7 @@ def write_bin(path, tr, pos=True, leap=18):
         us = int(round((t - boot) * 1e6))
         gps = t + leap - 315964800
         week, ms = int(gps // 604800), int(round((gps % 604800) * 1000))
+        week, ms = (week, ms) if gps_time else (0, 0)  # a GPS that has not got the time
         lat, lon = int(round(tr["lat"][i] * 1e7)), int(round(tr["lon"][i] * 1e7))
         amsl = tr["amsl"][i]
         gps_fields = (
@@ -579,3 +580,18 @@ def test_incursions_are_what_each_position_says(tmp_path, seed):
             got[inc.fence] = got.get(inc.fence, 0) + inc.samples
     assert sorted(got.items()) == expect
     assert {k for k, _ in expect} >= {0, 1, 2, 3}, expect  # the walk met every fence
+
+
+def test_without_a_wall_clock_time_windows_count_as_in_force(tmp_path, capsys):
+    fences = fence_file(
+        tmp_path, feature("concert/1", "keep_out", WALL, zone={"applicability": WEEKENDS})
+    )
+    tr = track([(0, 1), (0, 500)])  # a Wednesday, but the log cannot say so
+    log = write_bin(tmp_path / "f.BIN", tr, gps_time=False)
+    code, doc = as_json([log, "--fences", fences], capsys)
+    assert code == 1 and doc["log"]["clock"] == "boot" and doc["log"]["start"] is None
+    assert doc["log"]["start_t"] == pytest.approx(40.0, abs=0.01)  # seconds since boot
+    assert any("no GPS time" in n for n in doc["notes"])
+    assert any("time windows counted as in force" in n for n in doc["notes"])
+    _, out, _ = run([log, "--fences", fences], capsys)
+    assert "T+" in out
