@@ -10,15 +10,15 @@ import math
 from alphafence.geo.frame import short_distance_m
 from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
 from alphafence.monitor.clearance import Clearance
+from alphafence.monitor.engine_reroute import REROUTE_FALLBACK, RerouteDecisions
 from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
 from alphafence.monitor.options import REROUTE, MonitorOptions
 from alphafence.monitor.sample import Sample, finite_velocity, plausible
-from alphafence.monitor.state import Assessment, Level, StateMachine, assess
+from alphafence.monitor.state import Level, StateMachine, assess
 from alphafence.monitor.traffic import Traffic
 
-REROUTE_FALLBACK = "brake"  # when no route (or no goal) exists
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
 # modes in which the pilot flies the vehicle (MAVSDK's names): switching into one of them, or
 # out of a mode the monitor commanded, is the pilot taking over
@@ -26,7 +26,7 @@ PILOT_MODES = {"MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO", "RATTITUDE"}
 GLITCH_SLACK_M = 25.0  # telemetry arrival jitter must not look like a jump
 
 
-class Engine:
+class Engine(RerouteDecisions):
     """The monitor's decisions, fed one telemetry sample (:meth:`step`) or timer tick
     (:meth:`tick`) at a time; every call returns the events it decided (dicts, see
     :mod:`alphafence.monitor.events`). ``checks`` counts the positions checked against the
@@ -250,67 +250,6 @@ class Engine:
         if self.options.enforce and action != "none" and t >= self.backoff_until:
             events += self._command(t, s, action, reason=kind)
         return events
-
-    # -- re-routing (the runner reports its progress) ---------------------------------
-    def reroute_started(self, t, mode_change: bool = False, **extra) -> list:
-        """The runner is about to fly a re-route: the vehicle now flies the monitor's
-        commands (a mode change that is not the monitor's is the pilot taking over), and
-        ``mode_change``: its first command switches the mode (to GUIDED)."""
-        self.rerouting = True
-        self.in_commanded_mode = True
-        if mode_change:
-            self._expect(t)
-        return [new_event("reroute", t, self.last, **extra)]
-
-    def reroute_done(self, t, resume: bool = False, **extra) -> list:
-        """The vehicle reached the re-route's goal; ``resume``: the runner now switches back
-        to the mode it had (AUTO), which hands control back."""
-        self.rerouting = False
-        if resume:
-            self._expect(t)
-            self.handing_back = True
-        else:
-            self.in_commanded_mode = False
-        return [new_event("reroute_done", t, self.last, **extra)]
-
-    def reroute_failed(self, t, reason, **extra) -> list:
-        """No route (or no goal, or a leg not flown in time): brake instead."""
-        self.rerouting = False
-        s = self.last
-        events = [new_event("reroute_failed", t, s, reason=reason, **extra)]
-        if not self.options.enforce:
-            return events
-        if t < self.backoff_until:
-            return events + [
-                new_event(
-                    "action_withheld",
-                    t,
-                    s,
-                    action=REROUTE_FALLBACK,
-                    reason="pilot changed mode recently",
-                )
-            ]
-        if s is not None and s.armed is False:
-            return events
-        return events + self._command(t, s, REROUTE_FALLBACK, reason="reroute_failed")
-
-    def _reroute_assessment(self, a, check):
-        """With re-routing, IMMINENT comes while the vehicle can still stop the re-route
-        clearance short of the fence ahead: from there it can turn away and keep it."""
-        ahead = check.breach_ahead
-        if a.level >= Level.IMMINENT or ahead is None:
-            return a
-        clearance = self.options.reroute_clearance_m
-        if a.stopping_m + clearance < ahead[1]:
-            return a
-        return Assessment(
-            Level.IMMINENT,
-            ahead[0],
-            ahead[1],
-            a.time_to_breach_s,
-            a.stopping_m,
-            f"cannot stop {clearance:g} m (the re-route clearance) before the fence ahead",
-        )
 
     def _expect(self, t):
         """The monitor is about to command a mode change: it is not the pilot's."""
