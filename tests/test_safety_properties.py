@@ -9,6 +9,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 import shapely
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
@@ -457,3 +458,58 @@ def test_a_circle_zone_is_one_circle_fence_holding_it_plus_margin_in_every_forma
             assert not polygons and len(circles) == 1  # one circle item: 13 bytes onboard
             (c,) = circles
             assert circle_holds((c.lon, c.lat, c.param1), zone, margin), "plan/waypoints"
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    groups=st.lists(
+        st.tuples(sites(), st.sampled_from(["restricted", "caution", "allowed"])),
+        min_size=3,
+        max_size=12,
+    ),
+    margin=st.sampled_from([0.0, 10.0]),
+    method=st.sampled_from(METHODS),
+)
+def test_fence_sites_all_at_once_equal_one_at_a_time(groups, margin, method):
+    """fence_sites makes every stage for many sites at once (vectorised GEOS calls, the
+    containment checks of many fences in one call): the fences must be those made site by
+    site, to the last bit, for keep-out, warning and keep-in sites of every method."""
+    from alphafence.build.fences import fence_sites, site_fences
+    from alphafence.build.sites import group_sites
+
+    kinds = {"restricted": "keep_out", "caution": "warning", "allowed": "keep_in"}
+    rules = parse_rules(
+        {
+            "defaults": RULES_DOC["defaults"],
+            "rule": [
+                {"category": tag, "kind": kind, "tags": {tag: "*"}, "margin_m": margin}
+                for tag, kind in kinds.items()
+            ],
+        }
+    )
+    features = []
+    for k, ((lon, lat, items), tag) in enumerate(groups):
+        doc = feature_collection(lon, lat, items)
+        for feat in doc["features"]:
+            feat["properties"] = {tag: "yes", "osm_id": f"{k}.{feat['properties']['osm_id']}"}
+        features += read_geojson_doc(
+            "h.geojson", doc, rules, [], __import__("collections").Counter()
+        )
+    all_sites = group_sites(features, rules)
+    opts = BuildOptions(method=method, max_vertices=8, warn_distance_m=20.0)
+    try:
+        one = [f for s in all_sites for f in site_fences(s, opts)]
+    except ValueError:  # a keep-in site vanishing inside its margin: so must all at once
+        with pytest.raises(ValueError):
+            fence_sites(all_sites, opts)
+        return
+    many = fence_sites(all_sites, opts)
+    event(f"{min(len(all_sites) // 8, 2) * 8}+ sites")
+    event(f"repaired: {any(f.repaired for f in one)}")
+    assert len(many) == len(one)
+    for a, b in zip(one, many):
+        assert (a.site_id, a.kind, a.method, a.margin_m, a.circle, a.alpha_m, a.repaired) == (
+            b.site_id, b.kind, b.method, b.margin_m, b.circle, b.alpha_m, b.repaired
+        )  # fmt: skip
+        assert type(a.margin_m) is type(b.margin_m)
+        assert shapely.to_wkb(a.local) == shapely.to_wkb(b.local)

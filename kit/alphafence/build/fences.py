@@ -9,13 +9,13 @@ region, and reported.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
 from shapely.ops import polylabel
 
 from alphafence.build import METHODS
+from alphafence.build.fence_types import Fence, FenceOptions
 from alphafence.build.sites import circle_steps
 from alphafence.build.zone_circle import zone_circle
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
@@ -24,127 +24,6 @@ from alphafence.geo.outward import simplify_polygon
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
 QUAD_SEGS = 6
 CIRCLE_SEGMENTS = 64
-
-
-@dataclass
-class FenceOptions:
-    """How fences are made.
-
-    Attributes
-    ----------
-    method : str
-        ``"alpha"`` (alpha shape), ``"polygon"`` (convex hull), ``"circle"`` or ``"exact"``
-        (the required region itself).
-    alpha_radius : float, optional
-        Alpha in metres; None picks the smallest that joins each site into one piece.
-    max_vertices : int
-        Simplify (outward) to at most this many vertices a polygon.
-    tolerance_m : float
-        Simplifications adding at most this much height always run.
-    warn_distance_m : float
-        Width of the warning layer around keep-out fences (0: none).
-    margin_m : float, optional
-        Overrides every rule's margin (0 is the paper's setting).
-    """
-
-    method: str = "alpha"
-    alpha_radius: float | None = None  # metres; None = automatic per site
-    max_vertices: int = 32
-    tolerance_m: float = 1.0
-    warn_distance_m: float = 30.0
-    margin_m: float | None = None  # overrides every rule's margin (0 = the paper's setting)
-
-
-@dataclass
-class Fence:
-    """A fence around a site, in the site's metric frame.
-
-    Attributes
-    ----------
-    site_id, name, category : str
-        From the site.
-    kind : str
-        ``"keep_out"``, ``"keep_in"`` or ``"warning"``.
-    method : str
-        How it was made (``FenceOptions.method``).
-    margin_m : float
-        Least distance from the restricted area to the fence's boundary.
-    alt_min_m, alt_max_m : float, optional
-        The altitude band it applies to.
-    sources : list of str
-    frame : LocalFrame
-    local : shapely.Polygon or shapely.MultiPolygon
-        The fence, metres.
-    circle : tuple, optional
-        ``(x, y, radius)`` in metres, for a circle fence.
-    alpha_m : float, optional
-        The alpha used.
-    repaired : bool
-        The fence failed its containment check and was united with the required region.
-    properties : dict
-        ED-269 restriction, reasons, references and applicability, when the features had them.
-
-    Examples
-    --------
-    >>> import shapely
-    >>> from alphafence.geo.frame import LocalFrame
-    >>> fence = Fence("hospital/way/1", None, "hospital", "keep_out", "exact", 30.0, None, None,
-    ...               ["way/1"], LocalFrame(14.5, 35.9), shapely.box(-50, -50, 50, 50))
-    >>> fence.vertices, fence.area_m2
-    (4, 10000.0)
-    >>> round(fence.geometry.bounds[0], 6)
-    14.499446
-    """
-
-    site_id: str
-    name: str | None
-    category: str
-    kind: str  # keep_out | keep_in | warning
-    method: str
-    margin_m: float
-    alt_min_m: float | None
-    alt_max_m: float | None
-    sources: list
-    frame: object
-    local: object  # metric Polygon / MultiPolygon
-    circle: tuple | None = None  # (x, y, radius) metric, for circle fences
-    alpha_m: float | None = None
-    repaired: bool = False
-    properties: dict = field(default_factory=dict)
-
-    @property
-    def geometry(self):
-        """The fence in WGS84 (lon, lat)."""
-        g = getattr(self, "_wgs84", None)
-        if g is None:
-            g = self.frame.geom_to_wgs84(self.local)
-            self._wgs84 = g
-        return g
-
-    @property
-    def vertices(self) -> int:
-        """Vertices of its outer rings (1 for a circle)."""
-        if self.circle is not None:
-            return 1
-        if type(self.local) is shapely.Polygon and not self.local.is_empty:
-            return int(shapely.get_num_points(self.local.exterior)) - 1
-        rings = shapely.get_exterior_ring(shapely.get_parts(self.local))
-        return int(np.sum(shapely.get_num_points(rings) - 1))
-
-    @property
-    def area_m2(self) -> float:
-        """Its area, square metres (a circle's true area)."""
-        if self.circle is not None:
-            return math.pi * self.circle[2] ** 2
-        return float(self.local.area)
-
-    @property
-    def circle_wgs84(self):
-        """(lon, lat, radius_m) of a circle fence, else None."""
-        if self.circle is None:
-            return None
-        lon, lat = self.frame.to_wgs84(self.circle[0], self.circle[1])
-        return float(lon), float(lat), float(self.circle[2])
 
 
 def required_region(geometry, margin_m):
@@ -276,7 +155,75 @@ def site_fences(site, opts: FenceOptions):
     ValueError
         A keep-in site that vanishes inside its margin.
     """
-    base = dict(
+    return fence_sites([site], opts)
+
+
+def fence_sites(sites, opts: FenceOptions) -> list:
+    """The fences of many sites: :func:`site_fences` of each, one after another, made stage
+    by stage for all of them (each stage's buffers and containment checks one GEOS call).
+
+    Parameters
+    ----------
+    sites : list of Site
+    opts : FenceOptions
+
+    Returns
+    -------
+    list of Fence
+        Each site's main fence, followed by its warning layer if it has one.
+
+    Raises
+    ------
+    ValueError
+        A keep-in site that vanishes inside its margin.
+    """
+    out = [[] for _ in sites]
+    todo, bases, geoms, margins, zones = [], [], [], [], []
+    for k, site in enumerate(sites):
+        margin = site.margin_m if opts.margin_m is None else opts.margin_m
+        zone = zone_circle(site, margin, PAD_M)  # one circle zone: one circle item onboard
+        base = _base(site)
+        if site.kind == "keep_in":
+            out[k].append(_keep_in(site, site.geometry, margin, opts, base, zone))
+            continue
+        todo.append(k)
+        bases.append(base)
+        geoms.append(site.geometry)
+        margins.append(margin)
+        zones.append(zone)
+    geoms, margin_m = _array(geoms), np.array(margins, float)
+    d = (margin_m + PAD_M) * circle_steps(QUAD_SEGS)
+    regions = shapely.buffer(geoms, d, quad_segs=QUAD_SEGS)
+    locals_, circles, alphas = [], [], []
+    for region, zone in zip(regions, zones):
+        if zone is None:
+            local, circle, alpha = outer_fence(region, opts)
+        else:
+            local, circle, alpha = circle_polygon(*zone), zone, None
+        locals_.append(local)
+        circles.append(circle)
+        alphas.append(alpha)
+    locals_ = _array(locals_)
+    repaired = ~_covers_required(locals_, circles, geoms, margin_m)
+    for i in np.flatnonzero(repaired):
+        locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], regions[i])), None
+    mains = []
+    for i, k in enumerate(todo):
+        method = opts.method if zones[i] is None else "circle"
+        main = Fence(kind=sites[k].kind, method=method, margin_m=margins[i],
+                     local=locals_[i], circle=circles[i], alpha_m=alphas[i],
+                     repaired=bool(repaired[i]), **bases[i])  # fmt: skip
+        out[k].append(main)
+        mains.append(main)
+    warn = [i for i, k in enumerate(todo) if sites[k].kind == "keep_out"]
+    if opts.warn_distance_m > 0 and warn:
+        for i, fence in zip(warn, _warning_layers([mains[i] for i in warn], geoms[warn], opts)):
+            out[todo[i]].append(fence)
+    return [f for fences in out for f in fences]
+
+
+def _base(site):
+    return dict(
         site_id=site.site_id,
         name=site.name,
         category=site.category,
@@ -286,72 +233,63 @@ def site_fences(site, opts: FenceOptions):
         frame=site.frame,
         properties=site_properties(site),
     )
-    geometry = site.geometry
-    margin = site.margin_m if opts.margin_m is None else opts.margin_m
-    zone = zone_circle(site, margin, PAD_M)  # one circle zone: one circle item onboard
-    if site.kind == "keep_in":
-        return [_keep_in(site, geometry, margin, opts, base, zone)]
-    region = required_region(geometry, margin)
-    method = opts.method if zone is None else "circle"
-    if zone is None:
-        local, circle, alpha = outer_fence(region, opts)
-    else:
-        local, circle, alpha = circle_polygon(*zone), zone, None
-    repaired = False
-    if not covers_required(local, circle, geometry, margin):
-        local, circle, repaired = fill_holes(shapely.union(local, region)), None, True
-    main = Fence(
-        kind=site.kind,
-        method=method,
-        margin_m=margin,
-        local=local,
-        circle=circle,
-        alpha_m=alpha,
-        repaired=repaired,
-        **base,
-    )
-    fences = [main]
-    if site.kind == "keep_out" and opts.warn_distance_m > 0:
-        fences.append(_warning_layer(main, geometry, opts, base))
-    return fences
 
 
-def _warning_layer(main, geometry, opts, base):
-    margin = main.margin_m + opts.warn_distance_m
-    if main.circle is not None:
-        x, y, r = main.circle
-        c = (x, y, r + opts.warn_distance_m)
-        local = circle_polygon(*c)
-    else:
-        c = None
-        if opts.method == "exact":
-            grown = shapely.buffer(
-                main.local, opts.warn_distance_m * circle_steps(QUAD_SEGS), quad_segs=QUAD_SEGS
-            )
-            local = grown
+def _array(geoms):
+    arr = np.empty(len(geoms), dtype=object)
+    arr[:] = geoms
+    return arr
+
+
+def _covers_required(fences, circles, geoms, margins):
+    """:func:`covers_required` of each fence (array), the polygon checks in one call each."""
+    if len(fences) < 8:  # a few: one call each costs less than the arrays
+        return np.array([covers_required(*a) for a in zip(fences, circles, geoms, margins)], bool)
+    ok = np.zeros(len(fences), bool)
+    poly = np.array([c is None for c in circles], bool)
+    for i in np.flatnonzero(~poly):
+        ok[i] = covers_required(fences[i], circles[i], geoms[i], margins[i])
+    ok[poly] = shapely.covers(fences[poly], geoms[poly])
+    far = ok & poly & (margins > 0)
+    ok[far] = shapely.distance(geoms[far], shapely.boundary(fences[far])) >= margins[far]
+    return ok
+
+
+def _warning_layers(mains, geoms, opts):
+    """The warning layer of each keep-out fence in ``mains``, around ``geoms`` (an array)."""
+    warn = opts.warn_distance_m
+    margins = [m.margin_m + warn for m in mains]
+    circles = [None if m.circle is None else (*m.circle[:2], m.circle[2] + warn) for m in mains]
+    locals_ = _array([m.local for m in mains])
+    if opts.method == "exact":
+        grown = shapely.buffer(locals_, warn * circle_steps(QUAD_SEGS), quad_segs=QUAD_SEGS)
+    else:  # mitred corners contain the round offset and add no arc vertices
+        grown = shapely.buffer(locals_, warn, join_style="mitre", mitre_limit=4.0)
+    for i, c in enumerate(circles):
+        if c is not None:
+            locals_[i] = circle_polygon(*c)
         else:
-            # mitred corners contain the round offset and add no arc vertices
-            grown = shapely.buffer(
-                main.local, opts.warn_distance_m, join_style="mitre", mitre_limit=4.0
-            )
-            local = _simplify_parts(grown, opts)
-    repaired = False
-    if not covers_required(local, c, geometry, margin):
-        local, c, repaired = (
-            fill_holes(shapely.union(local, required_region(geometry, margin))),
-            None,
-            True,
-        )
-    return Fence(
-        kind="warning",
-        method=main.method,
-        margin_m=margin,
-        local=local,
-        circle=c,
-        alpha_m=main.alpha_m,
-        repaired=repaired,
-        **base,
-    )
+            locals_[i] = grown[i] if opts.method == "exact" else _simplify_parts(grown[i], opts)
+    repaired = ~_covers_required(locals_, circles, geoms, np.array(margins, float))
+    for i in np.flatnonzero(repaired):
+        region = required_region(geoms[i], margins[i])
+        locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], region)), None
+    return [
+        Fence(
+            kind="warning",
+            method=m.method,
+            margin_m=margins[i],
+            local=locals_[i],
+            circle=circles[i],
+            alpha_m=m.alpha_m,
+            repaired=bool(repaired[i]),
+            **{k: getattr(m, k) for k in _BASE},
+        )  # fmt: skip
+        for i, m in enumerate(mains)
+    ]
+
+
+_BASE = ("site_id", "name", "category", "alt_min_m", "alt_max_m", "sources", "frame", "properties")
 
 
 def _keep_in(site, geometry, margin, opts, base, zone=None):
