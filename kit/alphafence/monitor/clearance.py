@@ -33,7 +33,8 @@ class Clearance:
     clear_m : float
         Its distance to the nearest fence of any kind, in force or not (> 0: outside all).
     keep_out_m : float
-        Its distance to the nearest keep-out in force (infinite when there is none).
+        Its distance to the nearest keep-out in force, at any altitude (infinite when there
+        is none).
     fence : int or None
         That keep-out's index.
     version : int
@@ -57,7 +58,8 @@ class Clearance:
         if not clear > 0.0:
             return None
         nearest = check.nearest_keep_out
-        keep_out = nearest.distance_m if nearest is not None else math.inf
+        # at any altitude: the vehicle may climb or descend into a band before the next check
+        keep_out = min(check.keep_out_any_m, nearest.distance_m if nearest else math.inf)
         return cls(x, y, clear, keep_out, nearest.index if nearest else None, fences.version)
 
     def assess(self, fences, x, y, speed_mps, lookahead_m, braking) -> Assessment | None:

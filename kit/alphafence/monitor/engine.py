@@ -15,6 +15,7 @@ from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
 from alphafence.monitor.options import REROUTE, MonitorOptions
+from alphafence.monitor.predict import vertical_reach
 from alphafence.monitor.sample import Sample, finite_velocity, plausible
 from alphafence.monitor.state import Level, StateMachine, assess
 from alphafence.monitor.traffic import Traffic
@@ -61,6 +62,7 @@ class Engine(RerouteDecisions):
         self.onboard: OnboardLayer | None = None  # the fence the vehicle holds (load_onboard)
         self.shortcut = True  # positions far from every fence skip the fence query
         self.clearance: Clearance | None = None  # the room around the last full check
+        self.amsl_said = False  # whether AMSL limits without an altitude AMSL were said
 
     # -- inputs ---------------------------------------------------------------------
     def step(self, s: Sample) -> list:
@@ -117,6 +119,7 @@ class Engine(RerouteDecisions):
             self.link_lost = False
             events.append(new_event("telemetry_resumed", s.t, s))
         events += self._pilot(s)
+        events += self._home(s)
         self.last, self.last_t = s, s.t
         x, y = self.fences.frame.to_local(s.lon, s.lat)
         speed = math.hypot(s.vn, s.ve)
@@ -124,7 +127,8 @@ class Engine(RerouteDecisions):
         x, y = float(x), float(y)
         a = self._far_from_fences(x, y, speed, lookahead)
         if a is None:
-            check = self.fences.check(x, y, s.alt_m, s.ve, s.vn, lookahead)
+            vertical = vertical_reach(s.vd, self.options.horizon_s)
+            check = self.fences.check(x, y, s.alt_m, s.ve, s.vn, lookahead, vertical)
             a = assess(check, speed, self.options.horizon_s, self.options.braking)
             if self.options.reroute:
                 a = self._reroute_assessment(a, check)
@@ -160,6 +164,20 @@ class Engine(RerouteDecisions):
             events += self._act(s, level, onboard_only=d.onboard_only)
         events += self._traffic(s, float(x), float(y))
         return events
+
+    def _home(self, s):
+        """Home's altitude AMSL (the sample's altitude AMSL less its height above home): the
+        fences' AMSL limits follow it (:meth:`FenceSet.set_home`). Until one comes they hold
+        at every altitude, said once (``altitude_unknown``)."""
+        amsl, fs = s.alt_amsl_m, self.fences
+        if isinstance(amsl, (int, float)) and math.isfinite(amsl):
+            fs.set_home(amsl - s.alt_m)
+        elif fs.home_amsl is None and not self.amsl_said:
+            self.amsl_said = True
+            if sites := fs.amsl_sites:
+                why = f"no altitude AMSL: the AMSL limits of {len(sites)} fences hold at every altitude"
+                return [new_event("altitude_unknown", s.t, s, fences=sites[:10], reason=why)]
+        return []
 
     def _far_from_fences(self, x, y, speed, lookahead):
         """CLEAR without a fence query when the last full check proves it and nothing could

@@ -3,6 +3,13 @@
 One check costs a few STRtree queries in C, independent of how many fences there are.
 The frame is centred on the fences; positions farther than ``recentre_m`` from its origin
 get a new frame (the index is rebuilt), so distances stay accurate to centimetres.
+
+Altitudes are heights above home. A fence's limits keep their vertical references (ED-269 and
+ED-318 zones in ``properties["zone"]``, KML and OpenAir on the fence: :func:`reference`); an
+AMSL limit is moved to home's altitude AMSL (:meth:`FenceSet.set_home`, from the vehicle's
+altitude AMSL less its height above home) and, until home is known, holds at every altitude.
+AGL limits and limits without a reference are compared with the height above home (no terrain
+data: AGL is taken as above home). The monitor's engine and the post-flight check both do this.
 """
 
 from __future__ import annotations
@@ -17,6 +24,33 @@ from alphafence.geo.frame import LocalFrame
 
 KEEP_OUT, WARNING, KEEP_IN = 0, 1, 2
 KIND_CODES = {"keep_out": KEEP_OUT, "warning": WARNING, "keep_in": KEEP_IN}
+NEAREST_DIRECT = 64  # up to this many keep-outs in reach are measured without the tree
+HOME_TOLERANCE_M = 0.01  # a home AMSL this close to the last one moves no limit
+# references compared with the altitude AMSL, and what each comparison approximates
+AMSL_REFERENCES = {"AMSL": "", "MSL": "", "ALT": ""}
+AMSL_REFERENCES.update(
+    WGS84="heights above the WGS84 ellipsoid compared with the altitude AMSL (the geoid's "
+    "separation, up to 100 m, not applied)",
+    STD="flight levels compared with the altitude AMSL (no pressure altitude)",
+)
+
+
+def reference(record, which: str):
+    """A fence's vertical reference for its ``"lower"`` or ``"upper"`` limit, upper case, or
+    None: kept on the fence itself (KML, OpenAir) or in its ED-269 ``zone``.
+
+    Examples
+    --------
+    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> r = FenceRecord("z", "keep_out", shapely.box(0, 0, 1, 1), properties={"zone": {
+    ...     "lower_reference": "agl", "upper_reference": "AMSL"}})
+    >>> reference(r, "lower"), reference(r, "upper"), reference(FenceRecord("y", "keep_out",
+    ...     shapely.box(0, 0, 1, 1)), "upper")
+    ('AGL', 'AMSL', None)
+    """
+    props = record.properties or {}
+    ref = props.get(f"{which}_reference") or (props.get("zone") or {}).get(f"{which}_reference")
+    return str(ref).upper() if ref else None
 
 
 @dataclass
@@ -35,8 +69,9 @@ class Check:
     inside_keep_out: list  # fence indices the position is inside (within their altitudes)
     inside_warning: list
     outside_keep_in: list  # keep-in fences the position has left
-    nearest_keep_out: Hit | None  # nearest keep-out boundary ahead of or around the vehicle
+    nearest_keep_out: Hit | None  # nearest keep-out in force within the vertical reach
     breach_ahead: tuple | None  # (fence index, metres along the track) within the look-ahead
+    keep_out_any_m: float = math.inf  # to the nearest keep-out in force at any altitude
 
 
 class FenceSet:
@@ -63,12 +98,19 @@ class FenceSet:
         geoms = np.array([r.geometry for r in self.records], dtype=object)
         self.frame = frame or LocalFrame.around(geoms)
         self.kind = np.array([KIND_CODES[r.kind] for r in self.records])
-        self.alt_min = np.array(
-            [-math.inf if r.alt_min_m is None else r.alt_min_m for r in self.records]
-        )
-        self.alt_max = np.array(
-            [math.inf if r.alt_max_m is None else r.alt_max_m for r in self.records]
-        )
+        # the limits as given, each in its own reference; alt_min and alt_max above home
+        lower = [-math.inf if r.alt_min_m is None else r.alt_min_m for r in self.records]
+        upper = [math.inf if r.alt_max_m is None else r.alt_max_m for r in self.records]
+        self.limits = (np.array(lower, dtype=float), np.array(upper, dtype=float))
+        self.references = [(reference(r, "lower"), reference(r, "upper")) for r in self.records]
+        self.amsl = [  # per limit (lower, upper): the fences whose limit there is AMSL
+            np.flatnonzero([(ref[j] in AMSL_REFERENCES) for ref in self.references])
+            for j in range(2)
+        ]
+        self.amsl = [idx[np.isfinite(self.limits[j][idx])] for j, idx in enumerate(self.amsl)]
+        self.home_amsl: float | None = None
+        self.alt_min, self.alt_max = self.limits[0].copy(), self.limits[1].copy()
+        self.alt_min[self.amsl[0]], self.alt_max[self.amsl[1]] = -math.inf, math.inf
         self.applicability = [
             ((r.properties or {}).get("zone") or {}).get("applicability") for r in self.records
         ]
@@ -96,6 +138,7 @@ class FenceSet:
         shapely.prepare(self.local)
         self.boundary = shapely.boundary(self.local)
         self.tree = shapely.STRtree(self.local)
+        self._bounds = shapely.total_bounds(self.local)
         self._by_kind = {}
         timed = np.zeros(len(self.records), dtype=bool)
         timed[self.timed] = True
@@ -106,6 +149,7 @@ class FenceSet:
             self._by_kind[code] = (idx, shapely.STRtree(self.local[idx]) if idx.size else None)
         self._timed_keep_out = [k for k in self.timed if self.kind[k] == KEEP_OUT]
         self._keep_in = [int(k) for k in np.flatnonzero(self.kind == KEEP_IN)]
+        self._keep_out_all = np.flatnonzero(self.kind == KEEP_OUT)
 
     def recentre(self, lon, lat):
         """A new frame centred on ``(lon, lat)``, and the index rebuilt in it."""
@@ -113,8 +157,45 @@ class FenceSet:
         self._build(np.array([r.geometry for r in self.records], dtype=object))
         self.version += 1
 
+    def set_home(self, home_amsl) -> bool:
+        """Place the AMSL limits for a home at ``home_amsl`` metres AMSL (the vehicle's
+        altitude AMSL less its height above home): ``alt_min`` and ``alt_max`` stay heights
+        above home. Returns whether a limit moved (not for a home within a centimetre of the
+        last one, nor for one that is not finite). Clearances are horizontal, at any altitude:
+        no ``version`` change is needed."""
+        if home_amsl is None or not math.isfinite(home_amsl):
+            return False
+        if self.home_amsl is not None and abs(home_amsl - self.home_amsl) < HOME_TOLERANCE_M:
+            return False
+        self.home_amsl = float(home_amsl)
+        for j, arr in enumerate((self.alt_min, self.alt_max)):
+            idx = self.amsl[j]
+            arr[idx] = self.limits[j][idx] - self.home_amsl
+        return bool(self.amsl[0].size or self.amsl[1].size)
+
+    @property
+    def amsl_sites(self) -> list:
+        """The site ids of the fences with a (finite) AMSL limit, each once, in order."""
+        idx = np.union1d(self.amsl[0], self.amsl[1])
+        return list(dict.fromkeys(self.records[k].site_id for k in idx))
+
+    def altitude_notes(self) -> list:
+        """What comparing the fences' limits in their references approximates, one sentence
+        each (flight levels, ellipsoid heights, AGL without terrain data)."""
+        limited = np.isfinite(self.limits[0]) | np.isfinite(self.limits[1])
+        said = {ref for k, pair in enumerate(self.references) if limited[k] for ref in pair}
+        notes = [AMSL_REFERENCES[r] for r in sorted(said & AMSL_REFERENCES.keys()) if r]
+        if limited.any() and said - AMSL_REFERENCES.keys():
+            notes.append("AGL limits compared with the height above home (no terrain data)")
+        return notes
+
     def _in_alt(self, idx, alt):
         return (self.alt_min[idx] <= alt) & (alt <= self.alt_max[idx]) & self.active[idx]
+
+    def _in_reach(self, idx, alt, vertical_m):
+        """Fences in force whose band is within ``vertical_m`` of ``alt``."""
+        lo, hi = self.alt_min[idx] - vertical_m, self.alt_max[idx] + vertical_m
+        return (lo <= alt) & (alt <= hi) & self.active[idx]
 
     def set_time(self, when):
         """Switch time-windowed (ED-269 applicability) fences on or off for ``when`` (an aware
@@ -133,10 +214,15 @@ class FenceSet:
         _, d = self.tree.query_nearest(shapely.Point(x, y), return_distance=True)
         return float(d[0]) if d.size else math.inf
 
-    def check(self, x, y, alt=0.0, vx=0.0, vy=0.0, lookahead_m=0.0) -> Check:
-        """Position (metres in ``self.frame``), altitude and horizontal velocity.
+    def check(self, x, y, alt=0.0, vx=0.0, vy=0.0, lookahead_m=0.0, vertical_m=math.inf):
+        """What a position (metres in ``self.frame``, ``alt`` above home) moving at
+        ``(vx, vy)`` m/s means against every fence: a :class:`Check`.
 
-        The common case (nowhere near a fence) costs three STRtree look-ups in C."""
+        The position is inside a fence when within its band; the prediction (the nearest
+        keep-out, a breach ahead within ``lookahead_m``) counts the keep-out fences whose band
+        is within ``vertical_m`` of ``alt`` (infinite, the default: every keep-out, as a wall
+        from the ground up). The common case (nowhere near a fence) costs three STRtree
+        look-ups in C."""
         p = shapely.Point(x, y)
         inside = self.tree.query(p, predicate="intersects")
         inside_out, inside_warn, inside_in = [], [], set()
@@ -160,11 +246,42 @@ class FenceSet:
                 d = float(shapely.distance(p, self.local[k]))
                 if nearest is None or d < nearest.distance_m:
                     nearest = Hit(k, d, d == 0.0)
+        any_m = math.inf if nearest is None else nearest.distance_m
+        banded = not math.isinf(vertical_m)
+        if banded and nearest is not None and not self._in_reach(nearest.index, alt, vertical_m):
+            nearest = self._nearest_in_reach(p, alt, vertical_m, any_m)
         speed = math.hypot(vx, vy)
         # a fence can only lie ahead within the look-ahead if the nearest one does
         if nearest is not None and 0 < nearest.distance_m <= lookahead_m and speed > 0.05:
-            ahead = self._ahead(p, x, y, vx / speed, vy / speed, lookahead_m, inside_out)
-        return Check(inside_out, inside_warn, outside_in, nearest, ahead)
+            reach = (alt, vertical_m) if banded else None
+            ahead = self._ahead(p, x, y, vx / speed, vy / speed, lookahead_m, inside_out, reach)
+        return Check(inside_out, inside_warn, outside_in, nearest, ahead, any_m)
+
+    def _nearest_in_reach(self, p, alt, vertical_m, start_m):
+        """The nearest keep-out in force whose band is within ``vertical_m`` of ``alt``, or
+        None: a few such fences are measured directly, more within a growing square around
+        ``p`` (from ``start_m``, the nearest at any altitude) until one is within it."""
+        ko = self._keep_out_all
+        ok = np.zeros(len(self.records), dtype=bool)
+        ok[ko] = self._in_reach(ko, alt, vertical_m)
+        count = int(np.count_nonzero(ok))
+        if not count:
+            return None
+        x0, y0, x1, y1 = self._bounds
+        far = math.hypot(max(abs(p.x - x0), abs(p.x - x1)), max(abs(p.y - y0), abs(p.y - y1)))
+        r = max(2.0 * start_m, 100.0) if count > NEAREST_DIRECT else math.inf
+        while True:
+            if math.isinf(r):
+                cand = np.flatnonzero(ok)
+            else:  # every fence within r of p has its envelope in this square
+                cand = self.tree.query(shapely.box(p.x - r, p.y - r, p.x + r, p.y + r))
+                cand = cand[ok[cand]]
+            if cand.size:
+                d = shapely.distance(p, self.local[cand])
+                j = int(np.argmin(d))
+                if d[j] <= r:
+                    return Hit(int(cand[j]), float(d[j]), float(d[j]) == 0.0)
+            r = 4.0 * r if 4.0 * r < far else math.inf
 
     def near(self, x, y, alt, tol_m) -> int | None:
         """A fence in force at ``alt`` that forbids the point ``(x, y)`` or whose boundary is
@@ -193,7 +310,9 @@ class FenceSet:
                 return k
         return None
 
-    def _ahead(self, p, x, y, ux, uy, lookahead_m, skip):
+    def _ahead(self, p, x, y, ux, uy, lookahead_m, skip, reach=None):
+        """The first keep-out in force along the ray (those in ``skip`` left out; with
+        ``reach = (alt, vertical_m)`` only those whose band is within reach)."""
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
         ray = shapely.LineString([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
         cand = ko_idx[ko_tree.query(ray, predicate="intersects")] if ko_tree else ko_idx[:0]
@@ -204,6 +323,8 @@ class FenceSet:
             cand = np.concatenate([cand, np.asarray(timed, dtype=cand.dtype)])
         if skip:
             cand = cand[~np.isin(cand, skip)]
+        if reach is not None and cand.size:
+            cand = cand[self._in_reach(cand, *reach)]
         if not cand.size:
             return None
         # one vectorised intersection and distance over every candidate

@@ -30,17 +30,11 @@ import numpy as np
 
 from alphafence.errors import InputError
 from alphafence.monitor.engine import Engine
-from alphafence.monitor.fenceset import FenceSet
+from alphafence.monitor.fenceset import FenceSet, reference
 from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.postflight_track import Walker
 
 NEAR_M = 500.0  # fences this close to the track get a closest approach
-AMSL_REFERENCES = {"AMSL": "", "MSL": "", "ALT": ""}
-AMSL_REFERENCES.update(
-    WGS84="heights above the WGS84 ellipsoid compared with the altitude AMSL (the geoid's "
-    "separation, up to 100 m, not applied)",
-    STD="flight levels compared with the altitude AMSL (the log has no pressure altitude)",
-)
 
 
 def load_fences(path) -> FenceSet:
@@ -51,14 +45,6 @@ def load_fences(path) -> FenceSet:
     if not records:
         raise InputError(path, "holds no fences: nothing to check the flight against")
     return FenceSet(records)
-
-
-def reference(record, which: str):
-    """A fence's vertical reference for its ``"lower"`` or ``"upper"`` limit, upper case, or
-    None: kept on the fence itself (KML, OpenAir) or in its ED-269 ``zone``."""
-    props = record.properties or {}
-    ref = props.get(f"{which}_reference") or (props.get("zone") or {}).get(f"{which}_reference")
-    return str(ref).upper() if ref else None
 
 
 @dataclass
@@ -202,35 +188,6 @@ def _approach_json(rep, a):
     }
 
 
-class _Heights:
-    """The fences' altitude bands in the engine's terms (height above home): limits AMSL moved
-    by home's altitude AMSL (the log's altitude AMSL less its height above home)."""
-
-    def __init__(self, fs: FenceSet, notes: list):
-        self.fs = fs
-        self.base = (fs.alt_min.copy(), fs.alt_max.copy())
-        refs = [(reference(r, "lower"), reference(r, "upper")) for r in fs.records]
-        self.amsl = [
-            np.flatnonzero([(ref[j] in AMSL_REFERENCES) for ref in refs]) for j in range(2)
-        ]
-        self.home = None
-        limited = np.isfinite(self.base[0]) | np.isfinite(self.base[1])
-        said = {ref for k, pair in enumerate(refs) if limited[k] for ref in pair}
-        notes += [AMSL_REFERENCES[r] for r in sorted(said & AMSL_REFERENCES.keys()) if r]
-        if limited.any() and said - AMSL_REFERENCES.keys():
-            notes.append("AGL limits compared with the height above home (no terrain in the log)")
-
-    def update(self, home_amsl):
-        if not math.isfinite(home_amsl) or (
-            self.home is not None and abs(home_amsl - self.home) < 0.01
-        ):
-            return
-        self.home = home_amsl
-        for j, arr in enumerate((self.fs.alt_min, self.fs.alt_max)):
-            idx = self.amsl[j]
-            arr[idx] = self.base[j][idx] - home_amsl
-
-
 def check_flight(log, fences: FenceSet, near_m: float = NEAR_M, options=None) -> FlightReport:
     """Check every position of a flight log against the fences (see the module).
 
@@ -238,7 +195,8 @@ def check_flight(log, fences: FenceSet, near_m: float = NEAR_M, options=None) ->
     ----------
     log : FlightLog
     fences : FenceSet
-        Its altitude arrays are moved to the log's home for the check (a fresh one per log).
+        Its AMSL limits are moved to the log's home for the check (``FenceSet.set_home``;
+        a fresh one per log).
     near_m : float
         Closest approaches are measured to fences within this distance of the track.
     options : MonitorOptions, optional
@@ -255,7 +213,8 @@ def check_flight(log, fences: FenceSet, near_m: float = NEAR_M, options=None) ->
     """
     rep = FlightReport(log.info, fences, near_m)
     engine = Engine(fences, options or MonitorOptions(onboard="off"))
-    walker = Walker(rep, engine, _Heights(fences, rep.notes))
+    rep.notes += fences.altitude_notes()
+    walker = Walker(rep, engine)
     for chunk in log.chunks():
         rep.info = log.info
         walker.chunk(chunk)

@@ -64,19 +64,19 @@ def _fill(values, fallback):
 
 
 class Walker:
-    """Walks a track chunk by chunk, filling a :class:`FlightReport`.
+    """Walks a track chunk by chunk, filling a :class:`FlightReport`. The fences' AMSL limits
+    follow the log's home (its altitude AMSL less its height above home:
+    ``FenceSet.set_home``), as the engine's do.
 
     Parameters
     ----------
     report : FlightReport
     engine : Engine
         Built on ``report.fences``.
-    heights : object
-        ``update(home_amsl)`` moves the fences' AMSL limits to the log's home.
     """
 
-    def __init__(self, report, engine, heights):
-        self.rep, self.engine, self.heights = report, engine, heights
+    def __init__(self, report, engine):
+        self.rep, self.engine = report, engine
         fs = report.fences
         self.fs = fs
         self.cols = {k: j for j, k in enumerate(fs.timed)}
@@ -114,7 +114,7 @@ class Walker:
             if utc and t >= self.next_time:
                 fs.set_time(datetime.fromtimestamp(t, timezone.utc))
                 self.next_time = math.floor(t) + 1.0
-            self.heights.update(float(c.alt_amsl[i] - alt[i]))
+            fs.set_home(float(c.alt_amsl[i] - alt[i]))
             inside[i], left[i] = self._check(float(x[i]), float(y[i]), float(alt[i]))
             breach[i] = bool(left[i] or any(fs.kind[k] == KEEP_OUT for k in inside[i]))
             active[i] = fs.active[timed]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+VERTICAL_MARGIN_M = 10.0  # altitude error (GPS, baro, home) kept above and below a fence's band
+
 
 @dataclass(frozen=True)
 class Braking:
@@ -27,6 +29,19 @@ def time_to_breach(distance_along_track_m: float | None, speed_mps: float) -> fl
     if distance_along_track_m is None or speed_mps <= 0.05:
         return math.inf
     return distance_along_track_m / speed_mps
+
+
+def vertical_reach(vd_mps: float, horizon_s: float, margin_m: float = VERTICAL_MARGIN_M) -> float:
+    """Metres the vehicle may climb or descend within the horizon at its vertical speed, plus
+    a margin: the prediction counts the fences whose altitude band is within this of it.
+
+    Examples
+    --------
+    >>> vertical_reach(0.0, 15.0), vertical_reach(-2.0, 15.0)
+    (10.0, 40.0)
+    """
+    vd = abs(vd_mps) if math.isfinite(vd_mps) else 0.0
+    return vd * max(0.0, horizon_s) + margin_m
 
 
 def closest_approach(rx, ry, rz, vx, vy, vz, horizon_s):

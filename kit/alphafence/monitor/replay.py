@@ -4,6 +4,9 @@ A trace is JSON lines: a header (``{"trace": ...}``: where it was recorded, at w
 speedup, and the fence the vehicle held, as its items) and then one :class:`Sample` per line,
 as the monitor's engine stepped on it. :func:`replay` feeds a trace to an :class:`Engine` of
 its own, the vehicle's fence loaded as its onboard layer first, as the runner does at start.
+A trace whose samples carry no ``alt_amsl_m`` (written before it was recorded) replays as it
+did for fences without AMSL limits; AMSL limits then hold at every altitude, and an
+``altitude_unknown`` event names the fences that have them.
 """
 
 from __future__ import annotations

@@ -18,7 +18,9 @@ class Sample:
     """What the vehicle reported, as one input to :meth:`Engine.step`.
 
     The runner builds one from the latest value of each telemetry stream when a new position
-    arrives; replay tests read them from recorded traces (``Sample(**json)``).
+    arrives; replay tests read them from recorded traces (``Sample(**json)``). ``alt_m`` and
+    ``alt_amsl_m`` together place home AMSL: fences' limits are compared in their own
+    reference (AMSL limits with ``alt_amsl_m``, AGL ones and others with ``alt_m``).
     """
 
     t: float  # seconds (monotonic)
@@ -29,7 +31,7 @@ class Sample:
     ve: float = 0.0  # m/s east
     mode: str | None = None
     armed: bool | None = None
-    alt_amsl_m: float | None = None  # for other aircraft, whose ADS-B altitudes are AMSL
+    alt_amsl_m: float | None = None  # AMSL: fences' AMSL limits, other aircraft's altitudes
     vd: float = 0.0  # m/s down
     gps_fix: int | None = None  # MAVLink GPS_FIX_TYPE (3 = 3D); None if unknown
 
