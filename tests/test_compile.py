@@ -250,7 +250,7 @@ def test_upload_dry_run_and_missing_area(tmp_path, capsys):
     )
     assert "nothing sent" in capsys.readouterr().out
     assert main(["upload", str(fences), "--dry-run", "--allow-unsigned"]) == 2
-    assert "needs an operating area" in capsys.readouterr().err
+    assert "need an operating area" in capsys.readouterr().err
 
 
 def test_operating_area_from_a_mission(tmp_path):

@@ -10,9 +10,17 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
-from alphafence.build.fences import site_fences
+from alphafence.build.fences import fence_sites
 from alphafence.build.sites import region_sites
 from alphafence.build.spool import Spool
+
+PRELOAD = [
+    "alphafence.build.tile_jobs",
+    "alphafence.formats.fence_geojson",
+    "alphafence.formats.fence_stream",
+    "scipy.spatial",
+    "scipy.sparse.csgraph",
+]
 
 
 @dataclass
@@ -115,9 +123,7 @@ def run_job(job: JobInput) -> JobOutput:
     for start, end in job.spans:
         sites.extend(region_sites(features[start:end], job.rules, job.options.join_m))
     sites.sort(key=lambda s: (s.category, s.site_id))
-    fences = []
-    for site in sites:
-        fences.extend(site_fences(site, job.options))
+    fences = fence_sites(sites, job.options)
     encoded = []
     if job.encoders:
         docs = fence_features(fences)
@@ -155,7 +161,27 @@ def run_local(jobs):
         yield run_job(job)
 
 
-def run_processes(jobs, workers: int):
+def start_pool(workers: int):
+    """A pool of ``workers`` worker processes forked from a server that has imported the
+    fencing code once, started now: a build starts it before reading its database, so the
+    imports run on a core the reading leaves idle.
+
+    Returns
+    -------
+    concurrent.futures.ProcessPoolExecutor
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(PRELOAD)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    for _ in range(workers):
+        pool.submit(int)  # a task that starts a worker
+    return pool
+
+
+def run_processes(jobs, workers: int, pool=None):
     """Jobs in ``workers`` worker processes (forkserver), results in job order, at most two
     jobs per worker in flight (so memory holds a few tiles, not the country).
 
@@ -163,16 +189,15 @@ def run_processes(jobs, workers: int):
     ----------
     jobs : iterable of JobInput
     workers : int
+    pool : concurrent.futures.ProcessPoolExecutor, optional
+        One :func:`start_pool` started (shut down here when the jobs are done).
 
     Yields
     ------
     JobOutput
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    ctx = multiprocessing.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    pool = pool or start_pool(workers)
+    with pool:
         yield from _in_order(
             lambda job: pool.submit(run_job, job), lambda fut: fut.result(), jobs, 2 * workers
         )

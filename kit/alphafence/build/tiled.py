@@ -18,9 +18,11 @@ import numpy as np
 
 from alphafence.build.sites import feature_widths, site_class
 from alphafence.build.spool import Spool
-from alphafence.build.tile_jobs import JobInput, run_dask, run_local, run_processes
+from alphafence.build.tile_jobs import JobInput, run_dask, run_local, run_processes, start_pool
 from alphafence.build.tiles import TARGET_FEATURES, TILE_DEG, plan_jobs
 from alphafence.mavlink.items import MAX_POLYGON_VERTICES
+
+WARM_POOL_BYTES = 32 * 2**20  # databases larger than this start the workers before reading
 
 
 def default_jobs() -> int:
@@ -198,6 +200,57 @@ def build_tiled(
     result = TiledResult(site_kinds=Counter(), fences=[] if keep else None)
     result.site_objects = [] if keep else None
     t0 = time.perf_counter()
+    pool = None
+    if not dask and jobs > 1 and _input_bytes(stream.paths) > WARM_POOL_BYTES:
+        pool = start_pool(jobs)  # its imports overlap the reading
+    try:
+        return _build(
+            stream,
+            rules,
+            options,
+            writers,
+            jobs,
+            dask,
+            keep,
+            progress,
+            tile_deg,
+            target,
+            spool_dir,
+            result,
+            t0,
+            pool,
+        )
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _input_bytes(paths):
+    total = 0
+    for p in paths:
+        try:
+            total += os.path.getsize(p)
+        except OSError:
+            pass
+    return total
+
+
+def _build(
+    stream,
+    rules,
+    options,
+    writers,
+    jobs,
+    dask,
+    keep,
+    progress,
+    tile_deg,
+    target,
+    spool_dir,
+    result,
+    t0,
+    pool,
+):
     with Spool(spool_dir) as spool:
         for batch in stream.batches():
             widths = feature_widths(batch, rules)
@@ -235,8 +288,8 @@ def build_tiled(
 
         if dask:
             outputs = run_dask(inputs(), dask)
-        elif jobs > 1 and len(plan) > 1:
-            outputs = run_processes(inputs(), min(jobs, len(plan)))
+        elif jobs > 1 and (len(plan) > 1 or pool is not None):
+            outputs = run_processes(inputs(), jobs if pool else min(jobs, len(plan)), pool)
         else:
             outputs = run_local(inputs())
         done = 0
