@@ -191,9 +191,10 @@ def fence_sites(sites, opts: FenceOptions) -> list:
         geoms.append(site.geometry)
         margins.append(margin)
         zones.append(zone)
-    geoms, margin_m = _array(geoms), np.array(margins, float)
-    d = (margin_m + PAD_M) * circle_steps(QUAD_SEGS)
-    regions = shapely.buffer(geoms, d, quad_segs=QUAD_SEGS)
+    steps = circle_steps(QUAD_SEGS)
+    regions = shapely.buffer(
+        _array(geoms), [(m + PAD_M) * steps for m in margins], quad_segs=QUAD_SEGS
+    )
     locals_, circles, alphas = [], [], []
     for region, zone in zip(regions, zones):
         if zone is None:
@@ -203,21 +204,21 @@ def fence_sites(sites, opts: FenceOptions) -> list:
         locals_.append(local)
         circles.append(circle)
         alphas.append(alpha)
-    locals_ = _array(locals_)
-    repaired = ~_covers_required(locals_, circles, geoms, margin_m)
-    for i in np.flatnonzero(repaired):
+    repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
+    for i in (i for i, bad in enumerate(repaired) if bad):
         locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], regions[i])), None
     mains = []
     for i, k in enumerate(todo):
         method = opts.method if zones[i] is None else "circle"
         main = Fence(kind=sites[k].kind, method=method, margin_m=margins[i],
                      local=locals_[i], circle=circles[i], alpha_m=alphas[i],
-                     repaired=bool(repaired[i]), **bases[i])  # fmt: skip
+                     repaired=repaired[i], **bases[i])  # fmt: skip
         out[k].append(main)
         mains.append(main)
     warn = [i for i, k in enumerate(todo) if sites[k].kind == "keep_out"]
     if opts.warn_distance_m > 0 and warn:
-        for i, fence in zip(warn, _warning_layers([mains[i] for i in warn], geoms[warn], opts)):
+        layers = _warning_layers([mains[i] for i in warn], [geoms[i] for i in warn], opts)
+        for i, fence in zip(warn, layers):
             out[todo[i]].append(fence)
     return [f for fences in out for f in fences]
 
@@ -242,21 +243,25 @@ def _array(geoms):
 
 
 def _covers_required(fences, circles, geoms, margins):
-    """:func:`covers_required` of each fence (array), the polygon checks in one call each."""
+    """:func:`covers_required` of each fence, the polygons' checks one GEOS call each."""
     if len(fences) < 8:  # a few: one call each costs less than the arrays
-        return np.array([covers_required(*a) for a in zip(fences, circles, geoms, margins)], bool)
-    ok = np.zeros(len(fences), bool)
-    poly = np.array([c is None for c in circles], bool)
-    for i in np.flatnonzero(~poly):
-        ok[i] = covers_required(fences[i], circles[i], geoms[i], margins[i])
-    ok[poly] = shapely.covers(fences[poly], geoms[poly])
-    far = ok & poly & (margins > 0)
-    ok[far] = shapely.distance(geoms[far], shapely.boundary(fences[far])) >= margins[far]
+        return [covers_required(*a) for a in zip(fences, circles, geoms, margins)]
+    ok = [c is not None and covers_required(f, c, g, m)
+          for f, c, g, m in zip(fences, circles, geoms, margins)]  # fmt: skip
+    poly = [i for i, c in enumerate(circles) if c is None]
+    fence, geom = _array([fences[i] for i in poly]), _array([geoms[i] for i in poly])
+    covered = shapely.covers(fence, geom)
+    far = [k for k, i in enumerate(poly) if covered[k] and margins[i] > 0]
+    distance = shapely.distance(geom[far], shapely.boundary(fence[far]))
+    for k, i in enumerate(poly):
+        ok[i] = bool(covered[k])
+    for k, d in zip(far, distance.tolist()):
+        ok[poly[k]] = d >= margins[poly[k]]
     return ok
 
 
 def _warning_layers(mains, geoms, opts):
-    """The warning layer of each keep-out fence in ``mains``, around ``geoms`` (an array)."""
+    """The warning layer of each keep-out fence in ``mains``, around ``geoms``."""
     warn = opts.warn_distance_m
     margins = [m.margin_m + warn for m in mains]
     circles = [None if m.circle is None else (*m.circle[:2], m.circle[2] + warn) for m in mains]
@@ -265,13 +270,14 @@ def _warning_layers(mains, geoms, opts):
         grown = shapely.buffer(locals_, warn * circle_steps(QUAD_SEGS), quad_segs=QUAD_SEGS)
     else:  # mitred corners contain the round offset and add no arc vertices
         grown = shapely.buffer(locals_, warn, join_style="mitre", mitre_limit=4.0)
-    for i, c in enumerate(circles):
-        if c is not None:
-            locals_[i] = circle_polygon(*c)
-        else:
-            locals_[i] = grown[i] if opts.method == "exact" else _simplify_parts(grown[i], opts)
-    repaired = ~_covers_required(locals_, circles, geoms, np.array(margins, float))
-    for i in np.flatnonzero(repaired):
+    locals_ = [
+        circle_polygon(*c) if c is not None
+        else grown[i] if opts.method == "exact"
+        else _simplify_parts(grown[i], opts)
+        for i, c in enumerate(circles)
+    ]  # fmt: skip
+    repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
+    for i in (i for i, bad in enumerate(repaired) if bad):
         region = required_region(geoms[i], margins[i])
         locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], region)), None
     return [
@@ -282,7 +288,7 @@ def _warning_layers(mains, geoms, opts):
             local=locals_[i],
             circle=circles[i],
             alpha_m=m.alpha_m,
-            repaired=bool(repaired[i]),
+            repaired=repaired[i],
             **{k: getattr(m, k) for k in _BASE},
         )  # fmt: skip
         for i, m in enumerate(mains)
