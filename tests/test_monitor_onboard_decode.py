@@ -180,3 +180,10 @@ def test_the_kits_own_items_decode_to_the_fences_they_came_from(centres):
     for f, r in zip(fences, records):
         a, b = FRAME.geom_to_local(f.geometry()), FRAME.geom_to_local(r.geometry)
         assert a.symmetric_difference(b).area < 1e-3 * b.area
+
+
+def test_a_circle_too_small_for_degrees_has_no_area():
+    # found by the fuzz test above: a 3e-37 m radius collapsed to one repeated point (invalid)
+    item = SimpleNamespace(command=5003, param1=3.3759425731685346e-37, lon=0.0, lat=0.0)
+    (fence,) = decode_fence([item])
+    assert fence.geometry().is_empty and fence.geometry().is_valid

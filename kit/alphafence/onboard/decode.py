@@ -112,8 +112,11 @@ class OnboardFence:
             lon, lat = self.lonlat[0]
             frame = LocalFrame(lon, lat)
             r = self.radius_m if self.inclusion else self.radius_m / math.cos(math.pi / segments)
-            disc = shapely.Point(0.0, 0.0).buffer(r, quad_segs=max(1, segments // 4))
-            return frame.geom_to_wgs84(disc)
+            disc = frame.geom_to_wgs84(
+                shapely.Point(0.0, 0.0).buffer(r, quad_segs=max(1, segments // 4))
+            )
+            # a circle too small for degrees to tell its vertices apart has no area
+            return disc if disc.is_valid and disc.area > 0 else shapely.Polygon()
         # validity is judged in metres, in a frame centred on the polygon (a polygon across
         # the antimeridian is a small one there)
         frame = LocalFrame.around_coords(self.lonlat)
