@@ -4,10 +4,11 @@ import math
 
 import numpy as np
 import shapely
+import shapely.affinity
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alphafence.geo.outward import simplify_polygon, simplify_ring
+from alphafence.geo.outward import simplify_polygon, simplify_polygons, simplify_ring
 
 
 @st.composite
@@ -56,3 +57,79 @@ def test_orientation_is_kept():
     cw = np.array([(0, 0), (0, 10), (5, 11), (10, 10), (10, 0)], float)
     out = simplify_ring(cw, 4, 0.0)
     assert not shapely.LinearRing(out).is_ccw and shapely.Polygon(out).covers(shapely.Polygon(cw))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(star_polygons(), min_size=1, max_size=12),
+    st.sampled_from([4, 8, 32]),
+    st.sampled_from([0.0, 1.0, 10.0]),
+    st.booleans(),
+    st.floats(-1e6, 1e6),
+)
+def test_many_at_once_are_each_alone(polys, budget, tol, outward, offset):
+    """simplify_polygons finds every ring's first operations in one vectorised pass (numpy's
+    hypot only sorting out what is clearly too high or too far): the polygons must be those
+    simplify_polygon makes one at a time, to the last bit, far from the origin too."""
+    import alphafence.geo.outward as outward_module
+
+    polys = [shapely.affinity.translate(p, offset, -offset) for p in polys]
+    polys = [p for p in polys if p.geom_type == "Polygon"]
+    polys += [
+        shapely.Polygon(
+            np.column_stack([np.linspace(0, 1e3, 60), np.r_[0.0, 1e-9 * np.ones(58), 5.0]])
+        )
+    ]
+    batch_min, outward_module.BATCH_MIN_VERTICES = outward_module.BATCH_MIN_VERTICES, 0
+    try:  # the vectorised pass for any number of vertices
+        many = simplify_polygons(polys, budget, tol, outward)
+    finally:
+        outward_module.BATCH_MIN_VERTICES = batch_min
+    assert [shapely.to_wkb(p) for p in many] == [
+        shapely.to_wkb(simplify_polygon(p, budget, tol, outward)) for p in polys
+    ]
+
+
+def _ops_pass(pts, max_vertices, tolerance):
+    """The first operations of a ring as _greedy's own pass finds them, by kind and vertex."""
+    from alphafence.geo.outward import _ops
+
+    P = [tuple(p) for p in pts.tolist()]
+    reach = 2.0 * float((pts.max(axis=0) - pts.min(axis=0)).max()) + 1.0
+    prune = tolerance if len(P) <= max_vertices else math.inf
+    heap = []
+    for i, p, a, b, q in zip(range(len(P)), P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2]):
+        _ops(heap, i, 0, p, a, b, q, reach, prune)
+    return sorted(heap, key=lambda op: op[2:4])
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.lists(star_polygons(), min_size=1, max_size=8),
+    st.sampled_from([4, 32, 200]),
+    st.floats(0, 1),
+    st.floats(-1e6, 1e6),
+)
+def test_the_vectorised_first_pass_is_the_ops_pass(polys, budget, quantile, offset):
+    """_first_heaps measures with np.hypot only to drop what is clearly too high or too far:
+    its entries are the _ops pass's, to the last bit, with the tolerance at one of the
+    ring's own operation heights (the edge of the pruning) and rings far from the origin."""
+    from alphafence.geo.outward import _first_heaps
+
+    rings = []
+    for poly in polys:
+        if poly.geom_type != "Polygon":
+            continue
+        pts = np.asarray(poly.exterior.coords)[:-1] + (offset, -offset)
+        rings.append(pts if shapely.LinearRing(pts).is_ccw else pts[::-1].copy())
+    heights = [op[1] for r in rings for op in _ops_pass(r, 0, math.inf)]
+    tol = float(np.quantile(heights, quantile, method="nearest")) if heights else 1.0
+    import alphafence.geo.outward as outward_module
+
+    batch_min, outward_module.BATCH_MIN_VERTICES = outward_module.BATCH_MIN_VERTICES, 0
+    try:
+        heaps = _first_heaps(rings, budget, tol)
+    finally:
+        outward_module.BATCH_MIN_VERTICES = batch_min
+    for ring, heap in zip(rings, heaps):
+        assert sorted(heap, key=lambda op: op[2:4]) == _ops_pass(ring, budget, tol)

@@ -19,7 +19,7 @@ from alphafence.build.fence_types import Fence, FenceOptions
 from alphafence.build.sites import circle_steps
 from alphafence.build.zone_circle import zone_circle
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
-from alphafence.geo.outward import simplify_polygon
+from alphafence.geo.outward import simplify_polygon, simplify_polygons
 
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
 QUAD_SEGS = 6
@@ -56,12 +56,18 @@ def enclosing_circle(region):
     return cx, cy, r * (1 + 1e-9) + 1e-6
 
 
-def _simplify_parts(geom, opts, outward=True):
-    polys = outer_polygons(geom)
-    out = [simplify_polygon(p, opts.max_vertices, opts.tolerance_m, outward) for p in polys]
-    if len(out) == 1:
-        return out[0]
-    return fill_holes(shapely.union_all(out))
+def _simplify_parts(geoms, opts):
+    """Each geometry's polygons simplified outward (all of them in one pass), a geometry of
+    several united again with their holes filled."""
+    polys = [outer_polygons(g) for g in geoms]
+    flat = simplify_polygons(
+        [p for ps in polys for p in ps], opts.max_vertices, opts.tolerance_m, outward=True
+    )
+    out, at = [], 0
+    for ps in polys:
+        parts, at = flat[at : at + len(ps)], at + len(ps)
+        out.append(parts[0] if len(parts) == 1 else fill_holes(shapely.union_all(parts)))
+    return out
 
 
 def outer_fence(region, opts):
@@ -75,17 +81,29 @@ def outer_fence(region, opts):
     alpha : float or None
         The alpha used by the alpha method.
     """
+    return outer_fences([region], opts)[0]
+
+
+def outer_fences(regions, opts):
+    """:func:`outer_fence` of each region, their simplifications in one pass.
+
+    Returns
+    -------
+    list of tuple
+        ``(geometry, circle, alpha)`` per region.
+    """
     method = opts.method
     if method == "alpha":
-        shape, alpha = alpha_shape(region, opts.alpha_radius)
-        return _simplify_parts(shape, opts), None, alpha
+        made = [alpha_shape(r, opts.alpha_radius) for r in regions]
+        shapes = _simplify_parts([shape for shape, _ in made], opts)
+        return [(f, None, alpha) for f, (_, alpha) in zip(shapes, made)]
     if method == "polygon":
-        return _simplify_parts(shapely.convex_hull(region), opts), None, None
+        hulls = [shapely.convex_hull(r) for r in regions]
+        return [(f, None, None) for f in _simplify_parts(hulls, opts)]
     if method == "circle":
-        c = enclosing_circle(region)
-        return circle_polygon(*c), c, None
+        return [(circle_polygon(*c), c, None) for c in map(enclosing_circle, regions)]
     if method == "exact":
-        return fill_holes(region), None, None
+        return [(fill_holes(r), None, None) for r in regions]
     raise ValueError(f"unknown method {method!r} (expected one of {', '.join(METHODS)})")
 
 
@@ -195,15 +213,9 @@ def fence_sites(sites, opts: FenceOptions) -> list:
     regions = shapely.buffer(
         _array(geoms), [(m + PAD_M) * steps for m in margins], quad_segs=QUAD_SEGS
     )
-    locals_, circles, alphas = [], [], []
-    for region, zone in zip(regions, zones):
-        if zone is None:
-            local, circle, alpha = outer_fence(region, opts)
-        else:
-            local, circle, alpha = circle_polygon(*zone), zone, None
-        locals_.append(local)
-        circles.append(circle)
-        alphas.append(alpha)
+    fenced = iter(outer_fences([r for r, z in zip(regions, zones) if z is None], opts))
+    made = [next(fenced) if z is None else (circle_polygon(*z), z, None) for z in zones]
+    locals_, circles, alphas = (list(col) for col in zip(*made)) if made else ([], [], [])
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
     for i in (i for i, bad in enumerate(repaired) if bad):
         locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], regions[i])), None
@@ -270,12 +282,12 @@ def _warning_layers(mains, geoms, opts):
         grown = shapely.buffer(locals_, warn * circle_steps(QUAD_SEGS), quad_segs=QUAD_SEGS)
     else:  # mitred corners contain the round offset and add no arc vertices
         grown = shapely.buffer(locals_, warn, join_style="mitre", mitre_limit=4.0)
-    locals_ = [
-        circle_polygon(*c) if c is not None
-        else grown[i] if opts.method == "exact"
-        else _simplify_parts(grown[i], opts)
-        for i, c in enumerate(circles)
-    ]  # fmt: skip
+    polygonal = [i for i, c in enumerate(circles) if c is None]
+    if opts.method == "exact":
+        simplified = iter(grown[polygonal])
+    else:
+        simplified = iter(_simplify_parts(grown[polygonal], opts))
+    locals_ = [circle_polygon(*c) if c is not None else next(simplified) for c in circles]
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
     for i in (i for i, bad in enumerate(repaired) if bad):
         region = required_region(geoms[i], margins[i])

@@ -24,10 +24,18 @@ import math
 import numpy as np
 import shapely
 
-from alphafence.geo.rings import ring_coords, ring_covers, signed_area, valid_ring
+from alphafence.geo.rings import (
+    fill_blocked,
+    prereduce,
+    ring_coords,
+    ring_covers,
+    signed_area,
+    valid_ring,
+)
 
 _EPS = 1e-12
 MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
+BATCH_MIN_VERTICES = 160  # fewer vertices in all: each ring's own pass is cheaper
 
 
 def _ops(out, i, st, p, a, b, q, reach, prune):
@@ -70,8 +78,9 @@ def _ops(out, i, st, p, a, b, q, reach, prune):
         out.append((area, height, 1, i, st, (x0, x1)))
 
 
-def _greedy(pts, max_vertices, tolerance, check):
-    """Greedy outward simplification of a CCW ring; ``check`` verifies simplicity per step.
+def _greedy(pts, max_vertices, tolerance, check, first=None):
+    """Greedy outward simplification of a CCW ring; ``check`` verifies simplicity per step;
+    ``first``, the ring's first operations if :func:`_first_heaps` found them.
 
     Returns the ring, or None when no operation applies (the ring stays as it is)."""
     n = len(pts)
@@ -84,10 +93,11 @@ def _greedy(pts, max_vertices, tolerance, check):
     reach = 2.0 * span + 1.0
     # once the ring is within max_vertices (it only shrinks), operations higher than the
     # tolerance never run: they are not even queued
-    heap = []
+    heap = [] if first is None else list(first)
     prune = tolerance if n <= max_vertices else math.inf
-    for i, p, a, b, q in zip(range(n), P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2]):
-        _ops(heap, i, 0, p, a, b, q, reach, prune)
+    if first is None:
+        for i, p, a, b, q in zip(range(n), P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2]):
+            _ops(heap, i, 0, p, a, b, q, reach, prune)
     heapq.heapify(heap)
     count = n
     changed = False
@@ -99,7 +109,7 @@ def _greedy(pts, max_vertices, tolerance, check):
             continue
         if kind == 0:
             p, q = prev[i], nxt[i]
-            if check and _blocked(P, alive, nxt, (P[p], P[i], P[q]), (p, i, q), None):
+            if check and fill_blocked(P, alive, nxt, (P[p], P[i], P[q]), (p, i, q), None):
                 continue
             alive[i] = False
             nxt[p], prev[q] = q, p
@@ -107,7 +117,7 @@ def _greedy(pts, max_vertices, tolerance, check):
         else:
             p, j = prev[i], nxt[i]
             q = nxt[j]
-            if check and _blocked(
+            if check and fill_blocked(
                 P, alive, nxt, (P[i], X, P[j]), (i, j), ((P[i], X), (X, P[j]), (p, i, j))
             ):
                 continue
@@ -136,45 +146,66 @@ def _greedy(pts, max_vertices, tolerance, check):
     return np.array(out)
 
 
-def _blocked(P, alive, nxt, tri, corners, segments):
-    """Would filling triangle ``tri`` break the ring's simplicity?"""
-    (ax, ay), (bx, by), (cx, cy) = tri
-    lox, hix = min(ax, bx, cx), max(ax, bx, cx)
-    loy, hiy = min(ay, by, cy), max(ay, by, cy)
-    for v, ok in enumerate(alive):
-        if not ok or v in corners:
-            continue
-        x, y = P[v]
-        if x < lox or x > hix or y < loy or y > hiy:
-            continue
-        d1 = (bx - ax) * (y - ay) - (by - ay) * (x - ax)
-        d2 = (cx - bx) * (y - by) - (cy - by) * (x - bx)
-        d3 = (ax - cx) * (y - cy) - (ay - cy) * (x - cx)
-        if not ((d1 < 0 or d2 < 0 or d3 < 0) and (d1 > 0 or d2 > 0 or d3 > 0)):
-            return True
-    if segments is None:
-        return False
-    *segs, skip = segments
-    for u, ok in enumerate(alive):
-        if not ok or u in skip:
-            continue
-        C, D = P[u], P[nxt[u]]
-        for A, B in segs:
-            if _crosses(A, B, C, D):
-                return True
-    return False
-
-
-def _crosses(A, B, C, D):
-    if max(C[0], D[0]) < min(A[0], B[0]) or min(C[0], D[0]) > max(A[0], B[0]):
-        return False
-    if max(C[1], D[1]) < min(A[1], B[1]) or min(C[1], D[1]) > max(A[1], B[1]):
-        return False
-    o1 = (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0])
-    o2 = (B[0] - A[0]) * (D[1] - A[1]) - (B[1] - A[1]) * (D[0] - A[0])
-    o3 = (D[0] - C[0]) * (A[1] - C[1]) - (D[1] - C[1]) * (A[0] - C[0])
-    o4 = (D[0] - C[0]) * (B[1] - C[1]) - (D[1] - C[1]) * (B[0] - C[0])
-    return o1 * o2 <= 0 and o3 * o4 <= 0
+def _first_heaps(rings, max_vertices, tolerance):
+    """The first operations of many oriented rings (4 vertices or more each) at once: for
+    each ring the heap entries :func:`_greedy`'s pass of :func:`_ops` finds (None where a
+    few rings make the pass itself cheaper). The arithmetic is ``_ops``', elementwise, so
+    every value is the same float; ``_ops`` measures lengths with ``math.hypot``, which may
+    differ from ``np.hypot`` in the last bit, so ``np.hypot`` only drops operations that are
+    clearly too high or too far, and the others are measured again as ``_ops`` does."""
+    sizes = np.array([len(r) for r in rings], int)
+    if not len(rings) or sizes.sum() < BATCH_MIN_VERTICES:
+        return [None] * len(rings)
+    xy = np.concatenate(rings)
+    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    n = np.repeat(sizes, sizes)
+    i = np.arange(len(xy)) - start
+    x, y = xy[:, 0], xy[:, 1]
+    (px, py), (jx, jy), (qx, qy) = (xy[start + (i + k) % n].T for k in (-1, 1, 2))
+    offsets = np.cumsum(sizes) - sizes
+    span = (np.maximum.reduceat(xy, offsets) - np.minimum.reduceat(xy, offsets)).max(axis=1)
+    reach = np.repeat(2.0 * span + 1.0, sizes)
+    prune = np.repeat(np.where(sizes <= max_vertices, tolerance, math.inf), sizes)
+    loose = 1.0 + 1e-9  # far above the last-bit differences of the two hypots
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        c = (x - px) * (jy - py) - (y - py) * (jx - px)
+        area0, bx, by = -0.5 * c, jx - px, jy - py
+        keep0 = ~(c > 0) & ~(2.0 * area0 / np.hypot(bx, by) > prune * loose)
+        d1x, d1y, d2x, d2y = x - px, y - py, jx - qx, jy - qy
+        den = d1x * d2y - d1y * d2x
+        wx, wy = jx - x, jy - y
+        t = (wx * d2y - wy * d2x) / den
+        s = (wx * d1y - wy * d1x) / den
+        x0, x1 = x + t * d1x, y + t * d1y
+        x0, x1 = x0 + (x0 - 0.5 * (x + jx)) * 1e-9, x1 + (x1 - 0.5 * (y + jy)) * 1e-9
+        c = (jx - x) * (x1 - y) - (jy - y) * (x0 - x)
+        area1 = -0.5 * c
+        keep1 = ~(np.abs(den) < _EPS) & ~(t <= 0) & ~(s <= 0) & ~(c >= 0)
+        keep1 &= ~(2.0 * area1 / np.hypot(wx, wy) > prune * loose)
+        far = np.maximum(t * np.hypot(d1x, d1y), s * np.hypot(d2x, d2y))
+        keep1 &= ~(far > reach * loose)
+        near = ~(far > reach / loose)  # within reach whichever hypot measures it
+    ring = np.repeat(np.arange(len(rings)), sizes)
+    heaps = [[] for _ in rings]
+    hypot = math.hypot
+    v = np.flatnonzero(keep0)
+    for r, k, a, ux, uy, cut in zip(*(col[v].tolist() for col in (ring, i, area0, bx, by, prune))):
+        base = hypot(ux, uy)
+        height = 2.0 * a / base if base > 0 else 0.0
+        if not height > cut:
+            heaps[r].append((a, height, 0, k, 0, None))
+    for v in np.flatnonzero(keep1 & ~near).tolist():  # rare: the reach as _ops measures it
+        far = float(reach[v])
+        if t[v] * hypot(d1x[v], d1y[v]) > far or s[v] * hypot(d2x[v], d2y[v]) > far:
+            keep1[v] = False
+    v = np.flatnonzero(keep1)
+    cols = (ring, i, area1, wx, wy, x0, x1, prune)
+    for r, k, a, ux, uy, X0, X1, cut in zip(*(col[v].tolist() for col in cols)):
+        base = hypot(ux, uy)
+        height = 2.0 * a / base if base > 0 else 0.0
+        if not height > cut:
+            heaps[r].append((a, height, 1, k, 0, (X0, X1)))
+    return heaps
 
 
 def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True) -> np.ndarray:
@@ -212,18 +243,24 @@ def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True
     return _simplify(ring_coords(pts), max_vertices, tolerance, outward)[0]
 
 
-def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False):
+def _orient(pts, outward):
+    """``pts`` (clean, 4 vertices or more) in the orientation simplified, and whether that
+    flipped them."""
+    area = signed_area(pts)
+    flip = (area < 0) if outward else (area > 0)
+    return (pts[::-1] if flip else pts), flip
+
+
+def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False, first=None):
     """:func:`simplify_ring` of clean vertices ``pts``: the vertices, and their polygon when
     one was built (else None). ``given``, a polygon of ``pts``' vertices (any orientation),
     spares building one for the check; if ``same``, its exterior holds ``pts`` as they are
-    and it is the polygon of a ring left as it is."""
+    and it is the polygon of a ring left as it is. ``first``: ``(oriented pts, flipped,
+    first operations)`` when :func:`simplify_polygons` found them."""
     kept = given if same else None
     if len(pts) <= 3:
         return pts, kept
-    area = signed_area(pts)
-    flip = (area < 0) if outward else (area > 0)
-    if flip:
-        pts = pts[::-1]
+    pts, flip, heap = (*_orient(pts, outward), None) if first is None else first
     max_vertices = max(MIN_VERTICES, int(max_vertices))
 
     # the flipped ring is simplified "outward" in its own orientation: for inward
@@ -231,7 +268,7 @@ def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False):
     def ok(out):
         return ring_covers(out, pts) if outward else (valid_ring(out) and ring_covers(pts, out))
 
-    out = _greedy(pts, max_vertices, tolerance, check=False)
+    out = _greedy(pts, max_vertices, tolerance, False, heap)
     if out is None:  # no operation applies (nor would one checked): the ring as it is
         return (pts[::-1] if flip else pts), kept
     final = out[::-1] if flip else out
@@ -244,98 +281,10 @@ def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False):
             return final, poly
     if ok(out):
         return final, poly
-    out = _greedy(pts, max_vertices, tolerance, check=True)
+    out = _greedy(pts, max_vertices, tolerance, True, heap)
     if out is None or not ok(out):  # numerically degenerate input: leave it as it is
         return (pts[::-1] if flip else pts), kept
     return (out[::-1] if flip else out), None
-
-
-def shifted_dp(pts, tol):
-    """Fast outward pre-reduction of a CCW ring (vectorised).
-
-    Douglas-Peucker (GEOS) picks a subset of the vertices; each kept edge is then pushed
-    outward, parallel to itself, just far enough that the chain of vertices it replaced lies
-    on its inner side, and consecutive pushed edges are joined at their intersection (or,
-    where they are nearly parallel, by a short bevel). Returns the new ring, or None when the
-    subset is degenerate; callers verify containment.
-    """
-    return _shifted(pts, _dp(shapely.Polygon(pts), tol))
-
-
-def _dp(ring, tol):
-    """The vertices Douglas-Peucker (GEOS, topology preserving) keeps of polygon ``ring``."""
-    return ring_coords(shapely.simplify(ring, tol, preserve_topology=True).exterior)
-
-
-def _shifted(pts, spts, index=None):
-    """:func:`shifted_dp` given the kept vertices ``spts`` (and ``pts``' vertex -> index)."""
-    n = len(pts)
-    if len(spts) < 3 or len(spts) >= n:
-        return None
-    if index is None:
-        index = {tuple(p): k for k, p in enumerate(pts.tolist())}
-    try:
-        keep = np.array(sorted(index[tuple(p)] for p in spts.tolist()))
-    except KeyError:
-        return None
-    m = len(keep)
-    a = pts[keep]
-    b = pts[np.roll(keep, -1)]
-    d = b - a
-    length = np.hypot(d[:, 0], d[:, 1])
-    if np.any(length == 0):
-        return None
-    normal = np.column_stack([d[:, 1], -d[:, 0]]) / length[:, None]  # right = outside (CCW)
-    # every vertex belongs to the kept edge that starts at or before it
-    seg = np.searchsorted(keep, np.arange(n), side="right") - 1
-    seg[seg < 0] = m - 1  # vertices before the first kept one wrap to the last edge
-    rel = pts - a[seg]
-    dev = rel[:, 0] * normal[seg, 0] + rel[:, 1] * normal[seg, 1]
-    push = np.zeros(m)
-    np.maximum.at(push, seg, dev)
-    # the vertex where an edge ends also belongs to it
-    nxt = np.roll(np.arange(m), -1)
-    end = pts[keep[nxt]] - a
-    push = np.maximum(push, end[:, 0] * normal[:, 0] + end[:, 1] * normal[:, 1])
-    push = np.maximum(push, 0.0) * (1 + 1e-9) + 1e-9
-    a2 = a + normal * push[:, None]
-    # intersect edge k-1 with edge k
-    prv = np.roll(np.arange(m), 1)
-    d1, d2 = d[prv], d
-    den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-    w = a2 - a2[prv]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[:, 0] * d2[:, 1] - w[:, 1] * d2[:, 0]) / den
-    x = a2[prv] + t[:, None] * d1
-    far = ~np.isfinite(t) | (np.hypot(*(x - a).T) > 4.0 * (push + push[prv]) + 1e-6)
-    out = []
-    b_prev = a2[prv] + d1  # end of pushed edge k-1
-    for k in range(m):
-        if far[k]:
-            out.append(b_prev[k])
-            out.append(a2[k])
-        else:
-            out.append(x[k])
-    return np.array(out)
-
-
-def prereduce(pts, target):
-    """Bring a CCW ring near ``target`` vertices with :func:`shifted_dp`, verified."""
-    if len(pts) <= target:
-        return pts
-    span = float(np.ptp(pts, axis=0).max())
-    tol = max(span * 1e-4, 1e-3)
-    ring = shapely.Polygon(pts)
-    index = {tuple(p): k for k, p in enumerate(pts.tolist())}
-    while tol < span:
-        spts = _dp(ring, tol)
-        # the shifted ring has a vertex or two per kept one: too many kept, too long
-        if len(spts) <= target:
-            cand = _shifted(pts, spts, index)
-            if cand is not None and len(cand) <= target and ring_covers(cand, pts):
-                return cand
-        tol *= 2.0
-    return pts
 
 
 def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = True):
@@ -371,6 +320,48 @@ def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = 
     >>> disc.covers(inner), round(inner.area)
     (True, 27810)
     """
+    return simplify_polygons([poly], max_vertices, tolerance, outward)[0]
+
+
+def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool = True) -> list:
+    """:func:`simplify_polygon` of each polygon, the first operations of all their rings found
+    in one vectorised pass (the same polygons as one at a time).
+
+    Parameters
+    ----------
+    polys : sequence of shapely.Polygon
+    max_vertices : int
+    tolerance : float
+    outward : bool
+        As for :func:`simplify_polygon`.
+
+    Returns
+    -------
+    list of shapely.Polygon
+    """
+    rings = [_prepare(poly, max_vertices, outward) for poly in polys]
+    long = [k for k, (pts, _, _) in enumerate(rings) if len(pts) > 3]
+    oriented = [_orient(rings[k][0], outward) for k in long]
+    mv = max(MIN_VERTICES, int(max_vertices))
+    heaps = _first_heaps([pts for pts, _ in oriented], mv, tolerance)
+    first = {k: (pts, flip, heap) for k, (pts, flip), heap in zip(long, oriented, heaps)}
+    out = []
+    for k, (pts, given, same) in enumerate(rings):
+        pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same, first.get(k))
+        if result is None:
+            result = shapely.Polygon(pts)
+        if outward and len(pts) > max_vertices:
+            hull = ring_coords(shapely.convex_hull(result).exterior)
+            pts = simplify_ring(hull, max_vertices, tolerance, True)
+            result = shapely.Polygon(pts)
+        out.append(result)
+    return out
+
+
+def _prepare(poly, max_vertices, outward):
+    """``poly``'s clean exterior vertices (brought near ``2 * max_vertices`` if outward and
+    longer), the polygon standing for them if it has no holes, and whether its exterior
+    holds them as they are."""
     ring = poly.exterior
     pts = ring_coords(ring)
     given = poly if shapely.get_num_interior_rings(poly) == 0 else None
@@ -382,12 +373,4 @@ def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = 
     elif len(pts) > 1 and pts[0].tolist() == pts[-1].tolist():
         pts = ring_coords(pts)  # what simplify_ring's own ring_coords would do
     same = given is not None and len(pts) + 1 == shapely.get_num_coordinates(ring)
-    same = same and not shapely.has_z(poly)
-    pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same)
-    if result is None:
-        result = shapely.Polygon(pts)
-    if outward and len(pts) > max_vertices:
-        hull = ring_coords(shapely.convex_hull(result).exterior)
-        pts = simplify_ring(hull, max_vertices, tolerance, True)
-        result = shapely.Polygon(pts)
-    return result
+    return pts, given, same and not shapely.has_z(poly)

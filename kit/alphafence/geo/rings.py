@@ -1,5 +1,6 @@
 """Rings as (n, 2) arrays of vertices (not closed): their vertices without repeats, signed
-area, validity and containment, as the simplifiers check them."""
+area, validity and containment, as the simplifiers check them; long rings brought near a
+target size outward (shifted Douglas-Peucker) before the greedy simplification."""
 
 from __future__ import annotations
 
@@ -71,3 +72,139 @@ def ring_covers(outer_pts, inner_pts) -> bool:
         return shapely.difference(inner, outer).area <= 1e-9 * max(inner.area, 1.0)
     except shapely.errors.GEOSException:
         return False
+
+
+def fill_blocked(P, alive, nxt, tri, corners, segments) -> bool:
+    """Would filling triangle ``tri`` break the simplicity of a ring being simplified?
+
+    ``P`` holds the vertices, ``alive`` which of them are left and ``nxt`` each one's next;
+    a live vertex other than ``corners`` inside or on ``tri`` blocks it, and so does an edge
+    (not starting at a vertex in the last item of ``segments``) crossing one of the other
+    items of ``segments`` (the new edges).
+    """
+    (ax, ay), (bx, by), (cx, cy) = tri
+    lox, hix = min(ax, bx, cx), max(ax, bx, cx)
+    loy, hiy = min(ay, by, cy), max(ay, by, cy)
+    for v, ok in enumerate(alive):
+        if not ok or v in corners:
+            continue
+        x, y = P[v]
+        if x < lox or x > hix or y < loy or y > hiy:
+            continue
+        d1 = (bx - ax) * (y - ay) - (by - ay) * (x - ax)
+        d2 = (cx - bx) * (y - by) - (cy - by) * (x - bx)
+        d3 = (ax - cx) * (y - cy) - (ay - cy) * (x - cx)
+        if not ((d1 < 0 or d2 < 0 or d3 < 0) and (d1 > 0 or d2 > 0 or d3 > 0)):
+            return True
+    if segments is None:
+        return False
+    *segs, skip = segments
+    for u, ok in enumerate(alive):
+        if not ok or u in skip:
+            continue
+        C, D = P[u], P[nxt[u]]
+        for A, B in segs:
+            if segments_cross(A, B, C, D):
+                return True
+    return False
+
+
+def segments_cross(A, B, C, D) -> bool:
+    """Do segments A-B and C-D meet (touching counts)?"""
+    if max(C[0], D[0]) < min(A[0], B[0]) or min(C[0], D[0]) > max(A[0], B[0]):
+        return False
+    if max(C[1], D[1]) < min(A[1], B[1]) or min(C[1], D[1]) > max(A[1], B[1]):
+        return False
+    o1 = (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0])
+    o2 = (B[0] - A[0]) * (D[1] - A[1]) - (B[1] - A[1]) * (D[0] - A[0])
+    o3 = (D[0] - C[0]) * (A[1] - C[1]) - (D[1] - C[1]) * (A[0] - C[0])
+    o4 = (D[0] - C[0]) * (B[1] - C[1]) - (D[1] - C[1]) * (B[0] - C[0])
+    return o1 * o2 <= 0 and o3 * o4 <= 0
+
+
+def shifted_dp(pts, tol):
+    """Fast outward pre-reduction of a CCW ring (vectorised).
+
+    Douglas-Peucker (GEOS) picks a subset of the vertices; each kept edge is then pushed
+    outward, parallel to itself, just far enough that the chain of vertices it replaced lies
+    on its inner side, and consecutive pushed edges are joined at their intersection (or,
+    where they are nearly parallel, by a short bevel). Returns the new ring, or None when the
+    subset is degenerate; callers verify containment.
+    """
+    return _shifted(pts, _dp(shapely.Polygon(pts), tol))
+
+
+def _dp(ring, tol):
+    """The vertices Douglas-Peucker (GEOS, topology preserving) keeps of polygon ``ring``."""
+    return ring_coords(shapely.simplify(ring, tol, preserve_topology=True).exterior)
+
+
+def _shifted(pts, spts, index=None):
+    """:func:`shifted_dp` given the kept vertices ``spts`` (and ``pts``' vertex -> index)."""
+    n = len(pts)
+    if len(spts) < 3 or len(spts) >= n:
+        return None
+    if index is None:
+        index = {tuple(p): k for k, p in enumerate(pts.tolist())}
+    try:
+        keep = np.array(sorted(index[tuple(p)] for p in spts.tolist()))
+    except KeyError:
+        return None
+    m = len(keep)
+    a = pts[keep]
+    b = pts[np.roll(keep, -1)]
+    d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    if np.any(length == 0):
+        return None
+    normal = np.column_stack([d[:, 1], -d[:, 0]]) / length[:, None]  # right = outside (CCW)
+    # every vertex belongs to the kept edge that starts at or before it
+    seg = np.searchsorted(keep, np.arange(n), side="right") - 1
+    seg[seg < 0] = m - 1  # vertices before the first kept one wrap to the last edge
+    rel = pts - a[seg]
+    dev = rel[:, 0] * normal[seg, 0] + rel[:, 1] * normal[seg, 1]
+    push = np.zeros(m)
+    np.maximum.at(push, seg, dev)
+    # the vertex where an edge ends also belongs to it
+    nxt = np.roll(np.arange(m), -1)
+    end = pts[keep[nxt]] - a
+    push = np.maximum(push, end[:, 0] * normal[:, 0] + end[:, 1] * normal[:, 1])
+    push = np.maximum(push, 0.0) * (1 + 1e-9) + 1e-9
+    a2 = a + normal * push[:, None]
+    # intersect edge k-1 with edge k
+    prv = np.roll(np.arange(m), 1)
+    d1, d2 = d[prv], d
+    den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    w = a2 - a2[prv]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[:, 0] * d2[:, 1] - w[:, 1] * d2[:, 0]) / den
+    x = a2[prv] + t[:, None] * d1
+    far = ~np.isfinite(t) | (np.hypot(*(x - a).T) > 4.0 * (push + push[prv]) + 1e-6)
+    out = []
+    b_prev = a2[prv] + d1  # end of pushed edge k-1
+    for k in range(m):
+        if far[k]:
+            out.append(b_prev[k])
+            out.append(a2[k])
+        else:
+            out.append(x[k])
+    return np.array(out)
+
+
+def prereduce(pts, target):
+    """Bring a CCW ring near ``target`` vertices with :func:`shifted_dp`, verified."""
+    if len(pts) <= target:
+        return pts
+    span = float(np.ptp(pts, axis=0).max())
+    tol = max(span * 1e-4, 1e-3)
+    ring = shapely.Polygon(pts)
+    index = {tuple(p): k for k, p in enumerate(pts.tolist())}
+    while tol < span:
+        spts = _dp(ring, tol)
+        # the shifted ring has a vertex or two per kept one: too many kept, too long
+        if len(spts) <= target:
+            cand = _shifted(pts, spts, index)
+            if cand is not None and len(cand) <= target and ring_covers(cand, pts):
+                return cand
+        tol *= 2.0
+    return pts
