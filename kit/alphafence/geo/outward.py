@@ -153,9 +153,9 @@ def _first_heaps(rings, max_vertices, tolerance):
     every value is the same float; ``_ops`` measures lengths with ``math.hypot``, which may
     differ from ``np.hypot`` in the last bit, so ``np.hypot`` only drops operations that are
     clearly too high or too far, and the others are measured again as ``_ops`` does."""
-    sizes = np.array([len(r) for r in rings], int)
-    if not len(rings) or sizes.sum() < BATCH_MIN_VERTICES:
+    if not rings or sum(map(len, rings)) < BATCH_MIN_VERTICES:
         return [None] * len(rings)
+    sizes = np.array([len(r) for r in rings], int)
     xy = np.concatenate(rings)
     start = np.repeat(np.cumsum(sizes) - sizes, sizes)
     n = np.repeat(sizes, sizes)
@@ -320,7 +320,7 @@ def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = 
     >>> disc.covers(inner), round(inner.area)
     (True, 27810)
     """
-    return simplify_polygons([poly], max_vertices, tolerance, outward)[0]
+    return _finish(_prepare(poly, max_vertices, outward), max_vertices, tolerance, outward)
 
 
 def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool = True) -> list:
@@ -345,17 +345,23 @@ def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool 
     mv = max(MIN_VERTICES, int(max_vertices))
     heaps = _first_heaps([pts for pts, _ in oriented], mv, tolerance)
     first = {k: (pts, flip, heap) for k, (pts, flip), heap in zip(long, oriented, heaps)}
-    out = []
-    for k, (pts, given, same) in enumerate(rings):
-        pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same, first.get(k))
-        if result is None:
-            result = shapely.Polygon(pts)
-        if outward and len(pts) > max_vertices:
-            hull = ring_coords(shapely.convex_hull(result).exterior)
-            pts = simplify_ring(hull, max_vertices, tolerance, True)
-            result = shapely.Polygon(pts)
-        out.append(result)
-    return out
+    return [
+        _finish(ring, max_vertices, tolerance, outward, first.get(k))
+        for k, ring in enumerate(rings)
+    ]
+
+
+def _finish(prepared, max_vertices, tolerance, outward, first=None):
+    """The polygon simplified from what :func:`_prepare` made of it."""
+    pts, given, same = prepared
+    pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same, first)
+    if result is None:
+        result = shapely.Polygon(pts)
+    if outward and len(pts) > max_vertices:
+        hull = ring_coords(shapely.convex_hull(result).exterior)
+        pts = simplify_ring(hull, max_vertices, tolerance, True)
+        result = shapely.Polygon(pts)
+    return result
 
 
 def _prepare(poly, max_vertices, outward):
