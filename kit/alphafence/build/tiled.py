@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import time
 from collections import Counter
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -200,29 +201,67 @@ def build_tiled(
     result = TiledResult(site_kinds=Counter(), fences=[] if keep else None)
     result.site_objects = [] if keep else None
     t0 = time.perf_counter()
-    pool = None
-    if not dask and jobs > 1 and _input_bytes(stream.paths) > WARM_POOL_BYTES:
-        pool = start_pool(jobs)  # its imports overlap the reading
-    try:
-        return _build(
-            stream,
-            rules,
-            options,
-            writers,
-            jobs,
-            dask,
-            keep,
-            progress,
-            tile_deg,
-            target,
-            spool_dir,
-            result,
-            t0,
-            pool,
-        )
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+    with ExitStack() as stack:
+        pool = None
+        if not dask and jobs > 1 and _input_bytes(stream.paths) > WARM_POOL_BYTES:
+            pool = start_pool(jobs)  # its imports overlap the reading
+            stack.callback(pool.shutdown, wait=False, cancel_futures=True)
+        with Spool(spool_dir) as spool:
+            for batch in stream.batches():
+                widths = feature_widths(batch, rules)
+                spool.add(batch, widths, [spool.class_of(site_class(f)) for f in batch])
+                if progress is not None:
+                    progress("reading", stream.count, None)
+            result.features = len(spool)
+            if target is None:
+                target = job_size(result.features, jobs if not dask else 4)
+            plan = plan_jobs(
+                spool.bounds, spool.widths, spool.classes, options.join_m, tile_deg, target
+            )
+            result.jobs = len(plan)
+            t1 = time.perf_counter()
+            encoders = tuple(type(w).encode for w in writers)
+
+            def inputs():
+                for job in plan:
+                    spans, start = [], 0
+                    for region in job.regions:
+                        spans.append((start, start + len(region)))
+                        start += len(region)
+                    records = spool.records(np.concatenate(job.regions))
+                    yield JobInput(
+                        job.number,
+                        records,
+                        spans,
+                        rules,
+                        spool.rules,
+                        spool.origins,
+                        options,
+                        encoders,
+                        keep,
+                    )
+
+            if dask:
+                outputs = run_dask(inputs(), dask)
+            elif jobs > 1 and (len(plan) > 1 or pool is not None):
+                outputs = run_processes(inputs(), jobs if pool else min(jobs, len(plan)), pool)
+            else:
+                outputs = run_local(inputs())
+            done = 0
+            for out in outputs:
+                for writer, payload in zip(writers, out.encoded):
+                    writer.write(payload)
+                result.sites += out.sites
+                result.site_kinds.update(out.site_kinds)
+                result.stats.add(out.rows)
+                if keep:
+                    result.fences.extend(out.fences)
+                    result.site_objects.extend(out.site_objects)
+                done += out.features
+                if progress is not None:
+                    progress("fencing", done, result.features)
+        result.seconds = {"read": t1 - t0, "fence": time.perf_counter() - t1}
+        return result
 
 
 def _input_bytes(paths):
@@ -233,77 +272,3 @@ def _input_bytes(paths):
         except OSError:
             pass
     return total
-
-
-def _build(
-    stream,
-    rules,
-    options,
-    writers,
-    jobs,
-    dask,
-    keep,
-    progress,
-    tile_deg,
-    target,
-    spool_dir,
-    result,
-    t0,
-    pool,
-):
-    with Spool(spool_dir) as spool:
-        for batch in stream.batches():
-            widths = feature_widths(batch, rules)
-            spool.add(batch, widths, [spool.class_of(site_class(f)) for f in batch])
-            if progress is not None:
-                progress("reading", stream.count, None)
-        result.features = len(spool)
-        if target is None:
-            target = job_size(result.features, jobs if not dask else 4)
-        plan = plan_jobs(
-            spool.bounds, spool.widths, spool.classes, options.join_m, tile_deg, target
-        )
-        result.jobs = len(plan)
-        t1 = time.perf_counter()
-        encoders = tuple(type(w).encode for w in writers)
-
-        def inputs():
-            for job in plan:
-                spans, start = [], 0
-                for region in job.regions:
-                    spans.append((start, start + len(region)))
-                    start += len(region)
-                records = spool.records(np.concatenate(job.regions))
-                yield JobInput(
-                    job.number,
-                    records,
-                    spans,
-                    rules,
-                    spool.rules,
-                    spool.origins,
-                    options,
-                    encoders,
-                    keep,
-                )
-
-        if dask:
-            outputs = run_dask(inputs(), dask)
-        elif jobs > 1 and (len(plan) > 1 or pool is not None):
-            outputs = run_processes(inputs(), jobs if pool else min(jobs, len(plan)), pool)
-        else:
-            outputs = run_local(inputs())
-        done = 0
-        for out in outputs:
-            for writer, payload in zip(writers, out.encoded):
-                writer.write(payload)
-            result.sites += out.sites
-            result.site_kinds.update(out.site_kinds)
-            result.stats.add(out.rows)
-            if keep:
-                result.fences.extend(out.fences)
-                result.site_objects.extend(out.site_objects)
-            done += out.features
-            if progress is not None:
-                progress("fencing", done, result.features)
-    result.seconds = {"read": t1 - t0, "fence": time.perf_counter() - t1}
-    return result
