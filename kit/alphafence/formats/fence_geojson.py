@@ -65,6 +65,59 @@ class FenceRecord:
     properties: dict = field(default_factory=dict)
 
 
+def fence_record(path, props, geometry, label, index):
+    """One fence from its properties and shapely geometry, checked as every
+    fence reader checks a feature (kind, polygonal geometry, a circle's centre and radius).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, for messages.
+    props : dict
+    geometry : shapely geometry or None
+    label : str
+        The feature as messages name it (``"record 3 (hospital/way/1)"``).
+    index : int
+        Its place in the file: ``site_id`` is ``"fence/<index>"`` when it has none.
+
+    Returns
+    -------
+    FenceRecord
+    """
+    kind = _kind_of(path, props, label)
+    gtype = getattr(geometry, "geom_type", None)
+    if gtype not in ("Polygon", "MultiPolygon"):
+        raise InputError(path, f"a fence must be a Polygon or MultiPolygon, not {gtype}", label)
+    circle = None
+    if "radius_m" in props:
+        c, r = props.get("center"), props.get("radius_m")
+        if not (isinstance(c, list) and len(c) == 2 and isinstance(r, (int, float)) and r > 0):
+            raise InputError(
+                path, "circle fence needs center [lon, lat] and a positive radius_m", label
+            )
+        circle = (float(c[0]), float(c[1]), float(r))
+    return FenceRecord(
+        site_id=str(props["site_id"] if props.get("site_id") is not None else f"fence/{index}"),
+        kind=kind,
+        geometry=geometry,
+        margin_m=float(props.get("margin_m") or 0.0),
+        name=props.get("name"),
+        category=props.get("category"),
+        alt_min_m=props.get("alt_min_m"),
+        alt_max_m=props.get("alt_max_m"),
+        circle=circle,
+        properties=props,
+    )
+
+
+def _kind_of(path, props, label):
+    kind = props.get("kind")
+    if kind not in KINDS:
+        kinds = ", ".join(KINDS)
+        raise InputError(path, f"kind must be one of {kinds}, not {kind!r}", label)
+    return kind
+
+
 def read_fences(path) -> list:
     """The fences of a fence GeoJSON file written by ``alphafence build``.
 
@@ -95,9 +148,7 @@ def read_fences(path) -> list:
         if not isinstance(props, dict):
             raise InputError(path, "feature without properties", f"feature {i}")
         label = f"feature {i} ({props.get('site_id', '?')})"
-        kind = props.get("kind")
-        if kind not in KINDS:
-            raise InputError(path, f"kind must be one of {', '.join(KINDS)}, not {kind!r}", label)
+        _kind_of(path, props, label)  # before the geometry
         try:
             geom = shapely.geometry.shape(feat.get("geometry"))
         except (
@@ -109,33 +160,7 @@ def read_fences(path) -> list:
             IndexError,
         ) as exc:
             raise InputError(path, f"malformed geometry ({exc})", label) from None
-        if geom.geom_type not in ("Polygon", "MultiPolygon"):
-            raise InputError(
-                path, f"a fence must be a Polygon or MultiPolygon, not {geom.geom_type}", label
-            )
-        circle = None
-        if "radius_m" in props:
-            c = props.get("center")
-            r = props.get("radius_m")
-            if not (isinstance(c, list) and len(c) == 2 and isinstance(r, (int, float)) and r > 0):
-                raise InputError(
-                    path, "circle fence needs center [lon, lat] and a positive radius_m", label
-                )
-            circle = (float(c[0]), float(c[1]), float(r))
-        out.append(
-            FenceRecord(
-                site_id=str(props.get("site_id", f"fence/{i}")),
-                kind=kind,
-                geometry=geom,
-                margin_m=float(props.get("margin_m") or 0.0),
-                name=props.get("name"),
-                category=props.get("category"),
-                alt_min_m=props.get("alt_min_m"),
-                alt_max_m=props.get("alt_max_m"),
-                circle=circle,
-                properties=props,
-            )
-        )
+        out.append(fence_record(path, props, geom, label, i))
     if out:
         check_coordinates(
             path, np.array([f.geometry for f in out], dtype=object), lambda k: out[k].site_id

@@ -20,6 +20,7 @@ from shapely.errors import ShapelyError
 from alphafence.errors import InputError
 from alphafence.formats import fence_geojson, fence_parquet
 from alphafence.formats.features import check_coordinates
+from alphafence.formats.fence_geojson import _kind_of, fence_record
 from alphafence.formats.jsonfile import max_json_bytes
 
 SEQ_SUFFIXES = (".geojsonl", ".geojsons", ".geojsonseq")
@@ -124,59 +125,6 @@ def _sniff(head):
     if looks_like_legacy_fence(text):
         return "legacy"
     return "openair" if looks_like_openair(text) else "geojson"
-
-
-def fence_record(path, props, geometry, label, index):
-    """One fence from its properties and shapely geometry, checked as ``fence_geojson``
-    checks a feature (kind, polygonal geometry, a circle's centre and radius).
-
-    Parameters
-    ----------
-    path : str or Path
-        The file, for messages.
-    props : dict
-    geometry : shapely geometry or None
-    label : str
-        The feature as messages name it (``"record 3 (hospital/way/1)"``).
-    index : int
-        Its place in the file: ``site_id`` is ``"fence/<index>"`` when it has none.
-
-    Returns
-    -------
-    FenceRecord
-    """
-    kind = _kind_of(path, props, label)
-    gtype = getattr(geometry, "geom_type", None)
-    if gtype not in ("Polygon", "MultiPolygon"):
-        raise InputError(path, f"a fence must be a Polygon or MultiPolygon, not {gtype}", label)
-    circle = None
-    if "radius_m" in props:
-        c, r = props.get("center"), props.get("radius_m")
-        if not (isinstance(c, list) and len(c) == 2 and isinstance(r, (int, float)) and r > 0):
-            raise InputError(
-                path, "circle fence needs center [lon, lat] and a positive radius_m", label
-            )
-        circle = (float(c[0]), float(c[1]), float(r))
-    return fence_geojson.FenceRecord(
-        site_id=str(props["site_id"] if props.get("site_id") is not None else f"fence/{index}"),
-        kind=kind,
-        geometry=geometry,
-        margin_m=float(props.get("margin_m") or 0.0),
-        name=props.get("name"),
-        category=props.get("category"),
-        alt_min_m=props.get("alt_min_m"),
-        alt_max_m=props.get("alt_max_m"),
-        circle=circle,
-        properties=props,
-    )
-
-
-def _kind_of(path, props, label):
-    kind = props.get("kind")
-    if kind not in fence_geojson.KINDS:
-        kinds = ", ".join(fence_geojson.KINDS)
-        raise InputError(path, f"kind must be one of {kinds}, not {kind!r}", label)
-    return kind
 
 
 def _checked(path, out, what):
