@@ -232,3 +232,24 @@ def test_a_database_that_adds_nothing_is_said(tmp_path, name):
     )
     assert res.returncode == 0, res.stderr
     assert f"{empty}: it holds no restricted features" in " ".join(res.stderr.split())
+
+
+def test_the_spool_sits_beside_the_output(tmp_path, monkeypatch):
+    # /tmp is often memory (tmpfs): a country's spooled features go on the output's disk
+    import tempfile
+
+    import alphafence.build.spool as spool
+    from alphafence.cli.demo import scene_path
+
+    dirs, original = [], tempfile.TemporaryFile
+
+    def temporary_file(dir=None):
+        dirs.append(dir)
+        return original(dir=dir)
+
+    monkeypatch.setattr(spool.tempfile, "TemporaryFile", temporary_file)
+    out = tmp_path / "deep" / "fences.geojson"
+    assert main(["build", str(scene_path()), "-o", str(out), "-q", "--jobs", "1"]) == 0
+    assert dirs == [str(out.parent)] and sorted(p.name for p in out.parent.iterdir()) == [
+        "fences.geojson"
+    ]

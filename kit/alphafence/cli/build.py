@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from rich.table import Table
 
 from alphafence.build import METHODS
@@ -106,6 +108,9 @@ def run(args) -> int:
             keep=keep,
             progress=phases(prog, ", ".join(args.databases)),
             tile_deg=args.tile_size,
+            # the spool (an unlinked file, gone with the process) sits beside the output, on
+            # its disk: /tmp is often memory (tmpfs), and a country's features are gigabytes
+            spool_dir=os.path.dirname(os.path.abspath(args.output)),
         )
         extra = render(result.fences, meta, None, args.plan, args.waypoints) if keep else {}
     write_all(extra)
