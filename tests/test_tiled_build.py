@@ -178,3 +178,20 @@ def test_item_counts_are_what_fence_items_makes(malta_untiled):
     counted = [item_count(f) for f in untiled.fences]
     assert counted == [len(fence_items([f])) for f in untiled.fences]
     assert sum(counted) > 0 and 0 in counted  # polygons, circles' kin and warning layers
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    n=st.integers(1, 80),
+    edges=st.lists(st.tuples(st.integers(0, 79), st.integers(0, 79)), max_size=120),
+)
+def test_small_graph_components_are_scipys(n, edges):
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    from alphafence.build.sites import _components
+
+    a = np.array([e[0] % n for e in edges], dtype=np.int64)
+    b = np.array([e[1] % n for e in edges], dtype=np.int64)
+    graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
+    assert _components(n, a, b).tolist() == connected_components(graph, directed=False)[1].tolist()

@@ -22,6 +22,7 @@ from alphafence.geo.frame import LocalFrame
 M_PER_DEG_LAT = 110_574.0
 M_PER_DEG_LON = 111_320.0
 SMALL_REGION_M = 20_000.0  # a region this size shares one frame: distortion < 1 mm
+SMALL_GRAPH = 64  # components of graphs this small are found without scipy
 
 
 @dataclass
@@ -72,6 +73,18 @@ class Site:
 
 
 def _components(n, a, b):
+    """Connected-component labels of n nodes joined by edges a-b, numbered in the order of
+    each component's smallest node (as scipy numbers them)."""
+    if n <= SMALL_GRAPH:  # most regions: a few features; scipy's sparse set-up costs more
+        labels = np.arange(n)
+        while True:  # every node takes its neighbours' least label, then its label's label
+            new = labels.copy()
+            np.minimum.at(new, a, labels[b])
+            np.minimum.at(new, b, labels[a])
+            new = new[new]
+            if np.array_equal(new, labels):
+                return np.unique(labels, return_inverse=True)[1]
+            labels = new
     from scipy.sparse import coo_array  # scipy (the build extra), imported where it is used
     from scipy.sparse.csgraph import connected_components
 
@@ -270,6 +283,8 @@ def _region_sites(feats, geoms, widths, join_m):
 def _widen(local, widths):
     """Points become discs and lines strips (polygons that contain the true round shapes);
     polygons stay as they are."""
+    if not np.any(widths > 0):
+        return local
     grown = shapely.buffer(local, widths * circle_steps(8), quad_segs=8)
     return np.where(widths > 0, grown, local)
 
