@@ -34,16 +34,18 @@ def default_jobs() -> int:
         return os.cpu_count() or 1
 
 
-def job_size(features: int, workers: int) -> int:
-    """Features per tile job: about four jobs per worker (so none waits long on the last),
-    at least 200 (a job's fixed costs) and at most 2,000 (memory in flight).
+def job_size(features: int) -> int:
+    """Features per tile job: at least eight jobs (four for each of two workers, so none
+    waits long on the last), at least 200 features (a job's fixed costs) and at most 2,000
+    (memory in flight). It does not depend on the number of workers, so neither do the
+    jobs, nor the order of the output's bytes.
 
     Examples
     --------
-    >>> job_size(432, 2), job_size(133_000, 2), job_size(50, 8)
-    (200, 2000, 200)
+    >>> job_size(432), job_size(13_300), job_size(133_000), job_size(50)
+    (200, 1663, 2000, 200)
     """
-    return int(min(TARGET_FEATURES, max(200, -(-features // (4 * max(1, workers))))))
+    return int(min(TARGET_FEATURES, max(200, -(-features // 8))))
 
 
 @dataclass
@@ -176,8 +178,7 @@ def build_tiled(
     tile_deg : float
         Tile edge, degrees.
     target : int, optional
-        Features per job to aim for (default: about four jobs per worker, 200 to 2,000
-        features each).
+        Features per job to aim for (default :func:`job_size`).
     spool_dir : str, optional
         Where the spool's temporary file goes.
 
@@ -214,7 +215,7 @@ def build_tiled(
                     progress("reading", stream.count, None)
             result.features = len(spool)
             if target is None:
-                target = job_size(result.features, jobs if not dask else 4)
+                target = job_size(result.features)
             plan = plan_jobs(
                 spool.bounds, spool.widths, spool.classes, options.join_m, tile_deg, target
             )

@@ -277,7 +277,7 @@ def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False, fir
     poly = shapely.Polygon(final)
     if poly.is_valid:
         inner = given if given is not None else shapely.Polygon(pts)
-        if poly.covers(inner) if outward else inner.is_valid and inner.covers(poly):
+        if inner.is_valid and (poly.covers(inner) if outward else inner.covers(poly)):
             return final, poly
     if ok(out):
         return final, poly
