@@ -26,7 +26,6 @@ rate (45 s per 133,000 areas) and its memory up to 133,000 areas, the 1,000,000 
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -37,6 +36,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from bench.cli_bench import _command
 from bench.synth_db import cached_database, keep_out_areas, write_database
 
 SIZES = (133_000, 1_000_000)
@@ -62,15 +62,6 @@ def targets(n):
     if n <= 133_000:
         return 45.0 * n / 133_000, 1.5 * GB
     return 600.0, 4.0 * GB
-
-
-def _command():
-    """The installed console script beside this interpreter, else ``python -m alphafence``."""
-    script = Path(sys.executable).with_name("alphafence")
-    if script.exists():
-        return [str(script)]
-    found = shutil.which("alphafence")
-    return [found] if found else [sys.executable, "-m", "alphafence"]
 
 
 def build_flags():
