@@ -16,13 +16,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from alphafence.build.regions import _components, region_labels
 from alphafence.formats.features import make_valid_polygonal
 from alphafence.geo.frame import LocalFrame
 
-M_PER_DEG_LAT = 110_574.0
-M_PER_DEG_LON = 111_320.0
 SMALL_REGION_M = 20_000.0  # a region this size shares one frame: distortion < 1 mm
-SMALL_GRAPH = 64  # components of graphs this small are found without scipy
 
 
 @dataclass
@@ -72,26 +70,6 @@ class Site:
         return g
 
 
-def _components(n, a, b):
-    """Connected-component labels of n nodes joined by edges a-b, numbered in the order of
-    each component's smallest node (as scipy numbers them)."""
-    if n <= SMALL_GRAPH:  # most regions: a few features; scipy's sparse set-up costs more
-        labels = np.arange(n)
-        while True:  # every node takes its neighbours' least label, then its label's label
-            new = labels.copy()
-            np.minimum.at(new, a, labels[b])
-            np.minimum.at(new, b, labels[a])
-            new = new[new]
-            if np.array_equal(new, labels):
-                return np.unique(labels, return_inverse=True)[1]
-            labels = new
-    from scipy.sparse import coo_array  # scipy (the build extra), imported where it is used
-    from scipy.sparse.csgraph import connected_components
-
-    graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
-
-
 def feature_widths(features, rules):
     """Metres each feature is widened by before grouping: the rules' point radius for points,
     half their line width for lines, 0 for areas."""
@@ -108,50 +86,6 @@ def feature_widths(features, rules):
 def _regions(geoms, widths, join_m):
     """Conservative clusters: degree envelopes grown by the join distance and widths."""
     return region_labels(shapely.bounds(geoms), widths, join_m)
-
-
-def region_labels(bounds, widths, join_m):
-    """Conservative clusters of features of one class, from their extents alone.
-
-    Each extent (degrees) is grown by the join distance, twice the feature's width and a metre;
-    features whose grown extents meet, directly or through others, share a region. A site never
-    spans two regions, so regions can be fenced apart (in tiles, in worker processes) and give
-    exactly the sites :func:`group_sites` gives.
-
-    Parameters
-    ----------
-    bounds : ndarray, shape (n, 4)
-        ``minlon, minlat, maxlon, maxlat`` per feature.
-    widths : ndarray, shape (n,)
-        Metres each feature is widened by (points and lines), else 0.
-    join_m : float
-
-    Returns
-    -------
-    ndarray of int
-        A region label per feature.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> b = np.array([[14.5, 35.9, 14.5005, 35.9004], [14.5007, 35.9, 14.5012, 35.9004],
-    ...               [14.51, 35.9, 14.5105, 35.9004]])
-    >>> region_labels(b, np.zeros(3), 25.0).tolist()
-    [0, 0, 1]
-    """
-    bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
-    if len(bounds) == 1:
-        return np.zeros(1, int)
-    lat = np.clip(np.maximum(np.abs(bounds[:, 1]), np.abs(bounds[:, 3])), 0, 89.9)
-    grow_m = join_m + 2 * np.asarray(widths, dtype=float) + 1.0
-    dlat = grow_m / M_PER_DEG_LAT
-    dlon = grow_m / (M_PER_DEG_LON * np.cos(np.radians(lat)))
-    boxes = shapely.box(
-        bounds[:, 0] - dlon, bounds[:, 1] - dlat, bounds[:, 2] + dlon, bounds[:, 3] + dlat
-    )
-    tree = shapely.STRtree(boxes)
-    a, b = tree.query(boxes, predicate="intersects")
-    return _components(len(bounds), a, b)
 
 
 def site_class(feature):
@@ -227,9 +161,12 @@ def group_sites(features, rules, join_m=25.0):
         geoms = np.array([f.geometry for f in feats], dtype=object)
         widths = feature_widths(feats, rules)
         regions = _regions(geoms, widths, join_m)
-        for r in np.unique(regions):
-            idx = np.flatnonzero(regions == r)
-            sites.extend(_region_sites([feats[i] for i in idx], geoms[idx], widths[idx], join_m))
+        order = np.argsort(regions, kind="stable")  # region by region, database order within
+        ends = np.cumsum(np.bincount(regions))
+        spans = list(zip([0, *ends[:-1].tolist()], ends.tolist()))
+        sites.extend(
+            _regions_sites([feats[i] for i in order], geoms[order], widths[order], spans, join_m)
+        )
     sites.sort(key=lambda s: (s.category, s.site_id))
     return sites
 
@@ -248,35 +185,136 @@ def region_sites(features, rules, join_m=25.0):
     -------
     list of Site
     """
+    return regions_sites(features, [(0, len(features))], rules, join_m)
+
+
+def regions_sites(features, spans, rules, join_m=25.0):
+    """The sites of many regions at once: :func:`region_sites` of each span of ``features``,
+    in order, the same sites (bit for bit), with each step run once over all the regions
+    where it works feature by feature (reprojection, repair, widening, areas).
+
+    Parameters
+    ----------
+    features : list of Feature
+        The regions' features, region after region.
+    spans : list of tuple
+        ``(start, end)`` of each region in ``features``.
+    rules : Rules
+    join_m : float
+
+    Returns
+    -------
+    list of Site
+
+    Examples
+    --------
+    >>> import shapely
+    >>> from alphafence.formats.features import Feature
+    >>> from alphafence.formats.rules import load_rules
+    >>> rules = load_rules()
+    >>> rule = rules.match({"amenity": "school"}.get, "area")
+    >>> def school(lon, source):
+    ...     box = shapely.box(lon, 35.9, lon + 0.0005, 35.9004)
+    ...     return Feature(box, {"amenity": "school"}, source, "demo", rule)
+    >>> feats = [school(14.5, "way/1"), school(14.6, "way/2"), school(14.6007, "way/3")]
+    >>> [s.sources for s in regions_sites(feats, [(0, 1), (1, 3)], rules)]
+    [['way/1'], ['way/2', 'way/3']]
+    """
     geoms = np.array([f.geometry for f in features], dtype=object)
-    return _region_sites(features, geoms, feature_widths(features, rules), join_m)
+    return _regions_sites(features, geoms, feature_widths(features, rules), spans, join_m)
+
+
+def _regions_sites(feats, geoms, widths, spans, join_m):
+    counts = shapely.get_num_coordinates(geoms)
+    if not len(spans) or np.any(counts == 0) or np.any(shapely.has_z(geoms)):
+        out = []  # the general path, region by region (empty or 3-D geometry)
+        for start, end in spans:
+            out.extend(_region_sites(feats[start:end], geoms[start:end], widths[start:end], join_m))
+        return out
+    frames = _frames(geoms, counts, spans)
+    starts = np.array([s for s, _ in spans])
+    # each coordinate in its region's frame: the numbers region-by-region reprojection gives
+    at = np.concatenate([[0], np.cumsum(counts)])[[*starts.tolist(), spans[-1][1]]].tolist()
+
+    def forward(coords):
+        out = np.empty_like(coords)
+        for frame, a, b in zip(frames, at[:-1], at[1:]):
+            out[a:b] = frame._fwd(coords[a:b])
+        return out
+
+    local = make_valid_polygonal(shapely.transform(geoms, forward))
+    widened = _widen(local, widths)
+    areas = shapely.area(widened)
+    reach = np.fmax.reduce(np.abs(shapely.bounds(local)), axis=1)  # NaN where empty
+    out = []
+    for (start, end), frame in zip(spans, frames):
+        members = feats[start:end]
+        cut = slice(start, end)
+        out.extend(
+            _sites_of(
+                members,
+                geoms[cut],
+                widths[cut],
+                local[cut],
+                widened[cut],
+                areas[cut],
+                frame,
+                float(np.fmax.reduce(reach[cut])),  # _extent_m of the region
+                join_m,
+            )
+        )
+    return out
+
+
+def _frames(geoms, counts, spans):
+    """Each region's :meth:`LocalFrame.around` frame, the centres found for all at once."""
+    coords = shapely.get_coordinates(geoms)
+    ends = np.cumsum(counts)
+    first = np.concatenate([[0], ends])[[s for s, _ in spans]]
+    lo = np.minimum.reduceat(coords, first)
+    hi = np.maximum.reduceat(coords, first)
+    frames = []
+    last = [*first[1:].tolist(), len(coords)]
+    for k, a in enumerate(first.tolist()):
+        if hi[k, 0] - lo[k, 0] > 180.0:  # wraps the antimeridian: as around_coords does
+            frames.append(LocalFrame.around_coords(coords[a : last[k]]))
+        else:
+            frames.append(LocalFrame(0.5 * (lo[k, 0] + hi[k, 0]), 0.5 * (lo[k, 1] + hi[k, 1])))
+    return frames
 
 
 def _region_sites(feats, geoms, widths, join_m):
-    category, kind, margin = feats[0].category, feats[0].kind, feats[0].rule.margin_m
     frame = LocalFrame.around(geoms)
     local = make_valid_polygonal(frame.geom_to_local(geoms))
     # points and lines become discs and strips; polygons stay as they are
     widened = _widen(local, widths)
+    return _sites_of(
+        feats, geoms, widths, local, widened, shapely.area(widened), frame, _extent_m(local), join_m
+    )
+
+
+def _sites_of(feats, geoms, widths, local, widened, areas, frame, extent, join_m):
+    """A region's sites from its features in its frame (``local``), widened, and their
+    areas; ``extent``, metres from the frame's origin to the region's farthest bound."""
+    category, kind, margin = feats[0].category, feats[0].kind, feats[0].rule.margin_m
     if len(widened) == 1:
-        labels = np.zeros(1, int)
+        groups = [np.zeros(1, int)]
     else:
         tree = shapely.STRtree(widened)
         a, b = tree.query(widened, predicate="dwithin", distance=join_m)
         labels = _components(len(widened), a, b)
-    extent = _extent_m(local)
+        groups = [np.flatnonzero(labels == lab) for lab in np.unique(labels)]
     out = []
-    for lab in np.unique(labels):
-        idx = np.flatnonzero(labels == lab)
+    for idx in groups:
         members = [feats[i] for i in idx]
-        parts = widened[idx]
+        parts, part_areas = widened[idx], areas[idx]
         site_frame = frame
         if extent > SMALL_REGION_M:
             site_frame = LocalFrame.around(geoms[idx])
             loc = make_valid_polygonal(site_frame.geom_to_local(geoms[idx]))
-            w = widths[idx]
-            parts = _widen(loc, w)
-        out.append(_make_site(category, kind, margin, site_frame, members, parts))
+            parts = _widen(loc, widths[idx])
+            part_areas = shapely.area(parts)
+        out.append(_make_site(category, kind, margin, site_frame, members, parts, part_areas))
     return out
 
 
@@ -294,8 +332,7 @@ def _extent_m(local):
     return float(max(abs(b[0]), abs(b[1]), abs(b[2]), abs(b[3])))
 
 
-def _make_site(category, kind, margin, frame, members, parts):
-    areas = shapely.area(parts)
+def _make_site(category, kind, margin, frame, members, parts, areas):
     # features within a billionth of the largest count as equally large, and the first of
     # them in the database's order names the site: not the last digits of a projection
     key = np.where(areas >= areas.max() * (1 - 1e-9), np.inf, areas)

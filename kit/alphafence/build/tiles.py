@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from alphafence.build.sites import region_labels
+from alphafence.build.regions import region_labels
 
 TILE_DEG = 0.25  # about 28 km north-south
 TARGET_FEATURES = 2_000  # per job
