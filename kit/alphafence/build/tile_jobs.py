@@ -11,7 +11,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from alphafence.build.fences import fence_sites
-from alphafence.build.sites import region_sites
+from alphafence.build.sites import regions_sites
 from alphafence.build.spool import Spool
 
 PRELOAD = [
@@ -119,9 +119,7 @@ def run_job(job: JobInput) -> JobOutput:
     from alphafence.formats.fence_geojson import fence_features
 
     features = Spool.decode(job.records, job.rule_table, job.origins)
-    sites = []
-    for start, end in job.spans:
-        sites.extend(region_sites(features[start:end], job.rules, job.options.join_m))
+    sites = regions_sites(features, job.spans, job.rules, job.options.join_m)
     sites.sort(key=lambda s: (s.category, s.site_id))
     fences = fence_sites(sites, job.options)
     encoded = []
