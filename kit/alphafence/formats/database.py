@@ -10,7 +10,12 @@ from alphafence.formats import kml, openair
 from alphafence.formats.ed269 import looks_like_ed269, read_ed269_doc
 from alphafence.formats.features import Database, select_bbox
 from alphafence.formats.geojson import read_geojson_doc
-from alphafence.formats.geojson_stream import SEQ_SUFFIXES, iter_geojson, should_stream
+from alphafence.formats.geojson_stream import (
+    SEQ_SUFFIXES,
+    is_sequence,
+    iter_geojson,
+    should_stream,
+)
 from alphafence.formats.jsonfile import read_json
 
 OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
@@ -148,8 +153,17 @@ class DatabaseStream:
         self.bbox_name = bbox_name
         self.repaired, self.skipped, self.count = [], Counter(), 0
 
-    def batches(self):
+    def batches(self, sequences=None):
         """Lists of restricted features (inside the bbox), file by file.
+
+        Parameters
+        ----------
+        sequences : callable, optional
+            ``sequences(path, rules, bbox, repaired, skipped)`` -> the parts of a GeoJSON
+            text sequence, each inside ``bbox`` and of some length (lists of Feature or
+            another reader's parts, yielded as they come), ``repaired`` and ``skipped``
+            extended as they are read; or None to read the file here
+            (:func:`alphafence.build.read_jobs.sequence_reader` reads in worker processes).
 
         Raises
         ------
@@ -157,21 +171,16 @@ class DatabaseStream:
             As :func:`read_database`, including when no file holds a restricted feature.
         """
         for path in self.paths:
-            if should_stream(path) and str(path).lower().endswith(
-                (".json", ".geojson", *SEQ_SUFFIXES)
-            ):
-                parts = iter_geojson(path, self.rules, self.repaired, self.skipped)
-            elif str(path).lower().endswith(OSM_SUFFIXES):
-                need(*osm_wants([path]))
-                from alphafence.formats.osm import iter_osm  # pyosmium, only when OSM is read
-
-                parts = iter_osm(path, self.rules, self.repaired, self.skipped)
-            else:
-                parts = [read_file(path, self.rules, self.repaired, self.skipped)]
+            parts = None
+            if sequences is not None and is_sequence(path):
+                parts = sequences(path, self.rules, self.bbox, self.repaired, self.skipped)
+            inside = parts is not None
+            if parts is None:
+                parts = self._parts(path)
             before = self.count
             for part in parts:
-                part = select_bbox(part, self.bbox)
-                if part:
+                part = part if inside else select_bbox(part, self.bbox)
+                if len(part):
                     self.count += len(part)
                     yield part
             if self.count == before and parts is not None and not isinstance(parts, list):
@@ -185,6 +194,17 @@ class DatabaseStream:
             if self.bbox:
                 why = f" inside {self.bbox_name} {','.join(f'{v:g}' for v in self.bbox)}"
             raise InputError(where, f"no restricted features{why} (rules: {self.rules.source})")
+
+    def _parts(self, path):
+        """The file's features, as they come: batch by batch, or in one list."""
+        if should_stream(path) and str(path).lower().endswith((".json", ".geojson", *SEQ_SUFFIXES)):
+            return iter_geojson(path, self.rules, self.repaired, self.skipped)
+        if str(path).lower().endswith(OSM_SUFFIXES):
+            need(*osm_wants([path]))
+            from alphafence.formats.osm import iter_osm  # pyosmium, only when OSM is read
+
+            return iter_osm(path, self.rules, self.repaired, self.skipped)
+        return [read_file(path, self.rules, self.repaired, self.skipped)]
 
     def database(self, features=()) -> Database:
         """What was read, as a :class:`Database` (holding ``features``)."""
