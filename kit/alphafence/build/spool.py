@@ -5,18 +5,25 @@ A country's restricted features do not fit in memory as Python objects (some 34 
 once grouped and fenced). The spool holds each as a compact record (WKB geometry, tags,
 source, rule) in an anonymous temporary file that disappears with the process; tile jobs
 take their records from it and turn them back into features where they run.
+
+A record is an 8-byte header (the indices of its origin and rule in the spool's tables) and
+a pickle of the rest, so records encoded in another process (:meth:`Spool.encode`) take this
+spool's indices by a rewrite of their headers (:meth:`Spool.add_encoded`).
 """
 
 from __future__ import annotations
 
 import os
 import pickle
+import struct
 import tempfile
 
 import numpy as np
 import shapely
 
 from alphafence.formats.features import Feature
+
+HEADER = struct.Struct("<II")  # origin, rule
 
 
 class Spool:
@@ -98,32 +105,81 @@ class Spool:
         """Append features (with their widths and class indices) to the spool."""
         if not len(features):
             return
+        origins = [self._index(self.origins, self._origin_index, f.origin) for f in features]
+        rules = [self._index(self.rules, self._rule_index, f.rule) for f in features]
         geoms = np.array([f.geometry for f in features], dtype=object)
-        wkb = shapely.to_wkb(geoms)
-        chunks, offsets = [], np.empty(len(features), dtype=np.int64)
-        pos = self._end
-        for i, (f, g) in enumerate(zip(features, wkb)):
-            rec = pickle.dumps(
-                (
-                    g,
-                    f.tags,
-                    f.source,
-                    self._index(self.origins, self._origin_index, f.origin),
-                    self._index(self.rules, self._rule_index, f.rule),
-                    f.alt_min_m,
-                    f.alt_max_m,
-                    f.properties or None,
-                ),
-                protocol=pickle.HIGHEST_PROTOCOL,
+        data, lengths = self.encode(features, origins, rules)
+        self._append(data, lengths, shapely.bounds(geoms), widths, classes)
+
+    @staticmethod
+    def encode(features, origins, rules):
+        """Features as spool records (in any process).
+
+        Parameters
+        ----------
+        features : list of Feature
+        origins, rules : sequence of int
+            Each feature's origin and rule, as indices into tables (rewritten by
+            :meth:`add_encoded` when they are not this spool's).
+
+        Returns
+        -------
+        data : bytes
+            The records, one after the other.
+        lengths : ndarray of int64
+            Each record's length.
+        """
+        wkb = shapely.to_wkb(np.array([f.geometry for f in features], dtype=object))
+        chunks = []
+        for f, g, o, k in zip(features, wkb, origins, rules):
+            chunks.append(HEADER.pack(o, k))
+            chunks.append(
+                pickle.dumps(
+                    (g, f.tags, f.source, f.alt_min_m, f.alt_max_m, f.properties or None),
+                    protocol=pickle.HIGHEST_PROTOCOL,
+                )
             )
-            offsets[i] = pos
-            pos += len(rec)
-            chunks.append(rec)
+        lengths = np.fromiter(map(len, chunks), np.int64, len(chunks))
+        return b"".join(chunks), lengths[0::2] + lengths[1::2]
+
+    def add_encoded(self, data, lengths, bounds, widths, classes, origins, rules):
+        """Append records :meth:`encode` made elsewhere, with tables of their own.
+
+        Parameters
+        ----------
+        data : bytes
+        lengths : ndarray of int
+            As :meth:`encode` returns them.
+        bounds : ndarray, shape (n, 4)
+        widths : ndarray, shape (n,)
+        classes, origins, rules : tuple
+            ``(keys, ids)``: the distinct ``site_class`` keys, origins and Rule objects the
+            records refer to, and each record's index into them; they become this spool's.
+        """
+        if not len(lengths):
+            return
+        table = {
+            "classes": [self.class_of(key) for key in classes[0]],
+            "origins": [self._index(self.origins, self._origin_index, o) for o in origins[0]],
+            "rules": [self._index(self.rules, self._rule_index, r) for r in rules[0]],
+        }
+        header = np.empty((len(lengths), 2), dtype="<u4")
+        header[:, 0] = np.asarray(table["origins"], dtype=np.int64)[origins[1]]
+        header[:, 1] = np.asarray(table["rules"], dtype=np.int64)[rules[1]]
+        data = bytearray(data)
+        starts = np.cumsum(lengths) - lengths
+        np.frombuffer(data, np.uint8)[starts[:, None] + np.arange(HEADER.size)] = header.view(
+            np.uint8
+        ).reshape(-1, HEADER.size)
+        ids = np.asarray(table["classes"], dtype=np.int32)[classes[1]]
+        self._append(data, lengths, bounds, widths, ids)
+
+    def _append(self, data, lengths, bounds, widths, classes):
         self._fh.seek(self._end)
-        self._fh.write(b"".join(chunks))
-        self._end = pos
-        self._offsets.append(offsets)
-        self._bounds.append(shapely.bounds(geoms))
+        self._fh.write(data)
+        self._offsets.append(self._end + np.cumsum(lengths) - lengths)
+        self._end += len(data)
+        self._bounds.append(np.asarray(bounds, dtype=float).reshape(-1, 4))
         self._widths.append(np.asarray(widths, dtype=float))
         self._classes.append(np.asarray(classes, dtype=np.int32))
         self._frozen = None
@@ -181,9 +237,10 @@ class Spool:
         -------
         list of Feature
         """
-        rows = [pickle.loads(r) for r in records]
+        heads = [HEADER.unpack_from(r) for r in records]
+        rows = [pickle.loads(memoryview(r)[HEADER.size :]) for r in records]
         geoms = shapely.from_wkb([r[0] for r in rows])
         return [
             Feature(g, tags, source, origins[o], rules[k], lo, hi, props or {})
-            for g, (_, tags, source, o, k, lo, hi, props) in zip(geoms, rows)
+            for g, (o, k), (_, tags, source, lo, hi, props) in zip(geoms, heads, rows)
         ]
