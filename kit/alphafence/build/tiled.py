@@ -17,13 +17,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from alphafence.build.read_jobs import sequence_reader
 from alphafence.build.sites import feature_widths, site_class
 from alphafence.build.spool import Spool
 from alphafence.build.tile_jobs import JobInput, run_dask, run_local, run_processes, start_pool
 from alphafence.build.tiles import TARGET_FEATURES, TILE_DEG, plan_jobs
+from alphafence.formats.geojson_stream import BATCH
 from alphafence.mavlink.items import MAX_POLYGON_VERTICES
 
 WARM_POOL_BYTES = 32 * 2**20  # databases larger than this start the workers before reading
+READ_BATCH = BATCH  # records per chunk of a text sequence read in the workers
 
 
 def default_jobs() -> int:
@@ -208,9 +211,14 @@ def build_tiled(
             pool = start_pool(jobs)  # its imports overlap the reading
             stack.callback(pool.shutdown, wait=False, cancel_futures=True)
         with Spool(spool_dir) as spool:
-            for batch in stream.batches():
-                widths = feature_widths(batch, rules)
-                spool.add(batch, widths, [spool.class_of(site_class(f)) for f in batch])
+            # the workers read text sequences too (the main process would read them alone)
+            reader = sequence_reader(pool, 2 * jobs, READ_BATCH) if pool is not None else None
+            for batch in stream.batches(reader):
+                if not isinstance(batch, list):
+                    batch.add_to(spool, rules)
+                else:
+                    widths = feature_widths(batch, rules)
+                    spool.add(batch, widths, [spool.class_of(site_class(f)) for f in batch])
                 if progress is not None:
                     progress("reading", stream.count, None)
             result.features = len(spool)
