@@ -8,7 +8,8 @@ import shapely.affinity
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alphafence.geo.outward import simplify_polygon, simplify_polygons, simplify_ring
+from alphafence.geo.outward import simplify_polygon, simplify_ring
+from alphafence.geo.outward_many import simplify_polygons
 
 
 @st.composite
@@ -71,15 +72,20 @@ def test_many_at_once_are_each_alone(polys, budget, tol, outward, offset):
     """simplify_polygons finds every ring's first operations in one vectorised pass (numpy's
     hypot only sorting out what is clearly too high or too far): the polygons must be those
     simplify_polygon makes one at a time, to the last bit, far from the origin too."""
-    import alphafence.geo.outward as outward_module
+    import alphafence.geo.outward_many as outward_module
 
     polys = [shapely.affinity.translate(p, offset, -offset) for p in polys]
     polys = [p for p in polys if p.geom_type == "Polygon"]
-    polys += [
-        shapely.Polygon(
-            np.column_stack([np.linspace(0, 1e3, 60), np.r_[0.0, 1e-9 * np.ones(58), 5.0]])
-        )
-    ]
+    odd = [  # repeated vertices, a hole, heights, no area, nothing
+        shapely.Polygon(np.column_stack([np.linspace(0, 1e3, 60), np.r_[0.0, 1e-9 * np.ones(58), 5.0]])),
+        shapely.Polygon([(0, 0), (0, 0), (50, 0), (50, 40), (25, 41), (0, 40)],
+                        holes=[[(10, 10), (20, 10), (20, 20)]]),
+        shapely.Polygon([(0, 0, 1), (50, 0, 1), (50, 40, 2), (25, 41, 2), (0, 40, 3)]),
+        shapely.Polygon([(0, 0), (50, 0), (50, 0), (50, 40), (25, 41), (0, 40), (0, 0)]),
+        shapely.Polygon([(0, 0), (10, 0), (20, 0), (10, 0)]),
+        shapely.Polygon(),
+    ]  # fmt: skip
+    polys += [shapely.affinity.translate(p, offset, -offset) for p in odd]
     batch_min, outward_module.BATCH_MIN_VERTICES = outward_module.BATCH_MIN_VERTICES, 0
     try:  # the vectorised pass for any number of vertices
         many = simplify_polygons(polys, budget, tol, outward)
@@ -114,7 +120,7 @@ def test_the_vectorised_first_pass_is_the_ops_pass(polys, budget, quantile, offs
     """_first_heaps measures with np.hypot only to drop what is clearly too high or too far:
     its entries are the _ops pass's, to the last bit, with the tolerance at one of the
     ring's own operation heights (the edge of the pruning) and rings far from the origin."""
-    from alphafence.geo.outward import _first_heaps
+    from alphafence.geo.outward_many import _first_heaps
 
     rings = []
     for poly in polys:
@@ -124,7 +130,7 @@ def test_the_vectorised_first_pass_is_the_ops_pass(polys, budget, quantile, offs
         rings.append(pts if shapely.LinearRing(pts).is_ccw else pts[::-1].copy())
     heights = [op[1] for r in rings for op in _ops_pass(r, 0, math.inf)]
     tol = float(np.quantile(heights, quantile, method="nearest")) if heights else 1.0
-    import alphafence.geo.outward as outward_module
+    import alphafence.geo.outward_many as outward_module
 
     batch_min, outward_module.BATCH_MIN_VERTICES = outward_module.BATCH_MIN_VERTICES, 0
     try:
@@ -133,3 +139,31 @@ def test_the_vectorised_first_pass_is_the_ops_pass(polys, budget, quantile, offs
         outward_module.BATCH_MIN_VERTICES = batch_min
     for ring, heap in zip(rings, heaps):
         assert sorted(heap, key=lambda op: op[2:4]) == _ops_pass(ring, budget, tol)
+
+
+@st.composite
+def rings(draw):
+    """Rings on a coarse grid (repeated, closing and collinear vertices, no area), moved far
+    away or shrunk to a hair, as LinearRings (or empty)."""
+    pts = draw(st.lists(st.tuples(st.integers(-3, 3), st.integers(-3, 3)), max_size=9))
+    scale, offset = draw(st.sampled_from([1.0, 1e-9, 1e3])), draw(st.floats(-1e6, 1e6))
+    if draw(st.booleans()) and pts:
+        pts = pts + pts[:1]
+    if len(pts) < 3:
+        return shapely.LinearRing()
+    return shapely.linearrings(np.asarray(pts, float) * scale + offset)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(rings(), min_size=1, max_size=8))
+def test_many_rings_are_cleaned_and_oriented_as_one_at_a_time(many):
+    """rings_coords is ring_coords of each ring, and ring_signs the sign signed_area gives,
+    however close to no area the ring is."""
+    from alphafence.geo.rings import ring_coords, ring_signs, rings_coords, signed_area
+
+    pts, counts = rings_coords(np.asarray(many, dtype=object))
+    assert [p.tolist() for p in pts] == [ring_coords(r).tolist() for r in many]
+    assert counts.tolist() == [shapely.get_num_coordinates(r) for r in many]
+    some = [p for p in pts if len(p)]
+    if some:
+        assert ring_signs(some).tolist() == [int(np.sign(signed_area(p))) for p in some]

@@ -19,7 +19,8 @@ from alphafence.build.fence_types import Fence, FenceOptions
 from alphafence.build.sites import circle_steps
 from alphafence.build.zone_circle import zone_circle
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
-from alphafence.geo.outward import simplify_polygon, simplify_polygons
+from alphafence.geo.outward import simplify_polygon
+from alphafence.geo.outward_many import simplify_polygons
 
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
 QUAD_SEGS = 6

@@ -35,7 +35,6 @@ from alphafence.geo.rings import (
 
 _EPS = 1e-12
 MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
-BATCH_MIN_VERTICES = 160  # fewer vertices in all: each ring's own pass is cheaper
 
 
 def _ops(out, i, st, p, a, b, q, reach, prune):
@@ -78,19 +77,23 @@ def _ops(out, i, st, p, a, b, q, reach, prune):
         out.append((area, height, 1, i, st, (x0, x1)))
 
 
-def _greedy(pts, max_vertices, tolerance, check, first=None):
+def _greedy(pts, max_vertices, tolerance, check, first=None, reach=None):
     """Greedy outward simplification of a CCW ring; ``check`` verifies simplicity per step;
-    ``first``, the ring's first operations if :func:`_first_heaps` found them.
+    ``first``, the ring's first operations if
+    :func:`~alphafence.geo.outward_many._first_heaps` found them (and
+    ``reach``, the bound on how far an operation may move a vertex, if it measured it).
 
     Returns the ring, or None when no operation applies (the ring stays as it is)."""
+    if first is not None and not first:
+        return None  # no operation to start from: the loop below would not run
     n = len(pts)
-    P = [tuple(p) for p in pts.tolist()]
-    prev = [(k - 1) % n for k in range(n)]
-    nxt = [(k + 1) % n for k in range(n)]
+    P = pts.tolist()
+    prev = [n - 1, *range(n - 1)]
+    nxt = [*range(1, n), 0]
     alive = [True] * n
     stamp = [0] * n
-    span = float((pts.max(axis=0) - pts.min(axis=0)).max())
-    reach = 2.0 * span + 1.0
+    if reach is None:
+        reach = 2.0 * float((pts.max(axis=0) - pts.min(axis=0)).max()) + 1.0
     # once the ring is within max_vertices (it only shrinks), operations higher than the
     # tolerance never run: they are not even queued
     heap = [] if first is None else list(first)
@@ -146,68 +149,6 @@ def _greedy(pts, max_vertices, tolerance, check, first=None):
     return np.array(out)
 
 
-def _first_heaps(rings, max_vertices, tolerance):
-    """The first operations of many oriented rings (4 vertices or more each) at once: for
-    each ring the heap entries :func:`_greedy`'s pass of :func:`_ops` finds (None where a
-    few rings make the pass itself cheaper). The arithmetic is ``_ops``', elementwise, so
-    every value is the same float; ``_ops`` measures lengths with ``math.hypot``, which may
-    differ from ``np.hypot`` in the last bit, so ``np.hypot`` only drops operations that are
-    clearly too high or too far, and the others are measured again as ``_ops`` does."""
-    if not rings or sum(map(len, rings)) < BATCH_MIN_VERTICES:
-        return [None] * len(rings)
-    sizes = np.array([len(r) for r in rings], int)
-    xy = np.concatenate(rings)
-    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
-    n = np.repeat(sizes, sizes)
-    i = np.arange(len(xy)) - start
-    x, y = xy[:, 0], xy[:, 1]
-    (px, py), (jx, jy), (qx, qy) = (xy[start + (i + k) % n].T for k in (-1, 1, 2))
-    offsets = np.cumsum(sizes) - sizes
-    span = (np.maximum.reduceat(xy, offsets) - np.minimum.reduceat(xy, offsets)).max(axis=1)
-    reach = np.repeat(2.0 * span + 1.0, sizes)
-    prune = np.repeat(np.where(sizes <= max_vertices, tolerance, math.inf), sizes)
-    loose = 1.0 + 1e-9  # far above the last-bit differences of the two hypots
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        c = (x - px) * (jy - py) - (y - py) * (jx - px)
-        area0, bx, by = -0.5 * c, jx - px, jy - py
-        keep0 = ~(c > 0) & ~(2.0 * area0 / np.hypot(bx, by) > prune * loose)
-        d1x, d1y, d2x, d2y = x - px, y - py, jx - qx, jy - qy
-        den = d1x * d2y - d1y * d2x
-        wx, wy = jx - x, jy - y
-        t = (wx * d2y - wy * d2x) / den
-        s = (wx * d1y - wy * d1x) / den
-        x0, x1 = x + t * d1x, y + t * d1y
-        x0, x1 = x0 + (x0 - 0.5 * (x + jx)) * 1e-9, x1 + (x1 - 0.5 * (y + jy)) * 1e-9
-        c = (jx - x) * (x1 - y) - (jy - y) * (x0 - x)
-        area1 = -0.5 * c
-        keep1 = ~(np.abs(den) < _EPS) & ~(t <= 0) & ~(s <= 0) & ~(c >= 0)
-        keep1 &= ~(2.0 * area1 / np.hypot(wx, wy) > prune * loose)
-        far = np.maximum(t * np.hypot(d1x, d1y), s * np.hypot(d2x, d2y))
-        keep1 &= ~(far > reach * loose)
-        near = ~(far > reach / loose)  # within reach whichever hypot measures it
-    ring = np.repeat(np.arange(len(rings)), sizes)
-    heaps = [[] for _ in rings]
-    hypot = math.hypot
-    v = np.flatnonzero(keep0)
-    for r, k, a, ux, uy, cut in zip(*(col[v].tolist() for col in (ring, i, area0, bx, by, prune))):
-        base = hypot(ux, uy)
-        height = 2.0 * a / base if base > 0 else 0.0
-        if not height > cut:
-            heaps[r].append((a, height, 0, k, 0, None))
-    for v in np.flatnonzero(keep1 & ~near).tolist():  # rare: the reach as _ops measures it
-        far = float(reach[v])
-        if t[v] * hypot(d1x[v], d1y[v]) > far or s[v] * hypot(d2x[v], d2y[v]) > far:
-            keep1[v] = False
-    v = np.flatnonzero(keep1)
-    cols = (ring, i, area1, wx, wy, x0, x1, prune)
-    for r, k, a, ux, uy, X0, X1, cut in zip(*(col[v].tolist() for col in cols)):
-        base = hypot(ux, uy)
-        height = 2.0 * a / base if base > 0 else 0.0
-        if not height > cut:
-            heaps[r].append((a, height, 1, k, 0, (X0, X1)))
-    return heaps
-
-
 def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True) -> np.ndarray:
     """Simplify a simple ring, only ever adding area (``outward``) or only removing it.
 
@@ -256,35 +197,48 @@ def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False, fir
     one was built (else None). ``given``, a polygon of ``pts``' vertices (any orientation),
     spares building one for the check; if ``same``, its exterior holds ``pts`` as they are
     and it is the polygon of a ring left as it is. ``first``: ``(oriented pts, flipped,
-    first operations)`` when :func:`simplify_polygons` found them."""
+    first operations, fast pass)`` when :func:`simplify_polygons` found them."""
     kept = given if same else None
     if len(pts) <= 3:
         return pts, kept
-    pts, flip, heap = (*_orient(pts, outward), None) if first is None else first
     max_vertices = max(MIN_VERTICES, int(max_vertices))
+    if first is None:
+        pts, flip = _orient(pts, outward)
+        heap, fast = None, _fast_pass(pts, flip, max_vertices, tolerance, outward, given)
+    else:
+        pts, flip, heap, fast = first
 
     # the flipped ring is simplified "outward" in its own orientation: for inward
     # simplification that means the result must lie inside the input
     def ok(out):
         return ring_covers(out, pts) if outward else (valid_ring(out) and ring_covers(pts, out))
 
-    out = _greedy(pts, max_vertices, tolerance, False, heap)
+    out, poly, covers = fast
     if out is None:  # no operation applies (nor would one checked): the ring as it is
         return (pts[::-1] if flip else pts), kept
     final = out[::-1] if flip else out
-    # ok(out) first on the result's own polygon: validity and covers do not depend on
-    # orientation, so when they hold ok(out) holds; when they fail, ok(out) decides
-    poly = shapely.Polygon(final)
-    if poly.is_valid:
-        inner = given if given is not None else shapely.Polygon(pts)
-        if inner.is_valid and (poly.covers(inner) if outward else inner.covers(poly)):
-            return final, poly
-    if ok(out):
+    if covers or ok(out):
         return final, poly
     out = _greedy(pts, max_vertices, tolerance, True, heap)
     if out is None or not ok(out):  # numerically degenerate input: leave it as it is
         return (pts[::-1] if flip else pts), kept
     return (out[::-1] if flip else out), None
+
+
+def _fast_pass(pts, flip, max_vertices, tolerance, outward, given, heap=None, reach=None):
+    """The unchecked pass over oriented ``pts``: its ring (None when no operation applies),
+    that ring's polygon, and whether both polygons are valid and the result covers the input
+    (outward) or lies in it. When that holds the check of :func:`_simplify` holds: validity
+    and covers do not depend on orientation; when it fails, the check decides."""
+    out = _greedy(pts, max_vertices, tolerance, False, heap, reach)
+    if out is None:
+        return None, None, False
+    poly = shapely.Polygon(out[::-1] if flip else out)
+    if poly.is_valid:
+        inner = given if given is not None else shapely.Polygon(pts)
+        if inner.is_valid and (poly.covers(inner) if outward else inner.covers(poly)):
+            return out, poly, True
+    return out, poly, False
 
 
 def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = True):
@@ -320,43 +274,20 @@ def simplify_polygon(poly, max_vertices: int, tolerance: float, outward: bool = 
     >>> disc.covers(inner), round(inner.area)
     (True, 27810)
     """
-    return _finish(_prepare(poly, max_vertices, outward), max_vertices, tolerance, outward)
-
-
-def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool = True) -> list:
-    """:func:`simplify_polygon` of each polygon, the first operations of all their rings found
-    in one vectorised pass (the same polygons as one at a time).
-
-    Parameters
-    ----------
-    polys : sequence of shapely.Polygon
-    max_vertices : int
-    tolerance : float
-    outward : bool
-        As for :func:`simplify_polygon`.
-
-    Returns
-    -------
-    list of shapely.Polygon
-    """
-    rings = [_prepare(poly, max_vertices, outward) for poly in polys]
-    long = [k for k, (pts, _, _) in enumerate(rings) if len(pts) > 3]
-    oriented = [_orient(rings[k][0], outward) for k in long]
-    mv = max(MIN_VERTICES, int(max_vertices))
-    heaps = _first_heaps([pts for pts, _ in oriented], mv, tolerance)
-    first = {k: (pts, flip, heap) for k, (pts, flip), heap in zip(long, oriented, heaps)}
-    return [
-        _finish(ring, max_vertices, tolerance, outward, first.get(k))
-        for k, ring in enumerate(rings)
-    ]
-
-
-def _finish(prepared, max_vertices, tolerance, outward, first=None):
-    """The polygon simplified from what :func:`_prepare` made of it."""
-    pts, given, same = prepared
-    pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same, first)
+    ring = poly.exterior
+    pts, given, same = _prepare(
+        poly, ring_coords(ring), shapely.get_num_coordinates(ring),
+        shapely.get_num_interior_rings(poly), shapely.has_z(poly), max_vertices, outward,
+    )  # fmt: skip
+    pts, result = _simplify(pts, max_vertices, tolerance, outward, given, same)
     if result is None:
         result = shapely.Polygon(pts)
+    return _within_budget(pts, result, max_vertices, tolerance, outward)
+
+
+def _within_budget(pts, result, max_vertices, tolerance, outward):
+    """``result`` (the polygon of ``pts``), or, if outward and longer than ``max_vertices``,
+    its convex hull simplified."""
     if outward and len(pts) > max_vertices:
         hull = ring_coords(shapely.convex_hull(result).exterior)
         pts = simplify_ring(hull, max_vertices, tolerance, True)
@@ -364,13 +295,11 @@ def _finish(prepared, max_vertices, tolerance, outward, first=None):
     return result
 
 
-def _prepare(poly, max_vertices, outward):
-    """``poly``'s clean exterior vertices (brought near ``2 * max_vertices`` if outward and
-    longer), the polygon standing for them if it has no holes, and whether its exterior
-    holds them as they are."""
-    ring = poly.exterior
-    pts = ring_coords(ring)
-    given = poly if shapely.get_num_interior_rings(poly) == 0 else None
+def _prepare(poly, pts, count, holes, has_z, max_vertices, outward):
+    """``poly``'s clean exterior vertices (given as ``pts``, from ``count`` coordinates;
+    brought near ``2 * max_vertices`` if outward and longer), the polygon standing for them
+    if it has no holes, and whether its exterior holds them as they are."""
+    given = poly if holes == 0 else None
     if outward and len(pts) > 2 * max_vertices:
         if signed_area(pts) < 0:
             pts = pts[::-1]
@@ -378,5 +307,5 @@ def _prepare(poly, max_vertices, outward):
         given = None
     elif len(pts) > 1 and pts[0].tolist() == pts[-1].tolist():
         pts = ring_coords(pts)  # what simplify_ring's own ring_coords would do
-    same = given is not None and len(pts) + 1 == shapely.get_num_coordinates(ring)
-    return pts, given, same and not shapely.has_z(poly)
+    same = given is not None and len(pts) + 1 == count
+    return pts, given, same and not has_z

@@ -208,3 +208,84 @@ def prereduce(pts, target):
                 return cand
         tol *= 2.0
     return pts
+
+
+def rings_coords(rings):
+    """:func:`ring_coords` of each ring of an array of rings, from one coordinate fetch.
+
+    Returns
+    -------
+    pts : list of ndarray
+        Each ring's vertices, as :func:`ring_coords` gives them.
+    counts : ndarray of int
+        Each ring's number of coordinates (closing one included).
+
+    Examples
+    --------
+    >>> import shapely
+    >>> rings = shapely.get_exterior_ring([shapely.box(0, 0, 1, 1), shapely.box(0, 0, 2, 2)])
+    >>> pts, counts = rings_coords(rings)
+    >>> [p.tolist() == ring_coords(r).tolist() for p, r in zip(pts, rings)], counts.tolist()
+    ([True, True], [5, 5])
+    """
+    xy, at = shapely.get_coordinates(rings, return_index=True)
+    counts = np.bincount(at, minlength=len(rings))
+    end = np.cumsum(counts)
+    start = end - counts
+    drop = np.zeros(len(xy), bool)
+    drop[1:] = (xy[1:] == xy[:-1]).all(axis=1)  # a vertex equal to the one before
+    drop[start[counts > 0]] = False
+    two = np.flatnonzero(counts > 1)
+    closed = (xy[start[two]] == xy[end[two] - 1]).all(axis=1)
+    drop[end[two] - 1] = closed | drop[end[two] - 1]  # the closing duplicate, or a repeat
+    kept = np.cumsum(counts) - np.cumsum(np.bincount(at[drop], minlength=len(rings)))
+    return np.split(xy[~drop], kept[:-1]), counts
+
+
+def ring_signs(rings) -> np.ndarray:
+    """The sign (1, -1 or 0) of :func:`signed_area` of each ring ((n, 2) arrays, n >= 1),
+    summed for all rings at once and, where rounding could tell another sign, by
+    :func:`signed_area` itself (so always the sign it gives).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> ring_signs([square, square[::-1], square[:2]]).tolist()
+    [1, -1, 0]
+    """
+    sizes = np.fromiter(map(len, rings), int, len(rings))
+    xy = np.concatenate(rings)
+    start = np.cumsum(sizes) - sizes
+    nxt = np.arange(1, len(xy) + 1)
+    nxt[start + sizes - 1] = start
+    x, y = xy[:, 0], xy[:, 1]
+    with np.errstate(over="ignore", invalid="ignore"):
+        a, b = x * y[nxt], x[nxt] * y
+        twice = np.add.reduceat(a - b, start)
+        # both sums err by at most (n + 2) units of the last place of the terms' magnitude;
+        # eight times that (plus what underflow may lose) and the sign cannot be another
+        bound = np.add.reduceat(np.abs(a) + np.abs(b), start) * (sizes + 2) * 2.0**-50 + 1e-300
+        sure = np.abs(twice) > bound
+    signs = np.where(sure, np.sign(twice), 0).astype(int)
+    for k in np.flatnonzero(~sure).tolist():
+        area = signed_area(rings[k])
+        signs[k] = 1 if area > 0 else -1 if area < 0 else 0
+    return signs
+
+
+def ring_polygons(rings) -> np.ndarray:
+    """The polygon of each ring ((n, 2) arrays, 3 vertices or more each), closed as
+    ``shapely.Polygon`` closes them, built in one call.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ring_polygons([np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])])[0].wkt
+    'POLYGON ((0 0, 1 0, 0 1, 0 0))'
+    """
+    if not len(rings):
+        return np.empty(0, dtype=object)
+    sizes = np.fromiter(map(len, rings), int, len(rings))
+    at = np.repeat(np.arange(len(rings)), sizes)
+    return shapely.polygons(shapely.linearrings(np.concatenate(rings), indices=at))

@@ -1,0 +1,176 @@
+"""Outward (or inward) simplification of many polygons at once: each polygon is the one
+:func:`~alphafence.geo.outward.simplify_polygon` makes of it alone, to the last bit, but the
+work around the greedy passes (fetching the rings' vertices, their orientations, their first
+operations, building and checking the results) is done for all rings in vectorised passes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from alphafence.geo.outward import (
+    _EPS,
+    MIN_VERTICES,
+    _greedy,
+    _prepare,
+    _simplify,
+    _within_budget,
+)
+from alphafence.geo.rings import ring_polygons, ring_signs, rings_coords
+
+BATCH_MIN_VERTICES = 160  # fewer vertices in all: each ring's own pass is cheaper
+
+
+def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool = True) -> list:
+    """:func:`simplify_polygon` of each polygon (the same polygons as one at a time), with
+    vectorised passes over all their rings: the vertices fetched, the orientations summed,
+    the first operations found, and the unchecked passes' results built, validated and
+    checked.
+
+    Parameters
+    ----------
+    polys : sequence of shapely.Polygon
+    max_vertices : int
+    tolerance : float
+    outward : bool
+        As for :func:`simplify_polygon`.
+
+    Returns
+    -------
+    list of shapely.Polygon
+    """
+    if not len(polys):
+        return []
+    polys = _objects(polys)
+    coords, counts = rings_coords(shapely.get_exterior_ring(polys))
+    rings = [
+        _prepare(*args, max_vertices, outward)
+        for args in zip(polys.tolist(), coords, counts.tolist(),
+                        shapely.get_num_interior_rings(polys).tolist(),
+                        shapely.has_z(polys).tolist())
+    ]  # fmt: skip
+    long = [k for k, (pts, _, _) in enumerate(rings) if len(pts) > 3]
+    signs = ring_signs([rings[k][0] for k in long]).tolist() if long else []
+    oriented = []
+    for k, sign in zip(long, signs):
+        flip = sign < 0 if outward else sign > 0
+        oriented.append((rings[k][0][::-1] if flip else rings[k][0], flip))
+    mv = max(MIN_VERTICES, int(max_vertices))
+    heaps, reaches = _first_ops([pts for pts, _ in oriented], mv, tolerance)
+    givens = [rings[k][1] for k in long]
+    fast = _fast_passes(oriented, givens, heaps, reaches, mv, tolerance, outward)
+    first = dict(zip(long, ((*o, h, f) for o, h, f in zip(oriented, heaps, fast))))
+    done = [
+        _simplify(pts, max_vertices, tolerance, outward, given, same, first.get(k))
+        for k, (pts, given, same) in enumerate(rings)
+    ]
+    bare = [k for k, (pts, result) in enumerate(done) if result is None and len(pts) >= 3]
+    built = dict(zip(bare, ring_polygons([done[k][0] for k in bare]).tolist()))
+    for k, (pts, result) in enumerate(done):
+        if result is None:
+            result = built[k] if k in built else shapely.Polygon(pts)
+        done[k] = _within_budget(pts, result, max_vertices, tolerance, outward)
+    return done
+
+
+def _first_heaps(rings, max_vertices, tolerance):
+    """The first operations of many oriented rings (4 vertices or more each) at once: for
+    each ring the heap entries :func:`_greedy`'s pass of :func:`_ops` finds (None where a
+    few rings make the pass itself cheaper). The arithmetic is ``_ops``', elementwise, so
+    every value is the same float; ``_ops`` measures lengths with ``math.hypot``, which may
+    differ from ``np.hypot`` in the last bit, so ``np.hypot`` only drops operations that are
+    clearly too high or too far, and the others are measured again as ``_ops`` does."""
+    return _first_ops(rings, max_vertices, tolerance)[0]
+
+
+def _first_ops(rings, max_vertices, tolerance):
+    """:func:`_first_heaps`, and each ring's reach as :func:`_greedy` measures it (None
+    where the heaps are)."""
+    if not rings or sum(map(len, rings)) < BATCH_MIN_VERTICES:
+        return [None] * len(rings), [None] * len(rings)
+    sizes = np.array([len(r) for r in rings], int)
+    xy = np.concatenate(rings)
+    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    n = np.repeat(sizes, sizes)
+    i = np.arange(len(xy)) - start
+    x, y = xy[:, 0], xy[:, 1]
+    (px, py), (jx, jy), (qx, qy) = (xy[start + (i + k) % n].T for k in (-1, 1, 2))
+    offsets = np.cumsum(sizes) - sizes
+    span = (np.maximum.reduceat(xy, offsets) - np.minimum.reduceat(xy, offsets)).max(axis=1)
+    reach = np.repeat(2.0 * span + 1.0, sizes)
+    prune = np.repeat(np.where(sizes <= max_vertices, tolerance, math.inf), sizes)
+    loose = 1.0 + 1e-9  # far above the last-bit differences of the two hypots
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        c = (x - px) * (jy - py) - (y - py) * (jx - px)
+        area0, bx, by = -0.5 * c, jx - px, jy - py
+        keep0 = ~(c > 0) & ~(2.0 * area0 / np.hypot(bx, by) > prune * loose)
+        d1x, d1y, d2x, d2y = x - px, y - py, jx - qx, jy - qy
+        den = d1x * d2y - d1y * d2x
+        wx, wy = jx - x, jy - y
+        t = (wx * d2y - wy * d2x) / den
+        s = (wx * d1y - wy * d1x) / den
+        x0, x1 = x + t * d1x, y + t * d1y
+        x0, x1 = x0 + (x0 - 0.5 * (x + jx)) * 1e-9, x1 + (x1 - 0.5 * (y + jy)) * 1e-9
+        c = (jx - x) * (x1 - y) - (jy - y) * (x0 - x)
+        area1 = -0.5 * c
+        keep1 = ~(np.abs(den) < _EPS) & ~(t <= 0) & ~(s <= 0) & ~(c >= 0)
+        keep1 &= ~(2.0 * area1 / np.hypot(wx, wy) > prune * loose)
+        far = np.maximum(t * np.hypot(d1x, d1y), s * np.hypot(d2x, d2y))
+        keep1 &= ~(far > reach * loose)
+        near = ~(far > reach / loose)  # within reach whichever hypot measures it
+    ring = np.repeat(np.arange(len(rings)), sizes)
+    heaps = [[] for _ in rings]
+    hypot = math.hypot
+    v = np.flatnonzero(keep0)
+    for r, k, a, ux, uy, cut in zip(*(col[v].tolist() for col in (ring, i, area0, bx, by, prune))):
+        base = hypot(ux, uy)
+        height = 2.0 * a / base if base > 0 else 0.0
+        if not height > cut:
+            heaps[r].append((a, height, 0, k, 0, None))
+    for v in np.flatnonzero(keep1 & ~near).tolist():  # rare: the reach as _ops measures it
+        far = float(reach[v])
+        if t[v] * hypot(d1x[v], d1y[v]) > far or s[v] * hypot(d2x[v], d2y[v]) > far:
+            keep1[v] = False
+    v = np.flatnonzero(keep1)
+    cols = (ring, i, area1, wx, wy, x0, x1, prune)
+    for r, k, a, ux, uy, X0, X1, cut in zip(*(col[v].tolist() for col in cols)):
+        base = hypot(ux, uy)
+        height = 2.0 * a / base if base > 0 else 0.0
+        if not height > cut:
+            heaps[r].append((a, height, 1, k, 0, (X0, X1)))
+    return heaps, (2.0 * span + 1.0).tolist()
+
+
+def _fast_passes(oriented, givens, heaps, reaches, max_vertices, tolerance, outward):
+    """:func:`_fast_pass` of each oriented ring (``(pts, flipped)``), the polygons built,
+    validated and checked in one GEOS call each."""
+    outs = [
+        _greedy(pts, max_vertices, tolerance, False, heap, reach)
+        for (pts, _), heap, reach in zip(oriented, heaps, reaches)
+    ]
+    done = [k for k, out in enumerate(outs) if out is not None]
+    polys = ring_polygons([outs[k][::-1] if oriented[k][1] else outs[k] for k in done])
+    fast = [(None, None, False)] * len(outs)
+    for k, poly in zip(done, polys.tolist()):
+        fast[k] = (outs[k], poly, False)
+    valid = [(j, k) for (j, k), ok in zip(enumerate(done), shapely.is_valid(polys)) if ok]
+    built = iter(ring_polygons([oriented[k][0] for _, k in valid if givens[k] is None]))
+    inner = _objects([next(built) if givens[k] is None else givens[k] for _, k in valid])
+    sound = np.flatnonzero(shapely.is_valid(inner))
+    outer = polys[[valid[i][0] for i in sound.tolist()]]
+    inner = inner[sound]
+    covers = shapely.covers(outer, inner) if outward else shapely.covers(inner, outer)
+    for i in sound[covers].tolist():
+        k = valid[i][1]
+        fast[k] = (outs[k], fast[k][1], True)
+    return fast
+
+
+def _objects(items):
+    """``items`` as a 1-d object array."""
+    out = np.empty(len(items), dtype=object)
+    out[:] = items
+    return out
