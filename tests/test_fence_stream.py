@@ -4,6 +4,7 @@ half-written, and read_fence_file reads every format back as fence_geojson reads
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import sys
@@ -11,21 +12,28 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import shapely
 
 import alphafence
 from alphafence.build.outputs import build_meta
 from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.build.tile_jobs import fence_rows
 from alphafence.errors import InputError, MissingDependency
 from alphafence.formats import fence_geojson
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_read import read_fence_file
 from alphafence.formats.fence_stream import (
+    GeoJSONLinesWriter,
+    GeoJSONSeqWriter,
+    GeoJSONWriter,
     GeoParquetWriter,
     open_writers,
     writer_for,
 )
+from alphafence.formats.fence_text import FenceFeatures, feature_texts
+from alphafence.mavlink.items import item_count, item_counts
 
 SCENE = Path(alphafence.__file__).parent / "data" / "demo-scene.geojson"
 SUFFIXES = (".geojson", ".json", ".geojsonl", ".geojsons", ".geojsonseq", ".parquet")
@@ -180,6 +188,80 @@ def test_encoded_batches_travel_from_worker_processes(built, tmp_path):
         assert len(got) == len(expected), path
         for a, b in zip(got, expected):
             _same_fence(a, b)
+
+
+def _encodings(features):
+    out = [cls.encode(features) for cls in (GeoJSONWriter, GeoJSONLinesWriter, GeoJSONSeqWriter)]
+    if _has_pyarrow():
+        table, types, bounds = GeoParquetWriter.encode(features)
+        out.append((table.to_pylist(), types, bounds))
+    return out
+
+
+def test_features_made_together_are_written_as_their_dicts_are(built):
+    """fence_features' Features keep their coordinates as arrays, which the writers turn into
+    text and shapes without reading the dicts: the bytes are those the dicts give, for simple
+    polygons, a batch with a MultiPolygon (parts and rings taken apart), a Feature whose
+    geometry was replaced, and properties holding the text the encoder cuts at."""
+    fences = built[0]
+    simple = [f for f in fences if f.local.geom_type == "Polygon"]
+    assert len(simple) < len(fences)
+    for batch in (fences, simple, fences[:1]):
+        features = fence_geojson.fence_features(batch)
+        assert isinstance(features, FenceFeatures)
+        assert _encodings(features) == _encodings(copy.deepcopy(list(features)))
+    features = fence_geojson.fence_features(fences)
+    features[3]["properties"]["zone"] = {"a": 1, "geometry": "\0"}
+    assert _encodings(features) == _encodings(copy.deepcopy(list(features)))
+    assert '"zone":{"a":1,"geometry":"\\u0000"}' in feature_texts(features)[3]
+    moved = copy.deepcopy(features[2]["geometry"])
+    moved["coordinates"][0][0] = moved["coordinates"][0][-1] = [14.25, 35.75]
+    features[2] = {**features[2], "geometry": moved}
+    assert _encodings(features) == _encodings(copy.deepcopy(list(features)))
+    assert "[14.25,35.75]" in feature_texts(features)[2]
+
+
+def test_coordinates_are_written_as_repr_writes_them():
+    """The coordinates' text made from 1e-8-degree integers is ``repr``'s, digit for digit;
+    numbers it is not made for (below 1e-4, not a whole number of 1e-8) are left to json."""
+    rng = np.random.default_rng(7)
+    edges = [1e-4, -1e-4, 0.00012345, 12.5, 180.0, -180.0, 99.99999999, 1.0, 9999.99999999]
+    values = np.concatenate([rng.uniform(-180, 180, 3000), rng.uniform(-1, 1, 500), edges])
+    values = [round(v, 8) for v in values.tolist()]
+    values += [round(v, int(d)) for v, d in zip(rng.uniform(-99, 99, 500), rng.integers(0, 8, 500))]
+    for extra in ([], [5e-05], [0.0], [123.456789012]):
+        xy = values + extra + [1.5] * ((len(values) + len(extra)) % 2)
+        ring = [xy[i : i + 2] for i in range(0, len(xy), 2)]
+        ring.append(ring[0])
+        geometry = {"type": "Polygon", "coordinates": [ring]}
+        feature = {"type": "Feature", "properties": {"name": "ring"}, "geometry": geometry}
+        index = np.array([0])
+        features = FenceFeatures(
+            [feature], None, np.array(ring), np.array([len(ring)]), index, index
+        )
+        assert feature_texts(features) == [json.dumps(feature, separators=(",", ":"))]
+
+
+def test_fence_rows_numbers_are_each_fences_own(built):
+    """Vertices, areas and fence items counted for all fences at once are each fence's own
+    (Fence.vertices, Fence.area_m2, item_count) for circles, polygons with and without holes,
+    multipolygons, empty ones, keep-out, keep-in and warning layers."""
+    fences = list(built[0])
+    holed = shapely.Polygon([(0, 0), (90, 0), (90, 90), (0, 90)], [[(10, 10), (20, 10), (20, 30)]])
+    for kind in ("keep_out", "keep_in", "warning"):
+        for local in (holed, shapely.MultiPolygon([holed, shapely.box(200, 0, 230, 40)])):
+            fences.append(replace(fences[0], kind=kind, local=local))
+    fences.append(replace(fences[0], local=shapely.MultiPolygon()))
+    kinds = {(f.kind, f.circle is not None, f.local.geom_type) for f in fences}
+    assert len(kinds) >= 8
+    assert item_counts(fences) == [item_count(f) for f in fences]
+    vertices, areas = fence_geojson.fence_numbers(fences)
+    assert vertices == [f.vertices for f in fences]
+    assert areas == [f.area_m2 for f in fences]
+    rows = fence_rows(fences)
+    assert [r[2:4] + r[7:] for r in rows] == [
+        (f.vertices, f.area_m2, item_count(f)) for f in fences
+    ]
 
 
 def _has_pyarrow():

@@ -87,21 +87,16 @@ class JobOutput:
 
 
 def fence_rows(fences):
-    """The numbers the build's summary needs per fence (see :attr:`JobOutput.rows`)."""
-    from alphafence.mavlink.items import item_count
+    """The numbers the build's summary needs per fence (see :attr:`JobOutput.rows`): each
+    fence's ``vertices``, ``area_m2`` and ``item_count``, counted for all of them at once."""
+    from alphafence.formats.fence_geojson import fence_numbers
+    from alphafence.mavlink.items import item_counts
 
+    fences = list(fences)
+    vertices, areas = fence_numbers(fences)
     return [
-        (
-            f.category,
-            f.kind,
-            f.vertices,
-            f.area_m2,
-            f.repaired,
-            f.site_id,
-            f.circle is not None,
-            item_count(f),
-        )
-        for f in fences
+        (f.category, f.kind, n, area, f.repaired, f.site_id, f.circle is not None, items)
+        for f, n, area, items in zip(fences, vertices, areas, item_counts(fences))
     ]
 
 

@@ -7,8 +7,8 @@ site, kind, method, margin and altitude band (see ``fence_properties``).
 
 from __future__ import annotations
 
-import gc
 import json
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,7 +18,14 @@ from shapely.errors import ShapelyError
 from alphafence import __version__
 from alphafence.errors import InputError
 from alphafence.formats.features import check_coordinates
+from alphafence.formats.fence_text import (
+    FenceFeatures,
+    paused_gc,
+    ring_structure,
+    wgs84_coordinates,
+)
 from alphafence.formats.jsonfile import read_json
+from alphafence.mavlink.items import exterior_vertices
 
 KINDS = ("keep_out", "keep_in", "warning")
 
@@ -177,6 +184,35 @@ def fence_properties(f) -> dict:
     category, kind, method, margin, altitude band, vertices, area and sources; ``alpha_m``,
     ``center`` and ``radius_m`` for circles, ``repaired`` and the ED-269 ``zone`` when they
     apply."""
+    return _properties(f, f.vertices, f.area_m2)
+
+
+def fence_numbers(fences) -> tuple:
+    """The ``vertices`` and ``area_m2`` of built fences, the numbers their own properties
+    give, counted and measured all at once.
+
+    Parameters
+    ----------
+    fences : list of Fence
+
+    Returns
+    -------
+    (list of int, list of float)
+    """
+    fences = list(fences)
+    local = np.empty(len(fences), dtype=object)
+    local[:] = [f.local for f in fences]
+    if any(g is None for g in local):
+        return [f.vertices for f in fences], [f.area_m2 for f in fences]
+    vertices = exterior_vertices(local).tolist()
+    areas = shapely.area(local).tolist()
+    for k, f in enumerate(fences):
+        if f.circle is not None:  # as Fence.vertices and Fence.area_m2 have it
+            vertices[k], areas[k] = 1, math.pi * f.circle[2] ** 2
+    return vertices, areas
+
+
+def _properties(f, vertices, area_m2):
     props = {
         "site_id": f.site_id,
         "name": f.name,
@@ -186,8 +222,8 @@ def fence_properties(f) -> dict:
         "margin_m": round(f.margin_m, 3),
         "alt_min_m": f.alt_min_m,
         "alt_max_m": f.alt_max_m,
-        "vertices": f.vertices,
-        "area_m2": round(f.area_m2, 1),
+        "vertices": vertices,
+        "area_m2": round(area_m2, 1),
         "sources": list(f.sources),
     }
     if f.alpha_m is not None:
@@ -238,17 +274,11 @@ def fence_features(fences) -> list:
     Returns
     -------
     list of dict
-        One ``{"type": "Feature", "properties": ..., "geometry": ...}`` per fence, in order.
+        One ``{"type": "Feature", "properties": ..., "geometry": ...}`` per fence, in order;
+        a ``fence_text.FenceFeatures``, which keeps the coordinates for the writers.
     """
-    # millions of small lists and floats, no reference cycles among them: the cyclic
-    # garbage collector would only walk the whole heap again and again (twice the time)
-    collect = gc.isenabled()
-    gc.disable()
-    try:
+    with paused_gc():  # millions of small lists and floats
         return _features(list(fences))
-    finally:
-        if collect:
-            gc.enable()
 
 
 def _features(fences):
@@ -256,42 +286,40 @@ def _features(fences):
         return []
     local = np.array([f.local for f in fences], dtype=object)
     kinds = shapely.get_type_id(local)
-    parts, owner = shapely.get_parts(local, return_index=True)
-    if not (np.all((kinds == 3) | (kinds == 6)) and np.all(~shapely.is_empty(parts))) or np.any(
-        shapely.has_z(local)
-    ):  # anything but flat (multi)polygons of non-empty parts: GEOS writes them, then rounded
+    structure = ring_structure(local, kinds)
+    if structure is None:  # anything but flat (multi)polygons of non-empty parts: GEOS writes
         return [_feature(f, json.loads(shapely.to_geojson(f.geometry))) for f in fences]
-    counts = shapely.get_num_coordinates(local)
-    local_xy = shapely.get_coordinates(local)
-    xy = np.empty_like(local_xy)
-    ends = np.cumsum(counts)
-    start = 0
-    for k, f in enumerate(fences):  # runs of fences sharing one frame: one transformation
-        if k + 1 < len(fences) and fences[k + 1].frame is f.frame:
-            continue
-        stop = int(ends[k])
-        lon, lat = f.frame.to_wgs84(local_xy[start:stop, 0], local_xy[start:stop, 1])
-        xy[start:stop, 0], xy[start:stop, 1] = lon, lat
-        start = stop
-    flat = _round_array(xy).tolist()
-    rings, ring_part = shapely.get_rings(parts, return_index=True)
-    size = shapely.get_num_coordinates(rings).tolist()
-    part_rings = [[] for _ in parts]
-    at = 0
-    for p, n in zip(ring_part.tolist(), size):
-        part_rings[p].append(flat[at : at + n])
-        at += n
-    polygons = [[] for _ in fences]
-    for f, rs in zip(owner.tolist(), part_rings):
-        polygons[f].append(rs)
-    out = []
-    for f, kind, polys in zip(fences, kinds.tolist(), polygons):
-        if kind == 3:
-            geometry = {"type": "Polygon", "coordinates": polys[0]}
-        else:
-            geometry = {"type": "MultiPolygon", "coordinates": polys}
-        out.append({"type": "Feature", "properties": fence_properties(f), "geometry": geometry})
-    return out
+    size, ring_part, owner = structure
+    fence_ends = np.cumsum(shapely.get_num_coordinates(local)).tolist()
+    xy = _round_array(wgs84_coordinates(fences, shapely.get_coordinates(local), fence_ends))
+    flat = xy.tolist()
+    ends = np.cumsum(size).tolist()
+    ring_lists = [flat[a:b] for a, b in zip([0, *ends[:-1]], ends)]
+    # the rings of each part, the parts of each fence: runs of the lists, in order
+    part_rings = _runs(ring_lists, ring_part, len(owner))
+    fence_parts = _runs(part_rings, owner, len(fences))
+    vertices, areas = fence_numbers(fences)
+    out = [
+        {
+            "type": "Feature",
+            "properties": _properties(f, n, area),
+            "geometry": (
+                {"type": "Polygon", "coordinates": polys[0]}
+                if kind == 3
+                else {"type": "MultiPolygon", "coordinates": polys}
+            ),
+        }
+        for f, kind, polys, n, area in zip(fences, kinds.tolist(), fence_parts, vertices, areas)
+    ]
+    return FenceFeatures(out, local, xy, size, ring_part, owner)
+
+
+def _runs(items, group, groups):
+    """``items`` cut into ``groups`` lists: the runs of equal (non-decreasing) ``group``."""
+    if len(items) == groups and np.array_equal(group, np.arange(groups)):
+        return [[x] for x in items]
+    ends = np.cumsum(np.bincount(group, minlength=groups)).tolist()
+    return [items[a:b] for a, b in zip([0, *ends[:-1]], ends)]
 
 
 def _feature(f, geometry):

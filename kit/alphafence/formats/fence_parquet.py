@@ -71,12 +71,20 @@ def encode_table(features):
         The rows, the GeoParquet geometry types seen (``"Polygon"``, ``"MultiPolygon Z"``),
         and their bounds ``(minx, miny, maxx, maxy)`` (None for no rows). All picklable.
     """
-    import numpy as np
-    import shapely
+    from alphafence.formats.fence_text import paused_gc
 
     pa = _pyarrow("writing GeoParquet")
+    with paused_gc():  # many small lists and strings
+        return _encode_table(pa, features)
+
+
+def _encode_table(pa, features):
+    import shapely
+
+    from alphafence.formats.fence_text import feature_geometries
+
     props = [f.get("properties") or {} for f in features]
-    geoms = np.array([shapely.geometry.shape(f["geometry"]) for f in features], dtype=object)
+    geoms = feature_geometries(features)
     columns = {name: [p.get(name) for p in props] for name, _ in COLUMNS}
     columns[EXTRA] = [_extra(p) for p in props]
     columns[GEOMETRY] = list(shapely.to_wkb(geoms)) if len(geoms) else []
@@ -104,7 +112,10 @@ _TYPE_NAMES = {
 
 def _extra(props):
     rest = {k: v for k, v in props.items() if k not in NAMES}
-    return json.dumps(rest, separators=(",", ":"), ensure_ascii=False) if rest else None
+    return _ENCODE(rest) if rest else None
+
+
+_ENCODE = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False).encode  # json.dumps's
 
 
 def union_bounds(a, b):

@@ -31,6 +31,7 @@ from alphafence import __version__
 from alphafence.errors import InputError
 from alphafence.formats import fence_parquet
 from alphafence.formats.atomic import temp_beside
+from alphafence.formats.fence_text import feature_texts
 
 RS = b"\x1e"
 GENERATOR = f"alphafence {__version__}"  # as fence_geojson writes it
@@ -179,8 +180,7 @@ class GeoJSONWriter(FenceWriter):
     @staticmethod
     def encode(features: list) -> tuple:
         """``(count, bytes)``: the features as compact JSON, comma-separated."""
-        text = ",".join(_dumps(f) for f in features)
-        return len(features), text.encode("utf-8")
+        return len(features), ",".join(feature_texts(features)).encode("utf-8")
 
     def _start(self):
         head = f'{{"type":"FeatureCollection","generator":{_dumps(GENERATOR)},'
@@ -210,7 +210,7 @@ class GeoJSONLinesWriter(FenceWriter):
     @staticmethod
     def encode(features: list) -> tuple:
         """``(count, bytes)``: one Feature per line."""
-        return len(features), "".join(_dumps(f) + "\n" for f in features).encode("utf-8")
+        return len(features), "".join(t + "\n" for t in feature_texts(features)).encode("utf-8")
 
     def _write(self, encoded):
         count, data = encoded
@@ -239,7 +239,7 @@ class GeoJSONSeqWriter(GeoJSONLinesWriter):
     @staticmethod
     def encode(features: list) -> tuple:
         """``(count, bytes)``: one RS-prefixed, LF-terminated record per Feature."""
-        text = "".join("\x1e" + _dumps(f) + "\n" for f in features)
+        text = "".join("\x1e" + t + "\n" for t in feature_texts(features))
         return len(features), text.encode("utf-8")
 
 

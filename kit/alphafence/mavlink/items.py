@@ -53,6 +53,58 @@ def item_count(fence) -> int:
     return int((shapely.get_num_coordinates(rings) - 1).sum())
 
 
+def item_counts(fences) -> list:
+    """:func:`item_count` of each fence, the same numbers, the vertices of all of them counted
+    at once (:func:`exterior_vertices`).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as Fence
+    >>> box = shapely.box(0, 0, 10, 10)
+    >>> item_counts([Fence(kind="keep_out", circle=None, local=box),
+    ...              Fence(kind="keep_in", circle=(0, 0, 5), local=box),
+    ...              Fence(kind="warning", circle=None, local=box)])
+    [4, 1, 0]
+    """
+    fences = list(fences)
+    geoms = [getattr(f, "local", None) for f in fences]
+    geoms = [f.geometry if g is None else g for f, g in zip(fences, geoms)]
+    vertices = exterior_vertices(geoms).tolist()
+    return [
+        (0 if f.kind not in ("keep_out", "keep_in") else 1 if f.circle is not None else n)
+        for f, n in zip(fences, vertices)
+    ]
+
+
+def exterior_vertices(geoms) -> np.ndarray:
+    """Per geometry, the vertices of its parts' exterior rings without their closing repeats
+    (what :func:`item_count` counts of a polygon fence), vectorised.
+
+    Parameters
+    ----------
+    geoms : sequence of shapely geometries
+
+    Returns
+    -------
+    numpy.ndarray of int64
+
+    Examples
+    --------
+    >>> exterior_vertices([shapely.box(0, 0, 1, 1), shapely.MultiPolygon()]).tolist()
+    [4, 0]
+    """
+    array = np.empty(len(geoms), dtype=object)
+    array[:] = list(geoms)
+    out = shapely.get_num_coordinates(array) - 1  # a polygon without holes (an empty one: -1)
+    other = (shapely.get_type_id(array) != 3) | (shapely.get_num_interior_rings(array) > 0)
+    if other.any():  # parts and rings copied out only for these
+        at = np.flatnonzero(other)
+        parts, owner = shapely.get_parts(array[at], return_index=True)
+        counts = shapely.get_num_coordinates(shapely.get_exterior_ring(parts)) - 1
+        out[at] = np.bincount(owner, weights=counts, minlength=len(at))
+    return out.astype(np.int64)
+
+
 def fence_items(fences):
     """Items for the fences a vehicle can hold: keep-out as exclusions, keep-in as
     inclusions. Warning layers have no onboard equivalent and are left to the companion."""
