@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from itertools import chain
 
 import numpy as np
 import shapely
@@ -37,7 +38,7 @@ _EPS = 1e-12
 MIN_VERTICES = 4  # any convex polygon of 5+ vertices has an edge whose neighbours meet
 
 
-def _ops(out, i, st, p, a, b, q, reach, prune):
+def _ops(out, i, st, p, a, b, q, reach, prune, hypot=math.hypot, eps=_EPS):
     """Append vertex ``i``'s operations no higher than ``prune`` to ``out`` as heap entries
     ``(area, height, kind, i, st, X)``; ``a`` is its position, ``p`` the vertex before it,
     ``b`` the one after and ``q`` the one after ``b`` (the ring has 3 vertices or more).
@@ -50,18 +51,18 @@ def _ops(out, i, st, p, a, b, q, reach, prune):
     c = (ix - px) * (jy - py) - (iy - py) * (jx - px)
     if not c > 0:
         area = -0.5 * c
-        base = math.hypot(jx - px, jy - py)
+        base = hypot(jx - px, jy - py)
         height = 2.0 * area / base if base > 0 else 0.0
         if not height > prune:
             out.append((area, height, 0, i, st, None))
     d1x, d1y, d2x, d2y = ix - px, iy - py, jx - qx, jy - qy
     den = d1x * d2y - d1y * d2x
-    if abs(den) < _EPS:
+    if abs(den) < eps:
         return
     wx, wy = jx - ix, jy - iy
     t = (wx * d2y - wy * d2x) / den
     s = (wx * d1y - wy * d1x) / den
-    if t <= 0 or s <= 0 or t * math.hypot(d1x, d1y) > reach or s * math.hypot(d2x, d2y) > reach:
+    if t <= 0 or s <= 0 or t * hypot(d1x, d1y) > reach or s * hypot(d2x, d2y) > reach:
         return
     x0, x1 = ix + t * d1x, iy + t * d1y
     # nudge X a hair further out, so rounding never leaves a or b outside the new edges
@@ -71,7 +72,7 @@ def _ops(out, i, st, p, a, b, q, reach, prune):
     if c >= 0:
         return
     area = -0.5 * c
-    base = math.hypot(wx, wy)
+    base = hypot(wx, wy)
     height = 2.0 * area / base if base > 0 else 0.0
     if not height > prune:
         out.append((area, height, 1, i, st, (x0, x1)))
@@ -102,10 +103,10 @@ def _greedy(pts, max_vertices, tolerance, check, first=None, reach=None):
         for i, p, a, b, q in zip(range(n), P[-1:] + P[:-1], P, P[1:] + P[:1], P[2:] + P[:2]):
             _ops(heap, i, 0, p, a, b, q, reach, prune)
     heapq.heapify(heap)
+    pop, push, ops = heapq.heappop, heapq.heappush, _ops
     count = n
-    changed = False
     while heap and count > 3:
-        area, height, kind, i, st, X = heapq.heappop(heap)
+        area, height, kind, i, st, X = pop(heap)
         if not alive[i] or stamp[i] != st:
             continue
         if count <= max_vertices and height > tolerance:
@@ -129,16 +130,15 @@ def _greedy(pts, max_vertices, tolerance, check, first=None, reach=None):
             nxt[i], prev[q] = q, i
             touched = (prev[p], p, i, q)
         count -= 1
-        changed = True
         prune = tolerance if count <= max_vertices else math.inf
         new = []
         for v in touched:
-            stamp[v] += 1
+            stamp[v] = st = stamp[v] + 1
             j = nxt[v]
-            _ops(new, v, stamp[v], P[prev[v]], P[v], P[j], P[nxt[j]], reach, prune)
+            ops(new, v, st, P[prev[v]], P[v], P[j], P[nxt[j]], reach, prune)
         for op in new:
-            heapq.heappush(heap, op)
-    if not changed:
+            push(heap, op)
+    if count == n:
         return None
     start = alive.index(True)
     out = [P[start]]
@@ -146,7 +146,7 @@ def _greedy(pts, max_vertices, tolerance, check, first=None, reach=None):
     while v != start:
         out.append(P[v])
         v = nxt[v]
-    return np.array(out)
+    return np.fromiter(chain.from_iterable(out), float, 2 * count).reshape(count, 2)
 
 
 def simplify_ring(pts, max_vertices: int, tolerance: float, outward: bool = True) -> np.ndarray:

@@ -7,6 +7,7 @@ operations, building and checking the results) is done for all rings in vectoris
 from __future__ import annotations
 
 import math
+from itertools import repeat
 
 import numpy as np
 import shapely
@@ -91,14 +92,15 @@ def _first_ops(rings, max_vertices, tolerance):
     where the heaps are)."""
     if not rings or sum(map(len, rings)) < BATCH_MIN_VERTICES:
         return [None] * len(rings), [None] * len(rings)
-    sizes = np.array([len(r) for r in rings], int)
+    sizes = np.fromiter(map(len, rings), int, len(rings))
     xy = np.concatenate(rings)
-    start = np.repeat(np.cumsum(sizes) - sizes, sizes)
-    n = np.repeat(sizes, sizes)
-    i = np.arange(len(xy)) - start
-    x, y = xy[:, 0], xy[:, 1]
-    (px, py), (jx, jy), (qx, qy) = (xy[start + (i + k) % n].T for k in (-1, 1, 2))
     offsets = np.cumsum(sizes) - sizes
+    at = np.arange(len(xy))
+    i = at - np.repeat(offsets, sizes)  # each vertex's index in its ring
+    before, after = at - 1, at + 1
+    before[offsets], after[offsets + sizes - 1] = offsets + sizes - 1, offsets
+    x, y = xy[:, 0], xy[:, 1]
+    (px, py), (jx, jy), (qx, qy) = (xy[k].T for k in (before, after, after[after]))
     span = (np.maximum.reduceat(xy, offsets) - np.minimum.reduceat(xy, offsets)).max(axis=1)
     reach = np.repeat(2.0 * span + 1.0, sizes)
     prune = np.repeat(np.where(sizes <= max_vertices, tolerance, math.inf), sizes)
@@ -121,27 +123,34 @@ def _first_ops(rings, max_vertices, tolerance):
         far = np.maximum(t * np.hypot(d1x, d1y), s * np.hypot(d2x, d2y))
         keep1 &= ~(far > reach * loose)
         near = ~(far > reach / loose)  # within reach whichever hypot measures it
-    ring = np.repeat(np.arange(len(rings)), sizes)
-    heaps = [[] for _ in rings]
     hypot = math.hypot
-    v = np.flatnonzero(keep0)
-    for r, k, a, ux, uy, cut in zip(*(col[v].tolist() for col in (ring, i, area0, bx, by, prune))):
-        base = hypot(ux, uy)
-        height = 2.0 * a / base if base > 0 else 0.0
-        if not height > cut:
-            heaps[r].append((a, height, 0, k, 0, None))
     for v in np.flatnonzero(keep1 & ~near).tolist():  # rare: the reach as _ops measures it
         far = float(reach[v])
         if t[v] * hypot(d1x[v], d1y[v]) > far or s[v] * hypot(d2x[v], d2y[v]) > far:
             keep1[v] = False
-    v = np.flatnonzero(keep1)
-    cols = (ring, i, area1, wx, wy, x0, x1, prune)
-    for r, k, a, ux, uy, X0, X1, cut in zip(*(col[v].tolist() for col in cols)):
-        base = hypot(ux, uy)
-        height = 2.0 * a / base if base > 0 else 0.0
-        if not height > cut:
-            heaps[r].append((a, height, 1, k, 0, (X0, X1)))
+    ring = np.repeat(np.arange(len(rings)), sizes)
+    v0, h0 = _measured(np.flatnonzero(keep0), area0, bx, by, prune)
+    v1, h1 = _measured(np.flatnonzero(keep1), area1, wx, wy, prune)
+    # each ring's entries in _ops' order: its vertices' removals, then their collapses
+    ops0 = list(zip(area0[v0].tolist(), h0, repeat(0), i[v0].tolist(), repeat(0), repeat(None)))
+    X = zip(x0[v1].tolist(), x1[v1].tolist())
+    ops1 = list(zip(area1[v1].tolist(), h1, repeat(1), i[v1].tolist(), repeat(0), X))
+    end0 = np.cumsum(np.bincount(ring[v0], minlength=len(rings))).tolist()
+    end1 = np.cumsum(np.bincount(ring[v1], minlength=len(rings))).tolist()
+    heaps = [
+        ops0[a0:b0] + ops1[a1:b1] for a0, b0, a1, b1 in zip([0, *end0], end0, [0, *end1], end1)
+    ]
     return heaps, (2.0 * span + 1.0).tolist()
+
+
+def _measured(v, area, ux, uy, prune):
+    """The operations ``v`` (of heights ``2 area / |u|`` as :func:`_ops` measures them, with
+    ``math.hypot``) no higher than their ``prune``, and their heights."""
+    base = np.fromiter(map(math.hypot, ux[v].tolist(), uy[v].tolist()), float, len(v))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        height = np.where(base > 0, 2.0 * area[v] / base, 0.0)
+    low = ~(height > prune[v])
+    return v[low], height[low].tolist()
 
 
 def _fast_passes(oriented, givens, heaps, reaches, max_vertices, tolerance, outward):
