@@ -11,6 +11,7 @@ and every output, is byte for byte the serial read's.
 
 from __future__ import annotations
 
+import gc
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
@@ -106,6 +107,16 @@ def read_job(path, chunk, rules, bbox):
     raises there (the exception itself does not survive pickling), or ``("unchunkable",)``
     when the rest of the file must be read serially.
     """
+    enabled = gc.isenabled()
+    gc.disable()  # parsed JSON makes no cycles: a chunk's objects would only be traversed
+    try:
+        return _read_job(path, chunk, rules, bbox)
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def _read_job(path, chunk, rules, bbox):
     import numpy as np
     import shapely
 

@@ -20,7 +20,7 @@ from alphafence.formats.jsonfile import max_json_bytes
 SEQ_SUFFIXES = (".geojsonl", ".geojsons", ".geojsonseq", ".ndjson", ".jsonl")
 RS = "\x1e"
 STREAM_ABOVE_BYTES = 64 * 2**20  # a FeatureCollection larger than this is streamed
-BATCH = 20_000  # features parsed per batch
+BATCH = 2_000  # features parsed per batch (fewer live objects for the cyclic GC to traverse)
 TEXT_BLOCK = 8192  # bytes a text file is decoded at a time (io.TextIOWrapper's chunk size)
 SCAN_BLOCK = 8 * 2**20  # bytes scanned at a time for record boundaries
 
