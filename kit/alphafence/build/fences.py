@@ -60,7 +60,11 @@ def enclosing_circle(region):
 def _simplify_parts(geoms, opts):
     """Each geometry's polygons simplified outward (all of them in one pass), a geometry of
     several united again with their holes filled."""
-    polys = [outer_polygons(g) for g in geoms]
+    geoms = _array(geoms)
+    plain = _plain_polygons(geoms)
+    if plain.all():  # each geometry is its one polygon
+        return simplify_polygons(geoms, opts.max_vertices, opts.tolerance_m, outward=True)
+    polys = [[g] if one else outer_polygons(g) for g, one in zip(geoms.tolist(), plain.tolist())]
     flat = simplify_polygons(
         [p for ps in polys for p in ps], opts.max_vertices, opts.tolerance_m, outward=True
     )
@@ -69,6 +73,16 @@ def _simplify_parts(geoms, opts):
         parts, at = flat[at : at + len(ps)], at + len(ps)
         out.append(parts[0] if len(parts) == 1 else fill_holes(shapely.union_all(parts)))
     return out
+
+
+def _plain_polygons(geoms):
+    """Which of ``geoms`` are non-empty polygons without holes (their own
+    :func:`outer_polygons`), for all of them at once."""
+    return (
+        (shapely.get_type_id(geoms) == 3)
+        & ~shapely.is_empty(geoms)
+        & (shapely.get_num_interior_rings(geoms) == 0)
+    )
 
 
 def outer_fence(region, opts):
@@ -95,11 +109,16 @@ def outer_fences(regions, opts):
     """
     method = opts.method
     if method == "alpha":
-        made = [alpha_shape(r, opts.alpha_radius) for r in regions]
+        regions = _array(regions)
+        plain = _plain_polygons(regions) & (opts.alpha_radius is None)  # one part: alpha 0
+        made = [
+            (r, 0.0) if one else alpha_shape(r, opts.alpha_radius)
+            for r, one in zip(regions.tolist(), plain.tolist())
+        ]
         shapes = _simplify_parts([shape for shape, _ in made], opts)
         return [(f, None, alpha) for f, (_, alpha) in zip(shapes, made)]
     if method == "polygon":
-        hulls = [shapely.convex_hull(r) for r in regions]
+        hulls = shapely.convex_hull(_array(regions))
         return [(f, None, None) for f in _simplify_parts(hulls, opts)]
     if method == "circle":
         return [(circle_polygon(*c), c, None) for c in map(enclosing_circle, regions)]

@@ -46,11 +46,13 @@ def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool 
     if not len(polys):
         return []
     polys = _objects(polys)
-    coords, counts = rings_coords(shapely.get_exterior_ring(polys))
+    holes = shapely.get_num_interior_rings(polys)
+    exteriors = polys.copy()  # a polygon without holes has its exterior's coordinates
+    exteriors[holes > 0] = shapely.get_exterior_ring(polys[holes > 0])
+    coords, counts = rings_coords(exteriors)
     rings = [
         _prepare(*args, max_vertices, outward)
-        for args in zip(polys.tolist(), coords, counts.tolist(),
-                        shapely.get_num_interior_rings(polys).tolist(),
+        for args in zip(polys.tolist(), coords, counts.tolist(), holes.tolist(),
                         shapely.has_z(polys).tolist())
     ]  # fmt: skip
     long = [k for k, (pts, _, _) in enumerate(rings) if len(pts) > 3]

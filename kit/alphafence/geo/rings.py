@@ -180,15 +180,14 @@ def _shifted(pts, spts, index=None):
         t = (w[:, 0] * d2[:, 1] - w[:, 1] * d2[:, 0]) / den
     x = a2[prv] + t[:, None] * d1
     far = ~np.isfinite(t) | (np.hypot(*(x - a).T) > 4.0 * (push + push[prv]) + 1e-6)
-    out = []
-    b_prev = a2[prv] + d1  # end of pushed edge k-1
-    for k in range(m):
-        if far[k]:
-            out.append(b_prev[k])
-            out.append(a2[k])
-        else:
-            out.append(x[k])
-    return np.array(out)
+    # a vertex per kept one: the meeting point, or where they are far apart, a bevel from
+    # the end of pushed edge k-1 to the start of pushed edge k
+    room = 1 + far
+    at = np.cumsum(room) - room
+    out = np.empty((int(room.sum()), 2))
+    out[at] = np.where(far[:, None], a2[prv] + d1, x)
+    out[at[far] + 1] = a2[far]
+    return out
 
 
 def prereduce(pts, target):
@@ -211,7 +210,8 @@ def prereduce(pts, target):
 
 
 def rings_coords(rings):
-    """:func:`ring_coords` of each ring of an array of rings, from one coordinate fetch.
+    """:func:`ring_coords` of each ring of an array of rings (or of polygons without holes,
+    whose coordinates are their exterior's), from one coordinate fetch.
 
     Returns
     -------
