@@ -8,6 +8,7 @@ region, and reported.
 
 from __future__ import annotations
 
+import gc
 import math
 
 import numpy as np
@@ -215,6 +216,16 @@ def fence_sites(sites, opts: FenceOptions) -> list:
     ValueError
         A keep-in site that vanishes inside its margin.
     """
+    collect = gc.isenabled()
+    gc.disable()  # hundreds of thousands of small tuples (simplification heaps), no cycles:
+    try:  # the collector would only walk them, and every other live object, again and again
+        return _fence_sites(sites, opts)
+    finally:
+        if collect:
+            gc.enable()
+
+
+def _fence_sites(sites, opts):
     out = [[] for _ in sites]
     todo, bases, geoms, margins, zones = [], [], [], [], []
     for k, site in enumerate(sites):
