@@ -229,6 +229,7 @@ def test_invalid_utf8_raises_where_the_serial_reader_does(tmp_path):
 @pytest.fixture(scope="module")
 def pool():
     pool = start_pool(2)
+    pool.submit(int).result()  # started: the chunks are read there, none here
     yield pool
     pool.shutdown(wait=True)
 
@@ -260,8 +261,9 @@ def _build(path, out, jobs, monkeypatch, batch=None, stream=None):
         monkeypatch.setattr(tiled, "READ_BATCH", batch)
         real = tiled.sequence_reader
 
-        def spy(*args):
-            read = real(*args)
+        def spy(pool, *args):
+            pool.submit(int).result()  # the workers read every chunk
+            read = real(pool, *args)
             return lambda *a: (chunks.append(p) or p for p in read(*a))
 
         monkeypatch.setattr(tiled, "sequence_reader", spy)

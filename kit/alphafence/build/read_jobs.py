@@ -1,5 +1,6 @@
 """A large GeoJSON text sequence read in the worker processes, chunk by chunk, while the main
-process only cuts the file at record boundaries and spools what the workers return, in order.
+process only cuts the file at record boundaries and spools what the workers return, in order
+(and reads chunks itself until a worker has started: a pool takes a while to import).
 
 A worker reads its chunk as the serial reader reads that batch (the same records, indices,
 line numbers and errors: :func:`alphafence.formats.geojson_stream.read_chunk`), keeps the
@@ -183,12 +184,13 @@ def _read(pool, window, batch, path, rules, bbox, repaired, skipped):
                 return
             if chunk.records is None:
                 rest.append(chunk)
-            elif first:  # read here, while the workers start (they import the fencing code)
-                pending.append((chunk, first.pop()))
+            elif not ready.done():  # read here while the workers start: one chunk at a time
+                pending.append((chunk, None))
+                return
             else:
                 pending.append((chunk, pool.submit(read_job, path, chunk, rules, bbox)))
 
-    first = [None]
+    ready = pool.submit(int)  # done once a worker has started (imported the fencing code)
     try:
         fill()
         while pending:
