@@ -161,9 +161,10 @@ def test_many_rings_are_cleaned_and_oriented_as_one_at_a_time(many):
     however close to no area the ring is."""
     from alphafence.geo.rings import ring_coords, ring_signs, rings_coords, signed_area
 
-    pts, counts = rings_coords(np.asarray(many, dtype=object))
+    pts, counts, closed = rings_coords(np.asarray(many, dtype=object))
     assert [p.tolist() for p in pts] == [ring_coords(r).tolist() for r in many]
     assert counts.tolist() == [shapely.get_num_coordinates(r) for r in many]
+    assert closed.tolist() == [len(p) > 1 and p[0].tolist() == p[-1].tolist() for p in pts]
     some = [p for p in pts if len(p)]
     if some:
         assert ring_signs(some).tolist() == [int(np.sign(signed_area(p))) for p in some]

@@ -49,11 +49,18 @@ def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool 
     holes = shapely.get_num_interior_rings(polys)
     exteriors = polys.copy()  # a polygon without holes has its exterior's coordinates
     exteriors[holes > 0] = shapely.get_exterior_ring(polys[holes > 0])
-    coords, counts = rings_coords(exteriors)
+    coords, counts, closed = rings_coords(exteriors)
+    sizes = np.fromiter(map(len, coords), int, len(coords))
+    flat, has_z = holes == 0, shapely.has_z(polys)
+    # what _prepare makes of a ring neither to bring near 2 * max_vertices nor to clean again
+    odd = closed | (sizes > 2 * max_vertices) if outward else closed
+    same = flat & (sizes + 1 == counts) & ~has_z
     rings = [
-        _prepare(*args, max_vertices, outward)
-        for args in zip(polys.tolist(), coords, counts.tolist(), holes.tolist(),
-                        shapely.has_z(polys).tolist())
+        _prepare(poly, pts, n, h, z, max_vertices, outward) if o else (pts, poly if f else None, s)
+        for poly, pts, n, h, z, o, f, s in zip(
+            polys.tolist(), coords, counts.tolist(), holes.tolist(), has_z.tolist(),
+            odd.tolist(), flat.tolist(), same.tolist(),
+        )
     ]  # fmt: skip
     long = [k for k, (pts, _, _) in enumerate(rings) if len(pts) > 3]
     signs = ring_signs([rings[k][0] for k in long]).tolist() if long else []

@@ -151,28 +151,28 @@ def _shifted(pts, spts, index=None):
     except KeyError:
         return None
     m = len(keep)
+    nxt, prv = np.arange(1, m + 1), np.arange(-1, m - 1)  # the next and previous kept one
+    nxt[-1] = 0
     a = pts[keep]
-    b = pts[np.roll(keep, -1)]
+    b = pts[keep[nxt]]
     d = b - a
     length = np.hypot(d[:, 0], d[:, 1])
     if np.any(length == 0):
         return None
     normal = np.column_stack([d[:, 1], -d[:, 0]]) / length[:, None]  # right = outside (CCW)
-    # every vertex belongs to the kept edge that starts at or before it
-    seg = np.searchsorted(keep, np.arange(n), side="right") - 1
-    seg[seg < 0] = m - 1  # vertices before the first kept one wrap to the last edge
-    rel = pts - a[seg]
+    # every vertex belongs to the kept edge that starts at or before it (vertices before the
+    # first kept one wrap to the last edge): from the first kept vertex on, edge by edge
+    order = np.r_[keep[0] : n, 0 : keep[0]]
+    seg = np.repeat(np.arange(m), np.diff(np.r_[keep, n + keep[0]]))
+    rel = pts[order] - a[seg]
     dev = rel[:, 0] * normal[seg, 0] + rel[:, 1] * normal[seg, 1]
-    push = np.zeros(m)
-    np.maximum.at(push, seg, dev)
+    push = np.maximum(np.maximum.reduceat(dev, keep - keep[0]), 0.0)
     # the vertex where an edge ends also belongs to it
-    nxt = np.roll(np.arange(m), -1)
-    end = pts[keep[nxt]] - a
+    end = b - a
     push = np.maximum(push, end[:, 0] * normal[:, 0] + end[:, 1] * normal[:, 1])
     push = np.maximum(push, 0.0) * (1 + 1e-9) + 1e-9
     a2 = a + normal * push[:, None]
     # intersect edge k-1 with edge k
-    prv = np.roll(np.arange(m), 1)
     d1, d2 = d[prv], d
     den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
     w = a2 - a2[prv]
@@ -219,12 +219,14 @@ def rings_coords(rings):
         Each ring's vertices, as :func:`ring_coords` gives them.
     counts : ndarray of int
         Each ring's number of coordinates (closing one included).
+    closed : ndarray of bool
+        Whether a ring's vertices still end where they start (two or more of them).
 
     Examples
     --------
     >>> import shapely
     >>> rings = shapely.get_exterior_ring([shapely.box(0, 0, 1, 1), shapely.box(0, 0, 2, 2)])
-    >>> pts, counts = rings_coords(rings)
+    >>> pts, counts, closed = rings_coords(rings)
     >>> [p.tolist() == ring_coords(r).tolist() for p, r in zip(pts, rings)], counts.tolist()
     ([True, True], [5, 5])
     """
@@ -239,7 +241,11 @@ def rings_coords(rings):
     closed = (xy[start[two]] == xy[end[two] - 1]).all(axis=1)
     drop[end[two] - 1] = closed | drop[end[two] - 1]  # the closing duplicate, or a repeat
     kept = np.cumsum(counts) - np.cumsum(np.bincount(at[drop], minlength=len(rings)))
-    return np.split(xy[~drop], kept[:-1]), counts
+    xy = xy[~drop]
+    sizes = np.diff(kept, prepend=0)
+    closed = sizes > 1
+    closed[closed] = (xy[(kept - sizes)[closed]] == xy[kept[closed] - 1]).all(axis=1)
+    return np.split(xy, kept[:-1]), counts, closed
 
 
 def ring_signs(rings) -> np.ndarray:
