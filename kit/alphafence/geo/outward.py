@@ -197,7 +197,8 @@ def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False, fir
     one was built (else None). ``given``, a polygon of ``pts``' vertices (any orientation),
     spares building one for the check; if ``same``, its exterior holds ``pts`` as they are
     and it is the polygon of a ring left as it is. ``first``: ``(oriented pts, flipped,
-    first operations, fast pass)`` when :func:`simplify_polygons` found them."""
+    first operations, :func:`_fast_pass`)`` when
+    :func:`~alphafence.geo.outward_many.simplify_polygons` found them."""
     kept = given if same else None
     if len(pts) <= 3:
         return pts, kept
@@ -225,12 +226,12 @@ def _simplify(pts, max_vertices, tolerance, outward, given=None, same=False, fir
     return (out[::-1] if flip else out), None
 
 
-def _fast_pass(pts, flip, max_vertices, tolerance, outward, given, heap=None, reach=None):
+def _fast_pass(pts, flip, max_vertices, tolerance, outward, given):
     """The unchecked pass over oriented ``pts``: its ring (None when no operation applies),
     that ring's polygon, and whether both polygons are valid and the result covers the input
     (outward) or lies in it. When that holds the check of :func:`_simplify` holds: validity
     and covers do not depend on orientation; when it fails, the check decides."""
-    out = _greedy(pts, max_vertices, tolerance, False, heap, reach)
+    out = _greedy(pts, max_vertices, tolerance, False)
     if out is None:
         return None, None, False
     poly = shapely.Polygon(out[::-1] if flip else out)

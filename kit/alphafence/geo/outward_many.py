@@ -26,10 +26,10 @@ BATCH_MIN_VERTICES = 160  # fewer vertices in all: each ring's own pass is cheap
 
 
 def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool = True) -> list:
-    """:func:`simplify_polygon` of each polygon (the same polygons as one at a time), with
-    vectorised passes over all their rings: the vertices fetched, the orientations summed,
-    the first operations found, and the unchecked passes' results built, validated and
-    checked.
+    """:func:`~alphafence.geo.outward.simplify_polygon` of each polygon (the same polygons as
+    one at a time), with vectorised passes over all their rings: the vertices fetched, the
+    orientations summed, the first operations found, and the unchecked passes' results
+    built, validated and checked.
 
     Parameters
     ----------
@@ -37,7 +37,7 @@ def simplify_polygons(polys, max_vertices: int, tolerance: float, outward: bool 
     max_vertices : int
     tolerance : float
     outward : bool
-        As for :func:`simplify_polygon`.
+        As for :func:`~alphafence.geo.outward.simplify_polygon`.
 
     Returns
     -------
@@ -163,8 +163,9 @@ def _measured(v, area, ux, uy, prune):
 
 
 def _fast_passes(oriented, givens, heaps, reaches, max_vertices, tolerance, outward):
-    """:func:`_fast_pass` of each oriented ring (``(pts, flipped)``), the polygons built,
-    validated and checked in one GEOS call each."""
+    """:func:`~alphafence.geo.outward._fast_pass` of each oriented ring (``(pts, flipped)``,
+    its polygon's stand-in in ``givens``), the polygons built, validated and checked in one
+    GEOS call each."""
     outs = [
         _greedy(pts, max_vertices, tolerance, False, heap, reach)
         for (pts, _), heap, reach in zip(oriented, heaps, reaches)
