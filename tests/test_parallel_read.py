@@ -241,6 +241,23 @@ def test_workers_read_what_the_main_process_reads(tmp_path, pool):
     assert_same_read(_serial(path, box, 8), _parallel(path, box, 8, pool=pool))
 
 
+def test_several_files_read_alike(tmp_path, pool):
+    # two sequences around a FeatureCollection read whole: one spool, tables shared
+    first = _write(tmp_path / "a.geojsonl", _lines(30))
+    lines = [json.loads(t) for t in (line.strip().strip(RS) for line in _lines(12)) if t]
+    whole = tmp_path / "b.geojson"
+    whole.write_text(json.dumps({"type": "FeatureCollection", "features": lines}))
+    last = _write(tmp_path / "c.geojsons", [RS + line for line in _lines(25)])
+    box = (14.4, 35.8, 14.43, 35.81)
+    streams = [DatabaseStream([first, str(whole), last], RULES, box) for _ in range(2)]
+    serial = _spool_of(streams[0].batches()), streams[0].repaired, streams[0].skipped
+    read = sequence_reader(pool, 3, 4)
+    parallel = _spool_of(streams[1].batches(read)), streams[1].repaired, streams[1].skipped
+    assert_same_read(serial, parallel)
+    assert streams[0].count == streams[1].count == len(serial[0]) > 0
+    assert len(serial[0].origins) == 3
+
+
 def test_a_malformed_line_in_the_third_chunk(tmp_path, pool):
     lines = _lines(40)
     lines[19] = '{"type": "Feature", "properties": {"amenity": "school"}'
