@@ -16,6 +16,7 @@ from alphafence.build.spool import Spool
 
 PRELOAD = [
     "alphafence.build.tile_jobs",
+    "alphafence.build.read_jobs",
     "alphafence.formats.fence_geojson",
     "alphafence.formats.fence_stream",
     "scipy.spatial",
