@@ -176,10 +176,10 @@ def _shifted(pts, spts, index=None):
     d1, d2 = d[prv], d
     den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
     w = a2 - a2[prv]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # parallel edges: t is not finite
         t = (w[:, 0] * d2[:, 1] - w[:, 1] * d2[:, 0]) / den
-    x = a2[prv] + t[:, None] * d1
-    far = ~np.isfinite(t) | (np.hypot(*(x - a).T) > 4.0 * (push + push[prv]) + 1e-6)
+        x = a2[prv] + t[:, None] * d1
+        far = ~np.isfinite(t) | (np.hypot(*(x - a).T) > 4.0 * (push + push[prv]) + 1e-6)
     # a vertex per kept one: the meeting point, or where they are far apart, a bevel from
     # the end of pushed edge k-1 to the start of pushed edge k
     room = 1 + far
