@@ -130,7 +130,7 @@ def test_the_armv7_image_steps_become_the_script_navio2_test_runs():
     text = (ROOT / "docker" / "Dockerfile.armv7").read_text()
     lines = script(text, "debian:trixie-slim").splitlines()
     assert lines[0] == "set -euxo pipefail"
-    assert "cp -r /context/pyproject.toml /context/README.md /src/" in lines
+    assert "cp -r /context/pyproject.toml /context/README.md /context/LICENSE /src/" in lines
     assert "cp -r /context/docker/entrypoint.sh /opt/alphafence/bin/alphafence-entrypoint" in lines
     runs = [i for i, line in enumerate(lines) if line.startswith("apt-get update")]
     pip = [i for i, line in enumerate(lines) if "/opt/alphafence/bin/pip install" in line]
