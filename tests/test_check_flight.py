@@ -512,18 +512,25 @@ async def test_a_sitl_flight_through_a_zone_is_caught_in_both_its_logs(sitl, tmp
         assert abs(x) < 5 and 130 <= y < 134, (log, x, y)  # the square's south edge, flying north
         assert hit["alt_m"] == pytest.approx(30, abs=3)
         entries[log.suffix] = hit
-    # the streamed DataFlash reader reads the real log as pymavlink's DFReader does
-    log = FlightLog(binary)
-    got = np.concatenate([np.column_stack([c.t, c.lat, c.lon, c.alt_amsl]) for c in log.chunks()])
-    ref, rows = DFReader.DFReader_binary(str(binary)), []
-    while (m := ref.recv_match(type="POS")) is not None:
-        if m.Lat != 0 or m.Lng != 0:
-            rows.append((m._timestamp, m.Lat, m.Lng, m.Alt))
-    rows = np.array(rows)
-    assert log.info.source == "POS" and len(got) == len(rows) > 100
-    np.testing.assert_allclose(got[:, 0], rows[:, 0], atol=1e-6)
-    np.testing.assert_allclose(got[:, 1:3], rows[:, 1:3], rtol=0, atol=1e-12)  # as above
-    np.testing.assert_allclose(got[:, 3], rows[:, 3], atol=1e-3)
+    # the streamed DataFlash reader reads the real log as pymavlink's DFReader does: whole, and
+    # cut mid-message as a log still being written is. Both read the same copy, since SITL is
+    # still running and may append to its log between two reads.
+    data = binary.read_bytes()
+    for size in (len(data), len(data) * 2 // 3 + 5):
+        snapshot = tmp_path / f"snapshot-{size}.BIN"
+        snapshot.write_bytes(data[:size])
+        log = FlightLog(snapshot)
+        got = [np.column_stack([c.t, c.lat, c.lon, c.alt_amsl]) for c in log.chunks()]
+        got = np.concatenate(got)
+        ref, rows = DFReader.DFReader_binary(str(snapshot)), []
+        while (m := ref.recv_match(type="POS")) is not None:
+            if m.Lat != 0 or m.Lng != 0:
+                rows.append((m._timestamp, m.Lat, m.Lng, m.Alt))
+        rows = np.array(rows)
+        assert log.info.source == "POS" and len(got) == len(rows) > 100, size
+        np.testing.assert_allclose(got[:, 0], rows[:, 0], atol=1e-6)
+        np.testing.assert_allclose(got[:, 1:3], rows[:, 1:3], rtol=0, atol=1e-12)  # as above
+        np.testing.assert_allclose(got[:, 3], rows[:, 3], atol=1e-3)
 
 
 def test_it_needs_pymavlink_alone_and_says_so_without_it(fences, tmp_path):
