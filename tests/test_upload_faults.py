@@ -227,7 +227,9 @@ async def test_download_survives_a_late_repeated_count(link):
     # MAVSDK re-sends MISSION_REQUEST_LIST after 0.5 s; the late first MISSION_COUNT then
     # restarts its download without clearing what it has (it returned item 0 twice) -- the kit
     # keeps one item per sequence number
-    faults = Faults(delay_out={0: 0.7}, drop_out={3})
+    # the first count 0.7 s late: after MAVSDK's 0.5 s re-ask; before the pymavlink link's
+    # 0.75 s one by 0.35 s rather than 0.05 s (a busy host could fire both timers at once)
+    faults = Faults(delay_out={0: 0.7 if link == "mavsdk" else 0.4}, drop_out={3})
     async with (
         FakeVehicle(fence=PREVIOUS, faults=faults) as fake,
         open_vehicle(fake.url, timeout=5.0) as vehicle,
