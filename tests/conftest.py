@@ -13,6 +13,21 @@ settings.register_profile("ci", derandomize=True, deadline=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
+# pyproject's timeout (900 s) bounds every test; one that drives SITL (start-up, flights at
+# speedup 1) gets this instead, unless it sets its own @pytest.mark.timeout
+SITL_TIMEOUT_S = 1800
+
+
+def pytest_collection_modifyitems(config, items):
+    """Give each test marked ``sitl`` without a timeout of its own SITL_TIMEOUT_S (with
+    pytest-timeout installed: pyproject's dev extra)."""
+    if not config.pluginmanager.hasplugin("timeout"):
+        return
+    for item in items:
+        if item.get_closest_marker("sitl") and not item.get_closest_marker("timeout"):
+            item.add_marker(pytest.mark.timeout(SITL_TIMEOUT_S))
+
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "osm"
 MALTA = SHARED / "malta-2018-08-27.osm.pbf"
