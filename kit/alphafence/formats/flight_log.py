@@ -12,7 +12,11 @@ home, altitude AMSL, velocity), so a log of any length is read in bounded memory
   a type, fields as its ``FMT`` message says). Positions are ``POS`` (the AHRS's position:
   ``Alt`` AMSL, ``RelHomeAlt`` above home), or ``GPS`` instance 0 when the log has no ``POS``.
   ``TimeUS`` is time since boot; the GPS week and milliseconds (``GWk``, ``GMS``) of the first
-  GPS message that has them give the UTC time of boot (GPS time less its leap seconds). It is
+  GPS message that has them give the UTC time of boot (GPS time less its leap seconds). Logs
+  written before 2015 have no ``TimeUS`` and no ``POS``: their ``GPS`` messages
+  (``Status,TimeMS,Week,...,T``) give the GPS time in ``Week`` and ``TimeMS`` and the
+  milliseconds since boot in ``T`` (a ``GPS`` without ``T`` is timed by its own GPS time; one
+  with ``GWk``/``GMS`` beside ``TimeMS`` by ``TimeMS`` since boot). It is
   streamed with pymavlink's table of DataFlash field types (``DFReader.FORMAT_TO_STRUCT``),
   decoding only the messages it needs; ``tests/test_check_flight.py`` checks it against
   pymavlink's own ``DFReader``.
@@ -282,9 +286,29 @@ def _number(fmt, v, column, default=None):
     return dataflash.value(fmt, v, column)
 
 
+def _gps_week_ms(fmt, v):
+    """A GPS message's GPS week and milliseconds into it (``GWk``, ``GMS``; before 2015
+    ``Week``, ``TimeMS``), ``(None, None)`` when it has none or the GPS had no time yet."""
+    week, ms = ("GWk", "GMS") if "GWk" in fmt.columns else ("Week", "TimeMS")
+    week, ms = _number(fmt, v, week), _number(fmt, v, ms)
+    return (week, ms) if week is not None and ms is not None and week > 0 else (None, None)
+
+
+def _boot_seconds(fmt, v):
+    """Seconds since boot of a POS or GPS message: ``TimeUS``; before 2015 ``T`` (milliseconds)
+    of a GPS message whose ``TimeMS`` is GPS time (it has ``Week``), else ``TimeMS``; None when
+    the message has no such field."""
+    us = _number(fmt, v, "TimeUS")
+    if us is not None:
+        return us * 1e-6
+    ms = _number(fmt, v, "T" if "Week" in fmt.columns else "TimeMS")
+    return None if ms is None else ms * 1e-3
+
+
 def _dataflash_survey(path):
-    """A first pass: the UTC time of boot (from GPS time), whether the log has POS, and
-    home's altitude (ORGN type 1) for logs without a height above home."""
+    """A first pass: the UTC time of boot (from GPS time; 0.0 when the GPS messages have no
+    time since boot and are timed by their own GPS time), whether the log has POS, and home's
+    altitude (ORGN type 1) for logs without a height above home."""
     boot_utc = home = None
     has_pos = False
     for fmt, v in dataflash.messages(path, LogInfo(path, "dataflash"), ("GPS", "POS", "ORGN")):
@@ -292,9 +316,9 @@ def _dataflash_survey(path):
             if fmt.name == "POS":
                 has_pos = has_pos or bool(_number(fmt, v, "Lat", 0) or _number(fmt, v, "Lng", 0))
             elif fmt.name == "GPS" and boot_utc is None and _number(fmt, v, "I", 0) == 0:
-                week, ms, us = (_number(fmt, v, k) for k in ("GWk", "GMS", "TimeUS"))
-                if None not in (week, ms, us) and week > 0:
-                    boot_utc = dataflash.gps_utc(week, ms) - us * 1e-6
+                (week, ms), boot = _gps_week_ms(fmt, v), _boot_seconds(fmt, v)
+                if week is not None:
+                    boot_utc = 0.0 if boot is None else dataflash.gps_utc(week, ms) - boot
             elif fmt.name == "ORGN" and home is None and _number(fmt, v, "Type") == 1:
                 home = _number(fmt, v, "Alt")
         except (ValueError, OverflowError):
@@ -306,10 +330,15 @@ def _dataflash_survey(path):
 
 def _dataflash_position(fmt, v, boot_utc):
     """``(t, lat, lon, height above home or None, AMSL, vn, ve)`` of a POS or GPS message, or
-    None for one without a position (another GPS instance, no 3D fix)."""
+    None for one without a position (another GPS instance, no 3D fix, no time)."""
     if _number(fmt, v, "I", 0) != 0 or _number(fmt, v, "Status", 3) < 3:
         return None
-    t, lat, lon, amsl = (_number(fmt, v, k) for k in ("TimeUS", "Lat", "Lng", "Alt"))
+    lat, lon, amsl = (_number(fmt, v, k) for k in ("Lat", "Lng", "Alt"))
+    t = _boot_seconds(fmt, v)
+    if t is not None:
+        t += boot_utc or 0.0
+    elif fmt.name == "GPS" and _gps_week_ms(fmt, v)[0] is not None:
+        t = dataflash.gps_utc(*_gps_week_ms(fmt, v))  # a GPS message timed by GPS time alone
     if None in (t, lat, lon, amsl):
         return None
     rel = _number(fmt, v, "RelHomeAlt", _number(fmt, v, "RelAlt"))
@@ -317,7 +346,7 @@ def _dataflash_position(fmt, v, boot_utc):
     spd, crs = _number(fmt, v, "Spd"), _number(fmt, v, "GCrs")
     if spd is not None and crs is not None:
         vn, ve = spd * math.cos(math.radians(crs)), spd * math.sin(math.radians(crs))
-    return t * 1e-6 + (boot_utc or 0.0), lat, lon, rel, amsl, vn, ve
+    return t, lat, lon, rel, amsl, vn, ve
 
 
 def _dataflash(path, info, sysid, size):
