@@ -13,7 +13,7 @@ import shapely
 from pyproj import Geod
 
 from alphafence.errors import InputError
-from alphafence.formats import kml, openair
+from alphafence.formats import kml, openair_alt
 from alphafence.formats.database import read_database
 from alphafence.formats.rules import parse_rules
 from alphafence.geo.frame import LocalFrame
@@ -174,14 +174,18 @@ def test_openair_circles_and_arcs_lie_inside_their_polygons(rules):
     ],
 )
 def test_openair_altitudes(text, expected):
-    assert openair.parse_altitude("f", "AH", text) == expected
+    assert openair_alt.parse_altitude("f", "AH", text) == expected
 
 
 @pytest.mark.parametrize(
     "body, message",
     [
         ("AC R\nAN X\nAH 1000ft\nAL SFC\nDA 2,0,90\n", "DA without a centre"),
-        ("AC R\nAN X\nAH lots\nAL SFC\nDP 52:00:00 N 001:00:00 W\n", "cannot read the altitude"),
+        (
+            "AC R\nAN X\nDP 52:00:00 N 001:00:00 W\nDP 52:01:00 N 001:00:00 W\n"
+            "DP 52:02:00 N 001:00:00 W\n",
+            "points lie on one line: not an area",
+        ),
         ("AC R\nAN X\nAH 500ft\nAL 1000ft\nV X=52:00:00 N 001:00:00 W\nDC 1\n", "not above AL"),
         ("AC R\nAN X\nAH 500ft\n", "without DP, DA, DB or DC"),
         ("AC R\nDP 52:00:00 N 001:00:00 W\nDP 52:01:00 N\n", "expected 1 lat/lon"),

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from alphafence.errors import InputError
+from alphafence.errors import InputError, InputErrors
 from alphafence.formats.database import read_database
 from alphafence.formats.fence_geojson import read_fences
 from alphafence.formats.mission import read_mission
@@ -92,6 +92,9 @@ def write(suffix, data):
 def only_input_errors(fn, path):
     try:
         fn(path)
+    except InputErrors as exc:  # every fault of a file at once: a count, then one line each
+        assert len(str(exc).splitlines()) == 1 + len(exc.errors) and len(exc.errors) > 1
+        assert all("\n" not in str(e) and str(e) for e in exc.errors)
     except InputError as exc:
         assert "\n" not in str(exc) and str(exc)
     finally:

@@ -9,6 +9,7 @@ class                exit code  raised when
 ===================  =========  ==============================================================
 ``AlphaFenceError``  1          (base; catch this to catch them all)
 ``InputError``       2          a file, a feature or a value is malformed or out of range
+``InputErrors``      2          several such faults in one input: every one listed, a line each
 ``VehicleError``     3          the vehicle or the link to it failed, refused or disagreed
 ``SitlError``        1          an ArduPilot SITL binary is missing or did not start
 ``RoutingError``     1          no route exists (the message says what blocks it)
@@ -70,6 +71,42 @@ class InputError(AlphaFenceError):
         if self.feature is not None:
             where = f"{where}: {self.feature[:120]}"
         super().__init__(f"{where}: {message}")
+
+
+class InputErrors(InputError):
+    """Every fault found in an input, reported at once: ``str(err)`` is a line that counts
+    them, then each fault's own line (an :class:`InputError`'s, naming file and feature).
+
+    Parameters
+    ----------
+    path : str or Path or None
+        The input (or inputs) at fault.
+    errors : list of InputError
+        The faults, in the order found (at least one).
+    footer : str, optional
+        A last line: what to do about them.
+
+    Attributes
+    ----------
+    errors : list of InputError
+
+    Examples
+    --------
+    >>> faults = [InputError("a.txt", "bad", "line 2"), InputError("a.txt", "worse", "line 9")]
+    >>> print(InputErrors("a.txt", faults))
+    a.txt: 2 problems:
+      a.txt: line 2: bad
+      a.txt: line 9: worse
+    """
+
+    def __init__(self, path, errors, footer=None):
+        self.errors = list(errors)
+        self.footer = footer
+        super().__init__(path, f"{len(self.errors)} problem{'s' * (len(self.errors) != 1)}:")
+        lines = [Exception.__str__(self), *(f"  {e}" for e in self.errors)]
+        if footer:
+            lines.append(" ".join(str(footer).split()))
+        self.args = ("\n".join(lines),)
 
 
 class VehicleError(AlphaFenceError, RuntimeError):

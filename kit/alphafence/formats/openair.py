@@ -2,13 +2,18 @@
 community's airspace files).
 
 An airspace starts at ``AC class``; ``AN`` names it, ``AY`` types it, ``AL``/``AH`` give its
-floor and ceiling (``SFC``/``GND``, ``UNL``, ``FL65``, ``1500ft AGL``, ``600m MSL``...; feet
-when no unit). Its outline: ``DP`` points, ``DA radius, start, end`` and ``DB point, point``
-arcs about the centre ``V X=`` in the direction ``V D=+`` (clockwise, the default, reset at each
-``AC``) or ``-``, ``DC radius`` circles; distances in nautical miles, coordinates in degrees,
-minutes and seconds (``52:13:05 N 001:35:03 W``) or decimal minutes. Arcs and circles are drawn
-outward: a convex arc by tangents outside it, a concave one (the airspace outside its circle)
-by chords inside it, so the polygon never cuts into the airspace.
+floor and ceiling (``SFC``/``GND``, ``UNL``, ``FL65``, ``1500ft AGL``, ``2900AMSL FT``...;
+feet when no unit; :mod:`alphafence.formats.openair_alt`). Its outline: ``DP`` points,
+``DA radius, start, end`` and ``DB point, point`` arcs about the centre ``V X=`` in the
+direction ``V D=+`` (clockwise, the default, reset at each ``AC``) or ``-``, ``DC radius``
+circles; distances in nautical miles, coordinates in degrees, minutes and seconds
+(``52:13:05 N 001:35:03 W``) or decimal minutes. Arcs and circles are drawn outward
+(:mod:`alphafence.formats.openair_shape`), so the polygon never cuts into the airspace.
+
+A limit without a numeric meaning (``NOTAM``, ``BCTA FT``) widens the band, with a note: a
+floor to the ground, a ceiling to unlimited. Every fault of a file is found before any is
+raised, so one message lists them all; a build may leave out the airspaces at fault instead
+(``invalid``), naming each.
 """
 
 from __future__ import annotations
@@ -16,32 +21,25 @@ from __future__ import annotations
 import math
 import re
 
-import numpy as np
 import shapely
 
-from alphafence.errors import InputError
-from alphafence.formats.airspace import (
-    PAD_M,
-    arc_step,
-    circle_polygon,
-    circumscribed_points,
-    features_from_volumes,
-    fences_from_volumes,
-)
+from alphafence.errors import InputError, InputErrors
+from alphafence.formats.airspace import features_from_volumes, fences_from_volumes
 from alphafence.formats.jsonfile import max_json_bytes, read_limited
-from alphafence.geo.frame import LocalFrame
+from alphafence.formats.openair_alt import Unreadable, read_altitude
+from alphafence.formats.openair_shape import (
+    arc_from_angles,
+    arc_from_points,
+    outline_polygon,
+    parse_coordinates,
+)
 
 NM = 1852.0
-FT = 0.3048
 SUFFIXES = (".openair",)
-_COORD = re.compile(r"(\d+(?:\.\d+)?)(?::(\d+(?:\.\d+)?))?(?::(\d+(?:\.\d+)?))?\s*([NSEWnsew])")
-_ALT = re.compile(
-    r"^(\d+(?:\.\d+)?)(FT|F|FEET|M|MTR|METERS?)?(AGL|AMSL|MSL|GND|SFC|ASFC|AGND|ALT|STD)?$"
-)
-_GROUND = ("SFC", "GND", "GROUND")
-_UNLIMITED = ("UNL", "UNLIM", "UNLIMITED", "UNLTD")
-_REFERENCE = {"AGL": "AGL", "GND": "AGL", "SFC": "AGL", "ASFC": "AGL", "AGND": "AGL"}
-_REFERENCE.update({"AMSL": "AMSL", "MSL": "AMSL", "ALT": "AMSL", "STD": "STD", None: "AMSL"})
+_LIMITS = {
+    "AL": ("floor", (0.0, "AGL"), "the ground"),
+    "AH": ("ceiling", (None, "AMSL"), "unlimited"),
+}
 
 
 def looks_like_openair(text: str) -> bool:
@@ -70,72 +68,11 @@ def sniff(path) -> bool:
         return False
 
 
-def parse_coordinates(path, where, text, count):
-    """``count`` positions ``(lon, lat)`` from OpenAir text: latitude (N/S) then longitude
-    (E/W) each, as ``DD:MM:SS``, ``DD:MM.mmm`` or decimal degrees.
-
-    Examples
-    --------
-    >>> parse_coordinates("f", "line 1", "51:30:00 N 000:07:30 W", 1)
-    [(-0.125, 51.5)]
-    >>> parse_coordinates("f", "line 2", "51:30.500N 000:07.500E, 51:31N 0:08E", 2)
-    [(0.125, 51.50833333333333), (0.13333333333333333, 51.516666666666666)]
-    """
-    found = _COORD.findall(text)
-    if len(found) != 2 * count:
-        raise InputError(path, f"expected {count} lat/lon position(s), got {text.strip()!r}", where)
-    out = []
-    for k in range(count):
-        lat = _degrees(path, where, found[2 * k], "NS", 90.0)
-        lon = _degrees(path, where, found[2 * k + 1], "EW", 180.0)
-        out.append((lon, lat))
-    return out
-
-
-def _degrees(path, where, parts, hemispheres, limit):
-    deg, minutes, seconds, hemi = parts
-    if hemi.upper() not in hemispheres:
-        raise InputError(path, f"expected {'/'.join(hemispheres)} in {''.join(parts)!r}", where)
-    m, s = float(minutes or 0), float(seconds or 0)
-    if m >= 60 or s >= 60 or (seconds and "." in minutes):
-        raise InputError(path, f"minutes and seconds must be below 60: {':'.join(parts)}", where)
-    value = float(deg) + m / 60.0 + s / 3600.0
-    if value > limit:
-        raise InputError(path, f"{value:g} degrees is out of range", where)
-    return -value if hemi.upper() in "SW" else value
-
-
-def parse_altitude(path, where, text):
-    """An OpenAir limit -> ``(metres or None, reference)``; None for unlimited, the reference
-    ``"AGL"``, ``"AMSL"`` or ``"STD"`` (flight levels).
-
-    Examples
-    --------
-    >>> parse_altitude("f", "AL", "SFC"), parse_altitude("f", "AH", "FL 65")
-    ((0.0, 'AGL'), (1981.2, 'STD'))
-    >>> parse_altitude("f", "AH", "1500ft AGL"), parse_altitude("f", "AH", "600 m MSL")
-    ((457.2, 'AGL'), (600.0, 'AMSL'))
-    """
-    t = "".join(text.split("*")[0].upper().split())
-    if t in _GROUND:
-        return 0.0, "AGL"
-    if t in _UNLIMITED:
-        return None, "AMSL"
-    fl = re.match(r"^FL(\d+(?:\.\d+)?)(STD)?$", t)
-    if fl:
-        return round(float(fl.group(1)) * 100 * FT, 3), "STD"
-    m = _ALT.match(t)
-    if not m:
-        raise InputError(path, f"cannot read the altitude {text.strip()!r}", where)
-    unit = 1.0 if (m.group(2) or "FT").startswith("M") else FT
-    return round(float(m.group(1)) * unit, 3), _REFERENCE[m.group(3)]
-
-
 class _Airspace:
     """One airspace as its records are read."""
 
-    def __init__(self, line, cls):
-        self.line, self.cls = line, cls
+    def __init__(self, n, line, cls):
+        self.n, self.line, self.cls = n, line, cls
         self.name = self.type = None
         self.lower = (0.0, "AGL")
         self.upper = (None, "AMSL")
@@ -144,104 +81,50 @@ class _Airspace:
         self.centre = None
         self.cw = True
         self.airway = False
+        self.faults = []  # (line, message) per record that could not be read
+        self.unread = {}  # "AL"/"AH" -> (line, text, why): limits without a numeric meaning
+
+    def label(self, line=None):
+        """``airspace 3 (EGR101 TEST), line 27``: the airspace and a line of it."""
+        name = self.name or f"AC {self.cls}"
+        return f"airspace {self.n} ({name}), line {self.line if line is None else line}"
 
 
-def _arc_from_points(path, where, centre, start, end, cw):
-    frame = LocalFrame(*centre)
-    x, y = frame.to_local(np.array([start[0], end[0]]), np.array([start[1], end[1]]))
-    r0, r1 = float(math.hypot(x[0], y[0])), float(math.hypot(x[1], y[1]))
-    if min(r0, r1) <= 0:
-        raise InputError(path, "an arc's end lies on its centre", where)
-    b0, b1 = math.degrees(math.atan2(x[0], y[0])), math.degrees(math.atan2(x[1], y[1]))
-    sweep = ((b1 - b0) if cw else (b0 - b1)) % 360.0
-    return ("A", centre, r0, b0, r1, b1, cw, sweep, start, end)
-
-
-def _arc_from_angles(path, where, centre, radius_m, a0, a1, cw):
-    if not radius_m > 0:
-        raise InputError(path, "an arc's radius must be positive", where)
-    sweep = ((a1 - a0) if cw else (a0 - a1)) % 360.0
-    if sweep == 0 and a0 != a1:
-        sweep = 360.0
-    frame = LocalFrame(*centre)
-    b = np.radians([a0, a1])
-    lons, lats = frame.to_wgs84(radius_m * np.sin(b), radius_m * np.cos(b))
-    start, end = (float(lons[0]), float(lats[0])), (float(lons[1]), float(lats[1]))
-    return ("A", centre, radius_m, a0, radius_m, a1, cw, sweep, start, end)
-
-
-def _arc_points(arc, convex, exact):
-    """Positions of an arc from its start to its end: sampled on the true arc (``exact``),
-    outside it (``convex``: tangents) or inside it (chords)."""
-    _, centre, r0, b0, r1, b1, cw, sweep, start, end = arc
-    if sweep == 0:
-        return [start, end]
-    sign = 1.0 if cw else -1.0
-    rmax, rmin = max(r0, r1), min(r0, r1)
-    step = arc_step(rmax)
-    n = max(1, math.ceil(sweep / step))
-    step = sweep / n
-    if exact:
-        k = np.arange(1, n)
-        radii = r0 + (r1 - r0) * k / n
-        b = np.radians(b0 + sign * k * step)
-        xy = np.column_stack([radii * np.sin(b), radii * np.cos(b)])
-    elif convex:
-        xy = circumscribed_points(rmax, b0 + sign * (np.arange(n) + 0.5) * step, step)
-    else:
-        b = np.radians(b0 + sign * np.arange(1, n) * step)
-        r = max(rmin - PAD_M, 0.0)
-        xy = np.column_stack([r * np.sin(b), r * np.cos(b)])
-    lons, lats = LocalFrame(*centre).to_wgs84(xy[:, 0], xy[:, 1])
-    return [start, *zip(np.atleast_1d(lons).tolist(), np.atleast_1d(lats).tolist()), end]
-
-
-def _outline(parts, exact=False, ring_cw=None):
-    pts = []
-    for part in parts:
-        if part[0] == "P":
-            pts.append(part[1:])
-        else:
-            convex = ring_cw is None or part[6] == ring_cw
-            pts.extend(_arc_points(part, convex, exact))
-    return [p for i, p in enumerate(pts) if i == 0 or p != pts[i - 1]]
-
-
-def _polygon(path, where, space):
-    """The airspace's polygon, arcs drawn outward (by the ring's orientation)."""
-    if space.circle is not None:
-        if space.parts:
-            raise InputError(path, "a DC circle cannot be combined with DP, DA or DB", where)
-        lon, lat, r = space.circle
-        return circle_polygon(lon, lat, r), {"circle": [lon, lat, r]}
-    sampled = _outline(space.parts, exact=True)
-    if len(set(sampled)) < 3:
-        raise InputError(path, "needs at least 3 distinct points (DP, DA, DB) or a DC", where)
-    ring_cw = not shapely.LinearRing(sampled).is_ccw
-    pts = _outline(space.parts, ring_cw=ring_cw)
-    return shapely.Polygon(pts), {}
-
-
-def _volume(path, n, space, skipped):
-    where = f"airspace {n} ({space.name or space.cls}, line {space.line})"
+def _volume(path, space, skipped):
+    """The airspace's volume, or None for an airway left out; InputError when it is no area."""
     if space.airway:
         if skipped is None:
-            raise InputError(path, "airway segments (DY) are not read", where)
+            raise InputError(path, "airway segments (DY) are not read", space.label())
         skipped["OpenAir airway (DY) segments, not read"] += 1
         return None
     if not space.parts and space.circle is None:
-        raise InputError(path, "an airspace without DP, DA, DB or DC records", where)
-    geom, props = _polygon(path, where, space)
+        raise InputError(path, "an airspace without DP, DA, DB or DC records", space.label())
+    geom, props = outline_polygon(path, space.label(), space.circle, space.parts)
+    if not shapely.make_valid(geom).area > 0:
+        raise InputError(path, "its points lie on one line: not an area", space.label())
     (lower, lref), (upper, uref) = space.lower, space.upper
     if lower is not None and upper is not None and lref == uref and upper <= lower:
-        raise InputError(path, f"AH {upper:g} m is not above AL {lower:g} m", where)
+        raise InputError(path, f"AH {upper:g} m is not above AL {lower:g} m", space.label())
     tags = {"airspace:format": "openair", "airspace:class": space.cls}
     if space.type:
         tags["airspace:type"] = space.type
     if space.name:
         tags["name"] = space.name
     props.update(lower_reference=lref, upper_reference=uref, airspace_class=space.cls)
-    return geom, tags, f"openair/{n}", lower, upper, props
+    return geom, tags, f"openair/{space.n}", lower, upper, props
+
+
+def widened_notes(path, space) -> list:
+    """Notes on an airspace's limits that had no numeric meaning and were widened, one line
+    each naming the file, the airspace and the line."""
+    notes = []
+    for cmd, (line, text, why) in sorted(space.unread.items()):
+        limit, _, wide = _LIMITS[cmd]
+        notes.append(
+            f"{path}: {space.label(line)}: {cmd} {text!r} is not read ({why}): "
+            f"the {limit} is taken as {wide}"
+        )
+    return notes
 
 
 def _text(path):
@@ -263,14 +146,128 @@ def _numbers(path, where, text, count):
     return values
 
 
-def read_volumes(path, skipped=None):
-    """The airspaces of an OpenAir file as volumes (see :mod:`alphafence.formats.airspace`).
+def fault_entry(err) -> dict:
+    """A fault of :func:`scan` as a record (for a build's metadata): ``file``, ``airspace``
+    (its ``AN`` name, or None), ``line`` and ``problem``."""
+    return {
+        "file": err.path,
+        "airspace": getattr(err, "airspace", None),
+        "line": getattr(err, "line", None),
+        "problem": err.message,
+    }
+
+
+def _fault(path, space, line, message):
+    err = InputError(path, message, space.label(line) if space else f"line {line}")
+    err.airspace, err.line = (space.name if space else None), line
+    return err
+
+
+def scan(path, skipped=None):
+    """Every airspace of an OpenAir file read as far as it can be, and every fault found.
+
+    A limit without a numeric meaning (``NOTAM``, ``BCTA FT``) is widened: a floor to the
+    ground, a ceiling to unlimited, and a note says so. An airspace with a record that cannot
+    be read, or that is no area, is left out of the volumes and its faults listed.
+
+    Parameters
+    ----------
+    path : str or Path
+    skipped : collections.Counter, optional
+        Airways (``DY``) are counted here and left out; without it they are faults.
+
+    Returns
+    -------
+    volumes : list of tuple
+        As :mod:`alphafence.formats.airspace` takes them.
+    faults : list of InputError
+        In the order of the file's lines, each naming the file, the airspace (``AN``) and the
+        line; :func:`fault_entry` makes them records.
+    widened : dict
+        Volume source -> its airspace, for those with a limit widened (:func:`widened_notes`).
+    """
+    spaces, space, faults = [], None, []
+    for number, raw in enumerate(_text(path).splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("*"):
+            continue
+        cmd, _, arg = line.partition(" ")
+        cmd = cmd.upper()
+        if cmd == "AC":
+            space = _Airspace(len(spaces), number, arg.split("*")[0].strip() or "UNC")
+            spaces.append(space)
+        elif cmd[:1] not in ("A", "D", "V"):
+            continue  # SP, SB pens and brushes; TO, TC terrain
+        elif space is None:
+            faults.append(_fault(path, None, number, f"{cmd} before the first AC record"))
+        else:
+            try:
+                _record(path, f"line {number}", number, space, cmd, arg)
+            except InputError as exc:
+                space.faults.append((number, exc.message))  # named once AN is read
+    volumes, widened = [], {}
+    for s in spaces:
+        faults.extend(_fault(path, s, line, message) for line, message in s.faults)
+        if s.faults:
+            continue
+        try:
+            volume = _volume(path, s, skipped)
+        except InputError as exc:
+            faults.append(_fault(path, s, s.line, exc.message))
+            continue
+        if volume is not None:
+            volumes.append(volume)
+            if s.unread:
+                widened[volume[2]] = s
+    faults.sort(key=lambda e: e.line)
+    return volumes, faults, widened
+
+
+def _record(path, where, number, space, cmd, arg):
+    """Read one record of an airspace into it."""
+    if cmd == "AN":
+        space.name = arg.strip() or None
+    elif cmd == "AY":
+        space.type = arg.split("*")[0].strip() or None
+    elif cmd in ("AL", "AH"):
+        try:
+            value = read_altitude(arg)
+            space.unread.pop(cmd, None)
+        except Unreadable as exc:
+            value = _LIMITS[cmd][1]
+            space.unread[cmd] = (number, arg.split("*")[0].strip(), str(exc))
+        if cmd == "AL":
+            space.lower = value
+        else:
+            space.upper = value
+    elif cmd == "V":
+        _variable(path, where, space, arg)
+    elif cmd == "DP":
+        space.parts.append(("P", *parse_coordinates(path, where, arg, 1)[0]))
+    elif cmd in ("DA", "DB", "DC"):
+        _arc(path, where, space, cmd, arg)
+    elif cmd == "DY":
+        space.airway = True
+
+
+def _raise(path, faults):
+    if len(faults) == 1:
+        raise faults[0]
+    if faults:
+        raise InputErrors(path, faults)
+
+
+def read_volumes(path, skipped=None, notes=None):
+    """The airspaces of an OpenAir file as volumes (see :mod:`alphafence.formats.airspace`),
+    all of them or none.
 
     Parameters
     ----------
     path : str or Path
     skipped : collections.Counter, optional
         Airways (``DY``) are counted here and left out; without it they are refused.
+    notes : list, optional
+        Notes on limits that were widened (:func:`scan`) are appended.
 
     Returns
     -------
@@ -279,47 +276,15 @@ def read_volumes(path, skipped=None):
     Raises
     ------
     InputError
-        One line naming the airspace (or line) that is malformed.
+        Naming the airspace and line that is malformed; :class:`InputErrors` when there are
+        several, one line each.
     """
-    spaces, space = [], None
-    for number, raw in enumerate(_text(path).splitlines(), start=1):
-        line = raw.strip()
-        if not line or line.startswith("*"):
-            continue
-        where = f"line {number}"
-        cmd, _, arg = line.partition(" ")
-        cmd = cmd.upper()
-        if cmd == "AC":
-            space = _Airspace(number, arg.split("*")[0].strip() or "UNC")
-            spaces.append(space)
-            continue
-        if cmd[:1] not in ("A", "D", "V"):
-            continue  # SP, SB pens and brushes; TO, TC terrain
-        if space is None:
-            raise InputError(path, f"{cmd} before the first AC record", where)
-        if cmd == "AN":
-            space.name = arg.strip() or None
-        elif cmd == "AY":
-            space.type = arg.split("*")[0].strip() or None
-        elif cmd in ("AL", "AH"):
-            value = parse_altitude(path, where, arg)
-            if cmd == "AL":
-                space.lower = value
-            else:
-                space.upper = value
-        elif cmd == "V":
-            _variable(path, where, space, arg)
-        elif cmd == "DP":
-            space.parts.append(("P", *parse_coordinates(path, where, arg, 1)[0]))
-        elif cmd in ("DA", "DB", "DC"):
-            _arc(path, where, space, cmd, arg)
-        elif cmd == "DY":
-            space.airway = True
-    volumes = []
-    for n, s in enumerate(spaces):
-        volume = _volume(path, n, s, skipped)
-        if volume is not None:
-            volumes.append(volume)
+    volumes, faults, widened = scan(path, skipped)
+    _raise(path, faults)
+    if notes is not None:
+        notes.extend(
+            n for v in volumes if v[2] in widened for n in widened_notes(path, widened[v[2]])
+        )
     return volumes
 
 
@@ -347,18 +312,34 @@ def _arc(path, where, space, cmd, arg):
     elif cmd == "DA":
         radius, a0, a1 = _numbers(path, where, arg, 3)
         space.parts.append(
-            _arc_from_angles(path, where, space.centre, radius * NM, a0, a1, space.cw)
+            arc_from_angles(path, where, space.centre, radius * NM, a0, a1, space.cw)
         )
     else:
         start, end = parse_coordinates(path, where, arg, 2)
-        space.parts.append(_arc_from_points(path, where, space.centre, start, end, space.cw))
+        space.parts.append(arc_from_points(path, where, space.centre, start, end, space.cw))
 
 
-def read_openair(path, rules, repaired, skipped):
+def read_openair(path, rules, repaired, skipped, notes=None, invalid=None):
     """The restricted features of an OpenAir file: one per airspace, matched against
     ``rules`` by its pseudo-tags ``airspace:format`` (``openair``), ``airspace:class`` (the
     ``AC`` class), ``airspace:type`` (``AY``) and ``name`` (``AN``); the band from ``AL``/``AH``
     in metres, its references kept.
+
+    A limit without a numeric meaning widens a keep-out's (or warning's) band, with a note;
+    a keep-in's band cannot be widened safely, so that is a fault of its airspace.
+
+    Parameters
+    ----------
+    path : str or Path
+    rules : Rules
+    repaired : list
+    skipped : collections.Counter
+        As :func:`alphafence.formats.airspace.features_from_volumes` takes them.
+    notes : list, optional
+        Notes on widened limits are appended, one line each.
+    invalid : list, optional
+        When given, the airspaces with a fault are left out and described here
+        (:func:`fault_entry`); when None, any fault is raised.
 
     Returns
     -------
@@ -367,17 +348,39 @@ def read_openair(path, rules, repaired, skipped):
     Raises
     ------
     InputError
-        One line naming the airspace (or line) that is malformed.
+        Naming the airspace and line at fault; :class:`InputErrors` listing every fault of
+        the file, one line each, when there are several.
     """
-    volumes = read_volumes(path, skipped)
-    return features_from_volumes(path, volumes, rules, repaired, skipped, "OpenAir airspace")
+    volumes, faults, widened = scan(path, skipped)
+    features = features_from_volumes(path, volumes, rules, repaired, skipped, "OpenAir airspace")
+    kept = []
+    for f in features:
+        space = widened.get(f.source)
+        if space is None or f.kind != "keep_in":
+            kept.append(f)
+            continue
+        for cmd, (line, text, why) in sorted(space.unread.items()):
+            limit = _LIMITS[cmd][0]
+            message = f"{cmd} {text!r} is not read ({why}): a keep-in's {limit} cannot be widened"
+            faults.append(_fault(path, space, line, message))
+    faults.sort(key=lambda e: e.line)
+    if invalid is None:
+        _raise(path, faults)
+    else:
+        invalid.extend(fault_entry(e) for e in faults)
+    if notes is not None:
+        notes.extend(
+            n for f in kept if f.source in widened for n in widened_notes(path, widened[f.source])
+        )
+    return kept
 
 
-def read_openair_fences(path):
-    """The airspaces of an OpenAir file as keep-out fences (their bands kept).
+def read_openair_fences(path, notes=None):
+    """The airspaces of an OpenAir file as keep-out fences (their bands kept, widened where
+    a limit has no numeric meaning; ``notes`` collects what was widened).
 
     Returns
     -------
     list of FenceRecord
     """
-    return fences_from_volumes(path, read_volumes(path), "openair")
+    return fences_from_volumes(path, read_volumes(path, notes=notes), "openair")

@@ -1,0 +1,197 @@
+"""OpenAir files as gliding tools write them: every altitude form read to its metres and
+reference, limits without a numeric meaning widened with a note, and every fault of a file
+reported at once (or, asked for, the airspaces at fault left out and named)."""
+
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from alphafence.errors import InputError, InputErrors
+from alphafence.formats import openair
+from alphafence.formats.database import read_database
+from alphafence.formats.fence_read import read_fence_file
+from alphafence.formats.openair_alt import Unreadable, read_altitude
+from alphafence.formats.rules import parse_rules
+
+DATA = Path(__file__).parent / "data" / "openair"
+GLIDING = DATA / "gliding.openair"
+FAULTS = DATA / "gliding-faults.openair"
+FT = 0.3048
+
+
+def lines_of(path):
+    """The file's lines (1-based, CR LF removed), read apart from the reader."""
+    return {n: t.rstrip("\r\n") for n, t in enumerate(path.read_text().splitlines(), start=1)}
+
+
+def line_of(path, text, after=None):
+    """The number of the first line equal to ``text`` (after the line ``after``, if given)."""
+    lines = lines_of(path)
+    start = 0 if after is None else line_of(path, after)
+    return next(n for n, t in sorted(lines.items()) if n > start and t == text)
+
+
+@pytest.mark.parametrize(
+    "text, metres, reference",
+    [
+        ("UNL FT", None, "AMSL"),
+        ("UNL", None, "AMSL"),
+        ("UNLTD", None, "AMSL"),
+        ("2900AMSL FT", 2900 * FT, "AMSL"),
+        ("2900 FT AMSL", 2900 * FT, "AMSL"),
+        ("2900ft MSL", 2900 * FT, "AMSL"),
+        ("2900FT  MSL", 2900 * FT, "AMSL"),
+        ("1500 AGL", 1500 * FT, "AGL"),
+        ("1500AGL FT", 1500 * FT, "AGL"),
+        ("1000 ft GND", 1000 * FT, "AGL"),
+        ("500F SFC", 500 * FT, "AGL"),
+        ("FL65", 6500 * FT, "STD"),
+        ("FL 65", 6500 * FT, "STD"),
+        ("fl95", 9500 * FT, "STD"),
+        ("SFC", 0.0, "AGL"),
+        ("GND", 0.0, "AGL"),
+        ("MSL", 0.0, "AMSL"),
+        ("300 M MSL", 300.0, "AMSL"),
+        ("300m AMSL", 300.0, "AMSL"),
+        ("4500 MSL M", 4500.0, "AMSL"),
+        ("800 m AGL", 800.0, "AGL"),
+        ("1200", 1200 * FT, "AMSL"),
+        ("2000 ft * a comment", 2000 * FT, "AMSL"),
+    ],
+)
+def test_each_altitude_form_is_read_to_its_metres_and_reference(text, metres, reference):
+    got = read_altitude(text)
+    assert got[0] == (None if metres is None else pytest.approx(metres, abs=1e-3))
+    assert got[1] == reference
+
+
+@pytest.mark.parametrize(
+    "text, why",
+    [
+        ("NOTAM", "NOTAM"),
+        ("Notam", "NOTAM"),
+        ("BCTA FT", "no altitude"),
+        ("TMA", "no altitude"),
+        ("-5m", "no altitude"),
+        ("FL", "no altitude"),
+        ("FL65 MSL", "no altitude"),
+        ("1000 2000", "more than one"),
+        ("1000 FT M", "more than one"),
+    ],
+)
+def test_words_without_a_numeric_meaning_are_unreadable(text, why):
+    with pytest.raises(Unreadable, match=why):
+        read_altitude(text)
+
+
+def test_a_gliding_file_reads_its_bands_from_every_form(rules):
+    got = {f.name: f for f in read_database([GLIDING], rules).features}
+
+    def band(name):
+        f = got[name]
+        refs = (f.properties["lower_reference"], f.properties["upper_reference"])
+        return f.alt_min_m, f.alt_max_m, refs
+
+    assert band("ALPHA R901 GND-2900AMSL") == (0.0, pytest.approx(2900 * FT), ("AGL", "AMSL"))
+    assert band("BRAVO D902") == (
+        pytest.approx(1500 * FT),
+        pytest.approx(2900 * FT),
+        ("AGL", "AMSL"),
+    )
+    assert band("CHARLIE P903") == (0.0, None, ("AGL", "AMSL"))
+    assert band("DELTA D904") == (300.0, pytest.approx(2900 * FT), ("AMSL", "AMSL"))
+    assert band("ECHO WAVE") == (
+        pytest.approx(6500 * FT),
+        pytest.approx(9500 * FT),
+        ("STD", "STD"),
+    )
+    assert band("FOXTROT GLIDER SECTOR") == (pytest.approx(1000 * FT), 4500.0, ("AGL", "AMSL"))
+
+
+def test_notam_and_unknown_limits_widen_a_keep_out_with_a_note(rules):
+    notes = []
+    features = openair.read_openair(GLIDING, rules, [], Counter(), notes)
+    got = {f.name: f for f in features}
+    golf, hotel = got["GOLF TRA (NOTAM)"], got["HOTEL CTA"]
+    assert golf.kind == "keep_out" and hotel.kind == "keep_out"
+    # a floor that cannot be read is the ground, a ceiling that cannot be read unlimited
+    assert (golf.alt_min_m, golf.properties["lower_reference"]) == (0.0, "AGL")
+    assert golf.alt_max_m is None
+    assert (hotel.alt_min_m, hotel.properties["lower_reference"]) == (0.0, "AGL")
+    assert hotel.alt_max_m == pytest.approx(6500 * FT)  # its FL65 ceiling is kept
+    golf_al = line_of(GLIDING, "AL NOTAM")
+    golf_ah = line_of(GLIDING, "AH NOTAM")
+    hotel_al = line_of(GLIDING, "AL BCTA FT")
+    assert len(notes) == 3, notes
+    for name, line, what in [
+        ("GOLF TRA (NOTAM)", golf_al, "AL 'NOTAM' is not read (the limit is set by NOTAM)"),
+        ("GOLF TRA (NOTAM)", golf_ah, "AH 'NOTAM' is not read (the limit is set by NOTAM)"),
+        ("HOTEL CTA", hotel_al, "AL 'BCTA FT' is not read"),
+    ]:
+        (note,) = [n for n in notes if f"({name}), line {line}: " in n]
+        assert note.startswith(f"{GLIDING}: airspace ") and what in note and "\n" not in note
+        limit = "the floor is taken as the ground" if "AL" in what else "the ceiling is taken"
+        assert note.endswith(limit) or note.endswith(limit + " as unlimited")
+    # the zones with readable limits have no note
+    assert not any("ALPHA" in n or "CHARLIE" in n for n in notes)
+
+
+def test_a_keep_in_is_not_widened(tmp_path):
+    rules = parse_rules(
+        {
+            "rule": [
+                {"category": "area", "kind": "keep_in", "tags": {"airspace:class": ["R"]}},
+                {"category": "airspace", "kind": "keep_out", "tags": {"airspace:format": "*"}},
+            ]
+        }
+    )
+    with pytest.raises(InputError, match="keep-in's ceiling cannot be widened") as err:
+        openair.read_openair(GLIDING, rules, [], Counter())
+    message = str(err.value)
+    assert "GOLF TRA (NOTAM)" in message and "HOTEL" not in message  # HOTEL is class C
+
+
+def test_every_fault_of_a_file_is_reported_at_once(rules):
+    with pytest.raises(InputErrors) as err:
+        read_database([FAULTS], rules)
+    message = str(err.value)
+    head, *faults = message.splitlines()
+    assert head == f"{FAULTS}: 4 problems:"
+    expected = {
+        "JULIET R912 TWO POINTS": (line_of(FAULTS, "AC R", "AH 2500ft MSL"), "at least 3"),
+        "KILO D913 BAD MINUTES": (line_of(FAULTS, "DP 50:24:00 N 006:61:00 E"), "below 60"),
+        "LIMA D914 NO CENTRE": (line_of(FAULTS, "DC 1.5"), "without a centre"),
+        "MIKE R915 ON ONE LINE": (
+            line_of(FAULTS, "AC R", "DC 1.5"),
+            "on one line: not an area",
+        ),
+    }
+    assert len(faults) == len(expected)
+    for fault, (name, (line, what)) in zip(faults, expected.items()):
+        assert fault.strip().startswith(f"{FAULTS}: airspace ") and f"({name})" in fault
+        assert f"line {line}:" in fault and what in fault
+    assert len({line for line, _ in expected.values()}) == 4  # four lines, one message
+    assert "INDIA" not in message and "NOVEMBER" not in message
+    assert [e.line for e in err.value.errors] == [line for line, _ in expected.values()]
+
+
+def test_a_fence_file_read_lists_every_fault_too():
+    with pytest.raises(InputErrors) as err:
+        read_fence_file(FAULTS)
+    assert len(err.value.errors) == 4
+
+
+def test_invalid_airspaces_are_left_out_and_named_when_asked(rules):
+    invalid, notes = [], []
+    features = openair.read_openair(FAULTS, rules, [], Counter(), notes, invalid)
+    assert sorted(f.name for f in features) == ["INDIA R911 GOOD", "NOVEMBER R916 GOOD"]
+    assert [(e["airspace"], e["file"]) for e in invalid] == [
+        ("JULIET R912 TWO POINTS", str(FAULTS)),
+        ("KILO D913 BAD MINUTES", str(FAULTS)),
+        ("LIMA D914 NO CENTRE", str(FAULTS)),
+        ("MIKE R915 ON ONE LINE", str(FAULTS)),
+    ]
+    assert invalid[1]["line"] == line_of(FAULTS, "DP 50:24:00 N 006:61:00 E")
+    assert "below 60" in invalid[1]["problem"]
+    assert len(notes) == 1 and "NOVEMBER R916 GOOD" in notes[0]  # AH NOTAM, kept and widened
