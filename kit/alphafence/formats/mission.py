@@ -3,10 +3,10 @@ QGroundControl plans and QGC WPL files (both lat, lon; positions here are lon, l
 
 Every mission item whose command flies to its params 5-7 is a position
 (:func:`alphafence.mavlink.ids.flies_to_position`: waypoints, loiters, takeoffs, landings,
-payload places...). ``DO_JUMP`` and ``DO_JUMP_TAG`` are followed as ArduPilot runs them (the
-jump taken its repeat count of times, then passed; -1 for ever), with a bound: a jump loop
-that runs for ever is flown until it repeats, and after :data:`MAX_POSITIONS` positions every
-jump left is passed (the legs a loop flies again are legs already flown).
+payload places...), flown as :mod:`alphafence.formats.mission_flight` has it: jumps followed,
+each leg with its altitudes in the reference of the items' frame. Home's altitude AMSL is a
+plan's ``plannedHomePosition`` altitude or a waypoint file's line 0 (in a frame AMSL); an
+altitude of exactly 0 there, what planners write when they do not know it, is not known.
 """
 
 from __future__ import annotations
@@ -16,47 +16,34 @@ from dataclasses import dataclass
 
 from alphafence.errors import InputError
 from alphafence.formats.jsonfile import read_json
+from alphafence.formats.mission_flight import (
+    FRAMES,
+    MAX_POSITIONS,  # noqa: F401 (named here too)
+    RTL_ALT_M,
+    Step,
+    Waypoint,
+    fly,
+)
 from alphafence.formats.qgc_wpl import wpl_records
 from alphafence.geo.coords import checked_position
 from alphafence.mavlink import ids
 from alphafence.mavlink.ids import command_name
 
-MAX_POSITIONS = 10_000
-"""Positions flown before every jump still to come is passed instead of taken (a loop flown
-again flies legs already flown; the bound keeps a flight path that ``compile --area`` buffers
-short)."""
-
-JUMPS = (ids.MAV_CMD_DO_JUMP, ids.MAV_CMD_DO_JUMP_TAG)
-
 
 @dataclass
-class Waypoint:
-    """A position a mission flies through.
+class Mission:
+    """A mission as flown: its positions and what is known of home's altitude.
 
     Attributes
     ----------
-    label : str
-        Where it came from, for messages (``"home"``, ``"item 3 (waypoint)"``).
-    lon, lat : float
-        Degrees.
+    waypoints : list of Waypoint
+        In the order flown (:func:`read_mission`).
+    home_amsl : float or None
+        Home's altitude AMSL, metres, where the file gives it.
     """
 
-    label: str  # "home", "item 3 (waypoint)", "seq 4 (takeoff)"
-    lon: float
-    lat: float
-
-
-@dataclass(frozen=True)
-class _Step:
-    """One mission item as the flight follows it."""
-
-    where: str  # for messages: "item 5", "line 7"
-    label: str
-    command: int
-    position: tuple | None  # (lon, lat)
-    p1: float
-    p2: float
-    key: int | None  # what a DO_JUMP names: the doJumpId (plans) or the seq (WPL)
+    waypoints: list
+    home_amsl: float | None = None
 
 
 def read_mission(path, min_positions=2):
@@ -77,6 +64,24 @@ def read_mission(path, min_positions=2):
     list of Waypoint
         A loop flown several times is in it several times (at most until it repeats).
     """
+    return load_mission(path, min_positions).waypoints
+
+
+def load_mission(path, min_positions=2, rtl_alt_m=RTL_ALT_M) -> Mission:
+    """A mission as flown (:func:`read_mission`), with home's altitude AMSL where the file
+    gives it, and each leg's altitudes (see the module).
+
+    Parameters
+    ----------
+    path : str or Path
+    min_positions : int
+    rtl_alt_m : float
+        The altitude above home RTL climbs to at least (the vehicle's ``RTL_ALT``).
+
+    Returns
+    -------
+    Mission
+    """
     try:
         with open(path, encoding="utf-8") as fh:
             head = fh.read(16)
@@ -85,14 +90,24 @@ def read_mission(path, min_positions=2):
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read ({exc})") from None
     if head.startswith("QGC WPL"):
-        out = _fly(path, _wpl_steps(path), None, "seq")
+        home_amsl, steps = _wpl_steps(path)
+        out = fly(path, steps, None, "seq", home_amsl, rtl_alt_m)
     else:
-        home, steps = _plan_steps(path)
-        out = _fly(path, steps, home, "doJumpId")
+        home, home_amsl, steps = _plan_steps(path)
+        out = fly(path, steps, home, "doJumpId", home_amsl, rtl_alt_m)
     if len(out) < min_positions:
         what = "no legs to check" if min_positions > 1 else "no positions to use"
         raise InputError(path, f"the mission has fewer than {min_positions} position(s): {what}")
-    return out
+    return Mission(out, home_amsl)
+
+
+def _home_amsl(path, where, alt):
+    """Home's altitude AMSL as given, or None: none, null, or exactly 0 (not known)."""
+    if alt is None:
+        return None
+    if isinstance(alt, bool) or not isinstance(alt, (int, float)):
+        raise InputError(path, f"home altitude must be a number or null, not {alt!r}", where)
+    return float(alt) if math.isfinite(alt) and alt != 0 else None
 
 
 # -- QGroundControl plans -----------------------------------------------------------------
@@ -134,12 +149,16 @@ def _params(path, where, it):
 
 
 def _home(path, mission):
+    """Home (or None) and its altitude AMSL (or None)."""
     home = mission.get("plannedHomePosition")
     if isinstance(home, dict):  # the first mission layout: home saved as an item
         home = home.get("coordinate")
     if isinstance(home, list) and len(home) >= 2 and (home[0] or home[1]):
-        return Waypoint("home", *checked_position(path, "plannedHomePosition", home[0], home[1]))
-    return None
+        where = "plannedHomePosition"
+        lon, lat = checked_position(path, where, home[0], home[1])
+        amsl = _home_amsl(path, where, home[2]) if len(home) > 2 else None
+        return Waypoint("home", lon, lat, 0.0, "home"), amsl
+    return None, None
 
 
 def _plan_steps(path):
@@ -163,107 +182,42 @@ def _plan_steps(path):
                 raise InputError(
                     path, f"complex item {it.get('complexItemType', '?')!r} has no Items", where
                 )
-            cmd = it.get("command")
+            cmd, frame = it.get("command"), it.get("frame")
             if isinstance(cmd, bool) or not isinstance(cmd, int):
                 raise InputError(path, f"command must be a whole number, not {cmd!r}", where)
+            if frame is not None and (isinstance(frame, bool) or not isinstance(frame, int)):
+                raise InputError(path, f"frame must be a whole number, not {frame!r}", where)
             p = _params(path, where, it)
             # DO_JUMP names its target by doJumpId, among the plan's own (top-level) items
             key = it.get("doJumpId") if top else None
             key = key if isinstance(key, int) and not isinstance(key, bool) else None
-            steps.append(_step(path, where, f"{where} ({command_name(cmd)})", cmd, p, key))
+            label = f"{where} ({command_name(cmd)})"
+            steps.append(_step(path, where, label, cmd, p, key, frame))
 
     visit(mission.get("items", []), "", True)
-    return _home(path, mission), steps
+    return (*_home(path, mission), steps)
 
 
-def _step(path, where, label, cmd, p, key):
+def _step(path, where, label, cmd, p, key, frame):
     lat, lon = p[4], p[5]
     pos = None
     if ids.flies_to_position(cmd) and not (
         any(math.isnan(v) for v in (lat, lon)) or (lat == 0 and lon == 0)
     ):  # NaN or 0, 0: where the vehicle is (e.g. takeoff at the current position)
         pos = checked_position(path, where, lat, lon)
-    return _Step(where, label, cmd, pos, p[0], p[1], key)
+    return Step(where, label, cmd, pos, p[0], p[1], key, frame, p[6])
 
 
 # -- QGC WPL files ------------------------------------------------------------------------
 def _wpl_steps(path):
-    steps = []
+    """Home's altitude AMSL (line 0's, in a frame AMSL) and the steps; home is 0 above home."""
+    steps, home_amsl = [], None
     for r in wpl_records(path):
         label = "home" if r.seq == 0 else f"seq {r.seq} ({command_name(r.command)})"
-        p = [*r.params, r.lat, r.lon, r.alt]
-        steps.append(_step(path, r.where, label, r.command, p, r.seq))
-    return steps
-
-
-# -- the flight -----------------------------------------------------------------------------
-def _whole(v):
-    return math.isfinite(v) and v == int(v)
-
-
-def _targets(path, steps, key_name):
-    """Where each jump goes: the step a DO_JUMP's param1 names (by ``key_name``), or the
-    JUMP_TAG a DO_JUMP_TAG's param1 names."""
-    by_key, tags = {}, {}
-    for i, s in enumerate(steps):
-        if s.key is not None:
-            by_key.setdefault(s.key, i)
-        if s.command == ids.MAV_CMD_JUMP_TAG and _whole(s.p1):
-            tags.setdefault(int(s.p1), i)
-    out = {}
-    for i, s in enumerate(steps):
-        if s.command not in JUMPS:
-            continue
-        word = "DO_JUMP" if s.command == ids.MAV_CMD_DO_JUMP else "DO_JUMP_TAG"
-        if not _whole(s.p1):
-            raise InputError(path, f"{word} target must be a whole number, not {s.p1:g}", s.where)
-        t = int(s.p1)
-        if s.command == ids.MAV_CMD_DO_JUMP_TAG:
-            if t not in tags:
-                raise InputError(path, f"DO_JUMP_TAG to tag {t}: no JUMP_TAG {t}", s.where)
-            out[i] = tags[t]
-        elif key_name == "seq" and t == 0:
-            raise InputError(
-                path, "DO_JUMP to seq 0 (home): ArduPilot jumps to mission items only", s.where
-            )
-        elif t not in by_key:
-            raise InputError(path, f"DO_JUMP to {key_name} {t}: no such item", s.where)
-        else:
-            out[i] = by_key[t]
-    return out
-
-
-def _repeats(p2) -> float:
-    """How often a jump is taken: its repeat count; -1 (any negative, or no number) for ever."""
-    return float(int(p2)) if math.isfinite(p2) and p2 >= 0 else math.inf
-
-
-def _fly(path, steps, home, key_name):
-    """The positions flown, in order, following the jumps (see the module's notes)."""
-    targets = _targets(path, steps, key_name)
-    out = [home] if home is not None else []
-    left, seen, i = {}, set(), 0
-    while i < len(steps):
-        s = steps[i]
-        if i in targets:
-            n = left.setdefault(i, _repeats(s.p2))
-            if len(out) >= MAX_POSITIONS and n != math.inf:
-                n = 0
-            if n > 0:
-                left[i] = n - 1
-                last = (out[-1].label, out[-1].lon, out[-1].lat) if out else None
-                state = (i, last, tuple(sorted(left.items())))
-                if state in seen:  # flown exactly so before: the same legs from here on
-                    break
-                seen.add(state)
-                i = targets[i]
-                continue
-        elif s.command == ids.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            if home is not None:
-                out.append(Waypoint(f"{s.label} -> home", home.lon, home.lat))
-        elif s.position is not None:
-            out.append(Waypoint(s.label, *s.position))
-            if home is None:
-                home = out[-1]
-        i += 1
-    return out
+        p, frame = [*r.params, r.lat, r.lon, r.alt], r.frame
+        if r.seq == 0:
+            if FRAMES.get(frame) == "amsl":
+                home_amsl = _home_amsl(path, r.where, r.alt)
+            p[6], frame = 0.0, ids.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        steps.append(_step(path, r.where, label, r.command, p, r.seq, frame))
+    return home_amsl, steps
