@@ -33,6 +33,7 @@ AMSL_REFERENCES.update(
     "separation, up to 100 m, not applied)",
     STD="flight levels compared with the altitude AMSL (no pressure altitude)",
 )
+GROUND_REFERENCES = ("AGL", "SFC", "GND", "ASFC")  # limits above the ground below
 
 
 def reference(record, which: str):
@@ -172,6 +173,53 @@ class FenceSet:
             idx = self.amsl[j]
             arr[idx] = self.limits[j][idx] - self.home_amsl
         return bool(self.amsl[0].size or self.amsl[1].size)
+
+    def bands(self, frame):
+        """Each fence's lower and upper limits as altitudes in ``frame`` measure them: for
+        positions whose altitude is known in that reference only (a mission's legs).
+
+        ``"home"``: above home (:attr:`alt_min`, :attr:`alt_max`; AMSL limits placed by
+        :meth:`set_home`); ``"amsl"``: AMSL limits as given, the others placed by the home;
+        ``"terrain"``: above the ground below, AGL limits as given; None: not known. A limit
+        that cannot be compared in ``frame`` (an AMSL one before the home is known, any but
+        an AGL one above the terrain) is NaN; no limit is -inf or inf.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            ``(lower, upper)``, one value per fence.
+
+        Examples
+        --------
+        >>> from alphafence.formats.fence_geojson import FenceRecord
+        >>> box, amsl = shapely.box(14.5, 35.9, 14.501, 35.901), {"lower_reference": "AMSL"}
+        >>> fs = FenceSet([FenceRecord("a", "keep_out", box, alt_min_m=120.0),
+        ...                FenceRecord("b", "keep_out", box, alt_min_m=300.0, properties=amsl)])
+        >>> fs.bands("home")[0].tolist(), fs.bands("amsl")[0].tolist(), fs.bands("home")[1]
+        ([120.0, nan], [nan, 300.0], array([inf, inf]))
+        >>> _ = fs.set_home(100.0)
+        >>> fs.bands("home")[0].tolist(), fs.bands("amsl")[0].tolist()
+        ([120.0, 200.0], [220.0, 300.0])
+        """
+        home, out = self.home_amsl, []
+        for j in (0, 1):
+            given = self.limits[j]
+            amsl = np.zeros(len(given), dtype=bool)
+            amsl[self.amsl[j]] = True
+            if frame == "home":
+                lim = (self.alt_min, self.alt_max)[j].copy()
+                lim[amsl] = np.nan if home is None else lim[amsl]
+            elif frame == "amsl":
+                lim = np.where(amsl, given, np.nan if home is None else given + home)
+            elif frame == "terrain":
+                ground = np.array([ref[j] in GROUND_REFERENCES for ref in self.references])
+                lim = np.where(ground, given, np.nan)
+            else:
+                lim = np.full(len(given), np.nan)
+            none = ~np.isfinite(given)
+            lim[none] = given[none]
+            out.append(lim)
+        return out[0], out[1]
 
     @property
     def amsl_sites(self) -> list:
