@@ -8,7 +8,9 @@ volumes. Altitudes come from the coordinates when ``altitudeMode`` is ``absolute
 * an extruded geometry reaches down to the ground: the band is ground up to its highest point;
 * the other polygons of a placemark are one volume: their footprints united (vertical walls,
   which have no footprint, only add their altitudes), the band from the lowest to the highest
-  coordinate; a flat polygon (one altitude) has no band (a keep-out at every height).
+  coordinate; a flat polygon (one altitude) has no band (a keep-out at every height);
+* a zone drawn as separate placemarks (floor, ceiling and each wall its own placemark, all
+  named after the zone, in one Folder) is one volume (:mod:`alphafence.formats.kml_volumes`).
 
 Pseudo-tags for the rules: ``airspace:format`` (``kml``), ``name``, ``kml:style`` (the
 styleUrl without ``#``), ``kml:folder`` (the innermost Folder's name), ``airspace:class`` (an
@@ -28,15 +30,14 @@ import shapely
 from shapely.errors import ShapelyError
 
 from alphafence.errors import InputError, need
-from alphafence.formats.airspace import circle_polygon, features_from_volumes, fences_from_volumes
+from alphafence.formats.airspace import features_from_volumes, fences_from_volumes
 from alphafence.formats.jsonfile import max_json_bytes, read_limited
+from alphafence.formats.kml_volumes import Placemark, volumes
 
 SUFFIXES = (".kml", ".kmz")
 MAX_KMZ_ENTRIES = 10_000
 _GEOMETRIES = ("Point", "LineString", "LinearRing", "Polygon", "MultiGeometry")
-_REFERENCES = {"absolute": "AMSL", "relativeToGround": "AGL"}
 _CLASS_KEYS = ("airspace:class", "class", "airspace_class", "airspaceclass")
-_WALL = 1e-6  # a polygon whose area is below this times its perimeter squared is a wall
 
 
 def looks_like_kml(head: bytes) -> bool:
@@ -128,13 +129,13 @@ def _text(el, name):
 
 
 def placemarks(root):
-    """``(placemark element, innermost Folder's name)`` of every Placemark, in document order
-    (inside Documents and Folders at any depth)."""
+    """``(placemark element, innermost Folder element or None)`` of every Placemark, in
+    document order (inside Documents and Folders at any depth)."""
     out = []
     for el in root.iter():
         if _local(el) == "Placemark":
             folders = (a for a in el.iterancestors() if _local(a) == "Folder")
-            out.append((el, next((_text(a, "name") for a in folders), None)))
+            out.append((el, next(folders, None)))
     return out
 
 
@@ -205,25 +206,6 @@ def _primitives(path, label, el, out):
         raise InputError(path, f"malformed {name} ({exc})", label) from None
 
 
-def _band(prims, extruded):
-    """``(lower, upper, reference)`` of primitives that share one altitudeMode, else no band."""
-    modes = {p[3] for p in prims}
-    zs = np.concatenate([p[2] for p in prims]) if prims else np.array([])
-    if len(modes) != 1 or (ref := _REFERENCES.get(modes.pop())) is None:
-        return None, None, None
-    if zs.size == 0 or np.isnan(zs).any():
-        return None, None, None
-    low, high = float(zs.min()), float(zs.max())
-    if extruded:
-        return (0.0, high, ref) if high > 0 else (None, None, None)
-    return (low, high, ref) if high > low else (None, None, None)
-
-
-def _is_wall(geom):
-    length = geom.length
-    return length == 0 or geom.area <= _WALL * length * length
-
-
 def _radius(path, label, ext):
     value = ext.get("radius", ext.get("radius_m"))
     if value is None:
@@ -268,13 +250,14 @@ def _tags(name, style, folder, ext):
     return tags
 
 
-def _placemark_volumes(path, index, pm, folder, skipped):
+def _placemark(path, index, pm, folder, skipped):
+    """A Placemark's geometries and names, or None (counted) when it has no geometry."""
     name = _text(pm, "name")
     label = f"placemark {index}" + (f" ({name})" if name else "")
     style = _text(pm, "styleUrl")
     style = style.rsplit("#", 1)[-1] if style else None
     ext = _extended(pm)
-    tags = _tags(name, style, folder, ext)
+    tags = _tags(name, style, folder if folder is None else _text(folder, "name"), ext)
     prims = []
     for el in pm:
         if _local(el) in _GEOMETRIES:
@@ -282,48 +265,10 @@ def _placemark_volumes(path, index, pm, folder, skipped):
     if not prims:
         if skipped is not None:
             skipped["KML placemark without a Polygon, LinearRing, LineString or Point"] += 1
-        return []
+        return None
+    radius = _radius(path, label, ext) if any(p[0] == "point" for p in prims) else None
     ident = pm.get("id") or f"placemark/{index}"
-    parts = []  # (geometry, lower, upper, lower reference, upper reference, extra properties)
-    for p in prims:
-        if p[4] or p[0] != "area":  # extruded, points and lines: each its own volume
-            lower, upper, ref = _band([p], p[4])
-            geom, extra = p[1], {}
-            radius = _radius(path, label, ext) if p[0] == "point" else None
-            if radius is not None:
-                lon, lat = p[1].x, p[1].y
-                geom, extra = circle_polygon(lon, lat, radius), {"circle": [lon, lat, radius]}
-            parts.append((geom, lower, upper, ref and ("AGL" if p[4] else ref), ref, extra))
-    rest = [p for p in prims if not p[4] and p[0] == "area"]
-    if rest:
-        lower, upper, ref = _band(rest, False)
-        parts.append((_footprint(path, label, rest), lower, upper, ref, ref, {}))
-    volumes = []
-    for k, (geom, lower, upper, lref, uref, extra) in enumerate(parts):
-        props = {"lower_reference": lref, "upper_reference": uref, **extra} if uref else extra
-        source = ident if len(parts) == 1 else f"{ident}#{k}"
-        volumes.append((geom, dict(tags), source, lower, upper, props))
-    return volumes
-
-
-def _footprint(path, label, prims):
-    """The area under a placemark's polygons: floors and ceilings united (an identical floor
-    and ceiling are one), or, with walls only, the outline they stand on."""
-    floors = [p[1] for p in prims if not _is_wall(p[1])]
-    unique = list({shapely.normalize(f).wkb: f for f in floors}.values())
-    if len(unique) == 1:
-        return unique[0]
-    if not unique:
-        rings = shapely.polygonize([shapely.boundary(p[1]) for p in prims])
-        geom = shapely.union_all(shapely.get_parts(rings))
-    else:
-        try:
-            geom = shapely.union_all(unique)
-        except ShapelyError:
-            geom = shapely.union_all(shapely.make_valid(np.array(unique, dtype=object)))
-    if geom.is_empty:
-        raise InputError(path, "a polygon without area", label)
-    return geom
+    return Placemark(index, label, name, folder, ident, tags, prims, radius)
 
 
 def read_volumes(path, skipped=None):
@@ -345,10 +290,10 @@ def read_volumes(path, skipped=None):
         One line naming the placemark that is malformed.
     """
     root = read_document(path)
-    volumes = []
-    for index, (pm, folder) in enumerate(placemarks(root)):
-        volumes.extend(_placemark_volumes(path, index, pm, folder, skipped))
-    return volumes
+    marks = [
+        _placemark(path, k, pm, folder, skipped) for k, (pm, folder) in enumerate(placemarks(root))
+    ]
+    return volumes(path, [m for m in marks if m is not None])
 
 
 def read_kml(path, rules, repaired, skipped):
