@@ -1,8 +1,21 @@
 """Mission legs checked against fences: which legs cross or graze a keep-out fence, and which
-leave (or come near the edge of) a keep-in fence."""
+leave (or come near the edge of) a keep-in fence, each leg at its altitudes against each
+fence's altitude band where the bands are given.
+
+A leg's altitude changes along it as its profile says (:class:`~alphafence.formats.mission.Waypoint`).
+A leg crosses a keep-out fence when the part of it within the fence's band enters it; it
+grazes the fence when it comes closer than the clearance to the fence's volume, measured as
+the larger of the horizontal and the vertical distance (a box around the fence: never more
+than the straight-line distance). A leg leaves a keep-in fence when any of it is outside the
+fence, or above or below its band; it is near the edge when closer than the clearance to a
+side, the floor or the ceiling. A leg whose altitude is not known, or a limit that cannot be
+compared with it (NaN in the bands), counts as within a keep-out fence's band throughout and
+as possibly outside a keep-in fence's band.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,6 +23,8 @@ import shapely
 
 from alphafence.geo.frame import LocalFrame
 from alphafence.route.planner import fence_label as default_fence_label
+
+KINDS = ("keep_out", "keep_in", "warning")
 
 
 @dataclass
@@ -45,21 +60,90 @@ class LegIssue:
 
 def distinct_legs(waypoints):
     """The legs between consecutive waypoints, each once (a loop flown again flies the same
-    legs), in the order first flown: ``[(from, to), ...]``."""
+    legs at the same altitudes), in the order first flown: ``[(from, to), ...]``."""
     seen, out = set(), []
     for a, b in zip(waypoints[:-1], waypoints[1:]):
-        key = (a.label, a.lon, a.lat, b.label, b.lon, b.lat)
+        key = (a.label, a.lon, a.lat, b.label, b.lon, b.lat, b.frame, _profile(b))
         if key not in seen:
             seen.add(key)
             out.append((a, b))
     return out
 
 
-def check_legs(waypoints, records, clearance=20.0, fence_label=None):
+def _profile(w):
+    """The leg's altitude profile to waypoint ``w``, or () when not known."""
+    prof = tuple(getattr(w, "profile", ()) or ())
+    return prof if len(prof) >= 2 else ()
+
+
+def _within(profile, lo, hi):
+    """The stretches ``(t0, t1)`` (fractions of the leg) where the profile is within
+    ``[lo, hi]``."""
+    out = []
+    for (ta, za), (tb, zb) in zip(profile[:-1], profile[1:]):
+        if za == zb:
+            if lo <= za <= hi:
+                out.append((ta, tb))
+            continue
+        s0, s1 = sorted(((lo - za) / (zb - za), (hi - za) / (zb - za)))
+        s0, s1 = max(s0, 0.0), min(s1, 1.0)
+        if s0 <= s1:
+            out.append((ta + s0 * (tb - ta), ta + s1 * (tb - ta)))
+    return out
+
+
+def _part_distance(ends, profile, lo, hi, fence):
+    """Horizontal distance from the part of the leg within ``[lo, hi]`` to ``fence`` (inf when
+    no part is)."""
+    spans = _within(profile, lo, hi)
+    if not spans:
+        return math.inf
+    a, b = ends
+    t = np.asarray(spans, float)[..., None]
+    return float(shapely.distance(shapely.linestrings(a + t * (b - a)), fence).min())
+
+
+def _box_distance(ends, profile, lo, hi, fence, clearance, whole):
+    """The leg's distance to a fence's volume (0: it enters it), the larger of the horizontal
+    and the vertical distance, or None when not within ``clearance``; ``whole`` is the whole
+    leg's horizontal distance, the answer when its altitude is within the band throughout or
+    not known."""
+    lo = -math.inf if math.isnan(lo) else lo
+    hi = math.inf if math.isnan(hi) else hi
+    zs = [z for _, z in profile]
+    if not profile or lo <= min(zs) and max(zs) <= hi:
+        return whole
+    if _part_distance(ends, profile, lo, hi, fence) == 0.0:
+        return 0.0
+    if _part_distance(ends, profile, lo - clearance, hi + clearance, fence) > clearance:
+        return None
+    low, high = 0.0, clearance  # the least m whose part within m of the band is within m
+    for _ in range(32):
+        m = 0.5 * (low + high)
+        if _part_distance(ends, profile, lo - m, hi + m, fence) <= m:
+            high = m
+        else:
+            low = m
+    return high
+
+
+def _keep_in_margin(profile, lo, hi):
+    """How far the leg stays within a keep-in fence's band (negative: it leaves it; -inf when
+    a limit cannot be compared, or the leg's altitude is not known and the band has one)."""
+    if math.isnan(lo) or math.isnan(hi):
+        return -math.inf
+    if not profile:
+        return math.inf if (lo, hi) == (-math.inf, math.inf) else -math.inf
+    zs = [z for _, z in profile]
+    return min(min(zs) - lo, hi - max(zs))
+
+
+def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None):
     """Legs between consecutive waypoints that cross (distance 0) or graze (closer than
     ``clearance``) a keep-out fence, or leave (distance 0) or come closer than ``clearance``
     to the edge of a keep-in fence (the vehicle must stay inside each, as ArduPilot and the
-    monitor have it), computed exactly in one local metric frame.
+    monitor have it), computed exactly in one local metric frame; each leg at its altitudes
+    against each fence's band when ``bands`` are given (see the module).
 
     Parameters
     ----------
@@ -72,6 +156,12 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None):
         issues.
     fence_label : callable, optional
         Names a fence in the issues (default: site id and name).
+    bands : callable, optional
+        ``bands(frame)`` -> ``(lower, upper)``, arrays over ``records``: each fence's limits
+        as altitudes in a leg's reference (its last waypoint's ``frame``) measure them, NaN
+        where a limit cannot be compared, -inf and inf where there is none
+        (:meth:`~alphafence.monitor.fenceset.FenceSet.bands`). Omitted: every fence holds at
+        every altitude.
 
     Returns
     -------
@@ -97,9 +187,8 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None):
     [('area', True, True)]
     """
     label = fence_label or default_fence_label
-    keep_out = [r for r in records if r.kind == "keep_out"]
-    keep_in = [r for r in records if r.kind == "keep_in"]
-    warning = [r for r in records if r.kind == "warning"]
+    index = {kind: [k for k, r in enumerate(records) if r.kind == kind] for kind in KINDS}
+    keep_out, keep_in, warning = ([records[k] for k in index[kind]] for kind in KINDS)
     pairs = distinct_legs(waypoints)
     legs = [(n, a, b) for n, (a, b) in enumerate(pairs, start=1)]
     if not legs or not (keep_out or keep_in or warning):
@@ -110,7 +199,23 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None):
     )
     frame = LocalFrame.around_coords(coords)
     x, y = frame.to_local(ends[..., 0].ravel(), ends[..., 1].ravel())
-    segs = shapely.linestrings(np.column_stack([x, y]).reshape(-1, 2, 2))
+    xy = np.column_stack([x, y]).reshape(-1, 2, 2)
+    segs = shapely.linestrings(xy)
+    profiles = [_profile(b) if b.frame is not None else () for _, b in pairs]
+    limits = {}
+
+    def band(a, k):
+        """Fence ``k``'s (index in ``records``) limits as leg ``a``'s altitudes measure them."""
+        if bands is None:
+            return -math.inf, math.inf
+        ref = pairs[a][1].frame if profiles[a] else None
+        if ref not in limits:
+            limits[ref] = bands(ref)
+        return float(limits[ref][0][k]), float(limits[ref][1][k])
+
+    def box(a, k, geom, whole, reach):
+        return _box_distance(xy[a], profiles[a], *band(a, k), geom, reach, whole)
+
     issues = []
 
     def issue(a, fence, dist, crosses, inside=False):
@@ -123,21 +228,28 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None):
         i, j = tree.query(segs, predicate="dwithin", distance=clearance)
         d = shapely.distance(segs[i], ko[j])
         for a, b, dist in sorted(zip(i.tolist(), j.tolist(), d.tolist())):
-            issue(a, label(keep_out[b]), float(dist), dist <= 0.0)
-    for r in keep_in:
+            dist = box(a, index["keep_out"][b], ko[b], dist, clearance)
+            if dist is not None:
+                issue(a, label(keep_out[b]), float(dist), dist <= 0.0)
+    for k, r in zip(index["keep_in"], keep_in):
         area = frame.geom_to_local(r.geometry)
         shapely.prepare(area)
         inside = shapely.covers(area, segs)
         edge = shapely.distance(segs, area.boundary)
         for a in range(len(segs)):
-            if not inside[a]:
+            margin = min(float(edge[a]), _keep_in_margin(profiles[a], *band(a, k)))
+            if not inside[a] or margin < 0:
                 issue(a, label(r), 0.0, True, True)
-            elif edge[a] < clearance:
-                issue(a, label(r), float(edge[a]), False, True)
+            elif margin < clearance:
+                issue(a, label(r), margin, False, True)
     issues.sort(key=lambda t: (t.leg, t.keep_in))
     warning_legs = set()
     if warning:
         wa = frame.geom_to_local(np.array([r.geometry for r in warning], dtype=object))
-        i, _ = shapely.STRtree(wa).query(segs, predicate="intersects")
-        warning_legs = {int(k) + 1 for k in i}
+        i, j = shapely.STRtree(wa).query(segs, predicate="intersects")
+        warning_legs = {
+            int(a) + 1
+            for a, b in zip(i.tolist(), j.tolist())
+            if box(a, index["warning"][b], wa[b], 0.0, 0.0) == 0.0
+        }
     return issues, legs, warning_legs
