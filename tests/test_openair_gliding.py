@@ -195,3 +195,108 @@ def test_invalid_airspaces_are_left_out_and_named_when_asked(rules):
     assert invalid[1]["line"] == line_of(FAULTS, "DP 50:24:00 N 006:61:00 E")
     assert "below 60" in invalid[1]["problem"]
     assert len(notes) == 1 and "NOVEMBER R916 GOOD" in notes[0]  # AH NOTAM, kept and widened
+
+
+# -- the build: library and command line --------------------------------------------------
+
+
+def fault_lines():
+    """The lines the faults file's four faults are on, found in its text."""
+    return [
+        line_of(FAULTS, "AC R", "AH 2500ft MSL"),
+        line_of(FAULTS, "DP 50:24:00 N 006:61:00 E"),
+        line_of(FAULTS, "DC 1.5"),
+        line_of(FAULTS, "AC R", "DC 1.5"),
+    ]
+
+
+def test_faults_of_several_files_are_reported_together(tmp_path, rules):
+    other = tmp_path / "second.openair"
+    other.write_bytes(FAULTS.read_bytes())
+    with pytest.raises(InputErrors) as err:
+        read_database([FAULTS, GLIDING, other], rules)
+    assert [(e.path, e.line) for e in err.value.errors] == [
+        *((str(FAULTS), n) for n in fault_lines()),
+        *((str(other), n) for n in fault_lines()),
+    ]
+
+
+def test_the_library_skips_invalid_zones_when_asked(rules):
+    from alphafence.build.outputs import build_meta
+    from alphafence.build.pipeline import BuildOptions
+    from alphafence.build.tiled import build_tiled
+    from alphafence.formats.database import DatabaseStream
+
+    db = read_database([FAULTS, GLIDING], rules, skip_invalid=True)
+    assert [(z["airspace"], z["line"]) for z in db.invalid] == list(
+        zip(
+            [
+                "JULIET R912 TWO POINTS",
+                "KILO D913 BAD MINUTES",
+                "LIMA D914 NO CENTRE",
+                "MIKE R915 ON ONE LINE",
+            ],
+            fault_lines(),
+        )
+    )
+    names = {f.name for f in db.features}
+    assert "INDIA R911 GOOD" in names and "ALPHA R901 GND-2900AMSL" in names
+    assert not any(z["airspace"] in names for z in db.invalid)
+    assert len(db.notes) == 4  # GOLF's two limits, HOTEL's floor, NOVEMBER's ceiling
+
+    stream = DatabaseStream([FAULTS, GLIDING], rules, skip_invalid=True)
+    result = build_tiled(stream, rules, BuildOptions(), jobs=1)
+    assert result.features == len(db.features)
+    meta = build_meta(stream.database(), rules, BuildOptions())
+    assert meta["skipped_invalid"] == db.invalid and meta["notes"] == db.notes
+
+    with pytest.raises(InputErrors):  # without the option, the stream refuses them all
+        list(DatabaseStream([FAULTS], rules).batches())
+
+
+def test_build_without_skip_invalid_lists_every_fault_and_writes_nothing(tmp_path, capsys):
+    from alphafence.cli import main
+
+    out = tmp_path / "fences.geojson"
+    plan = tmp_path / "fences.plan"
+    code = main(["build", str(FAULTS), str(GLIDING), "-o", str(out), "--plan", str(plan)])
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert lines[0] == f"alphafence build: error: {FAULTS}: 4 problems:"
+    for line, n in zip(lines[1:5], fault_lines()):
+        assert line.startswith(f"  {FAULTS}: airspace ") and f", line {n}: " in line
+    assert "--skip-invalid" in lines[5] and len(lines) == 6
+    assert list(tmp_path.iterdir()) == []  # no output, no temporary file
+
+
+def test_build_with_skip_invalid_names_the_zones_left_out(tmp_path, capsys):
+    import json
+
+    from alphafence.cli import main
+
+    out = tmp_path / "fences.geojson"
+    code = main(["build", str(FAULTS), str(GLIDING), "-o", str(out), "--skip-invalid"])
+    captured = capsys.readouterr()
+    assert code == 0
+    said = " ".join(captured.err.split())  # the console wraps long notes
+    for name, line in zip(
+        [
+            "JULIET R912 TWO POINTS",
+            "KILO D913 BAD MINUTES",
+            "LIMA D914 NO CENTRE",
+            "MIKE R915 ON ONE LINE",
+        ],
+        fault_lines(),
+    ):
+        assert f"left out (--skip-invalid): {FAULTS}: airspace '{name}', line {line}: " in said
+    assert "AH 'NOTAM' is not read" in said and "the ceiling is taken as unlimited" in said
+    doc = json.loads(out.read_text())
+    left_out = doc["alphafence"]["skipped_invalid"]
+    assert [(z["file"], z["line"]) for z in left_out] == [(str(FAULTS), n) for n in fault_lines()]
+    assert left_out[0]["airspace"] == "JULIET R912 TWO POINTS"
+    assert "at least 3" in left_out[0]["problem"]
+    assert any("GOLF TRA (NOTAM)" in n for n in doc["alphafence"]["notes"])
+    fenced = {f["properties"]["name"] for f in doc["features"]}
+    assert "INDIA R911 GOOD" in fenced and "GOLF TRA (NOTAM)" in fenced
+    assert not fenced & {z["airspace"] for z in left_out}

@@ -13,7 +13,9 @@ OSM_ATTRIBUTION = "Contains data © OpenStreetMap contributors, ODbL 1.0"
 
 def build_meta(db, rules, options) -> dict:
     """What a build was made of, for the fence GeoJSON's ``"alphafence"`` member: tool, inputs,
-    rules, method and its options, the bbox, and OSM's attribution when OSM data was read."""
+    rules, method and its options, the bbox, OSM's attribution when OSM data was read, the
+    zones left out as no area (``skipped_invalid``: file, airspace, line, problem) and what was
+    read other than as written (``notes``) when there are any."""
     meta = {
         "tool": f"alphafence {__version__}",
         "inputs": db.files,
@@ -31,6 +33,10 @@ def build_meta(db, rules, options) -> dict:
         meta["bbox"] = list(db.bbox)
     if any(".osm" in f or f.endswith(".pbf") for f in db.files):
         meta["attribution"] = OSM_ATTRIBUTION
+    if getattr(db, "invalid", None):
+        meta["skipped_invalid"] = list(db.invalid)
+    if getattr(db, "notes", None):
+        meta["notes"] = list(db.notes)
     return meta
 
 

@@ -18,6 +18,8 @@ from alphafence.cli.options import (
 )
 from alphafence.errors import need
 
+SKIP_HINT = "nothing was written; --skip-invalid leaves these zones out and builds the rest"
+
 
 def register(sub):
     """Add the ``build`` verb to the sub-parsers ``sub``."""
@@ -72,6 +74,12 @@ def register(sub):
         metavar="DEG",
         help="tile edge in degrees (default 0.25); sites never split at tile edges",
     )
+    p.add_argument(
+        "--skip-invalid",
+        action="store_true",
+        help="leave out the OpenAir airspaces that cannot be read as areas (each is named in "
+        "the summary and the output's metadata) instead of failing with the list of them",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run)
 
@@ -81,6 +89,7 @@ def run(args) -> int:
     complete (all or nothing); exit status 0."""
     from alphafence.build.outputs import build_meta, render
     from alphafence.build.tiled import build_tiled
+    from alphafence.errors import InputError, InputErrors
     from alphafence.formats.atomic import write_all
     from alphafence.formats.database import DatabaseStream
     from alphafence.formats.fence_stream import open_writers, writer_for
@@ -94,7 +103,16 @@ def run(args) -> int:
     need(*wants)
     rules = load_rules(args.rules)
     opts = build_options(args)
-    stream = DatabaseStream(args.databases, rules, args.bbox, bbox_name="--bbox")
+    stream = DatabaseStream(
+        args.databases, rules, args.bbox, bbox_name="--bbox", skip_invalid=args.skip_invalid
+    )
+    try:
+        stream.read_ahead()  # what it leaves out goes in the outputs' metadata
+    except InputError as exc:
+        faults = exc.errors if isinstance(exc, InputErrors) else [exc]
+        if not all(hasattr(f, "airspace") for f in faults):  # not only zones at fault
+            raise
+        raise InputErrors(exc.path, faults, SKIP_HINT) from None
     meta = build_meta(stream.database(), rules, opts)
     keep = bool(args.plan or args.waypoints or args.figure)
     with progress(not args.quiet) as prog, open_writers([args.output], meta) as writers:
@@ -152,6 +170,8 @@ def phases(prog, what):
 def summary(db, result, opts, written):
     """Print the fences built per category and kind, and notes on repairs, skipped features
     and what does not fit a vehicle."""
+    from rich.markup import escape
+
     from alphafence.build.tiled import median_of
     from alphafence.mavlink.items import MAX_POLYGON_VERTICES
     from alphafence.mavlink.storage import PROFILES
@@ -175,7 +195,11 @@ def summary(db, result, opts, written):
             f"{area / 1e6:.3f}",
         )
     out_console.print(table)
-    notes = []
+    notes = list(db.notes)
+    for zone in db.invalid:
+        name = f"airspace {zone['airspace']!r}, " if zone["airspace"] else ""
+        where = f"{zone['file']}: {name}line {zone['line']}"
+        notes.append(f"left out (--skip-invalid): {where}: {zone['problem']}")
     if db.repaired:
         shown = ", ".join(db.repaired[:5]) + (" ..." if len(db.repaired) > 5 else "")
         notes.append(f"repaired {len(db.repaired)} invalid (self-intersecting) polygon(s): {shown}")
@@ -199,6 +223,6 @@ def summary(db, result, opts, written):
             f"{stats.items} fence items: more than a Copter holds ({copter_items}); "
             "compile an onboard subset for the operating area before uploading"
         )
-    for n in notes:
-        err_console.print(f"[yellow]note:[/] {n}")
+    for n in notes:  # names read from the files are text, not rich markup
+        err_console.print(f"[yellow]note:[/] {escape(n)}")
     out_console.print("wrote " + ", ".join(written))

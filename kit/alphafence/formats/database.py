@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from alphafence.errors import InputError, need
+from alphafence.errors import InputError, InputErrors, need
 from alphafence.formats import kml, openair
 from alphafence.formats.ed269 import looks_like_ed269, read_ed269_doc
 from alphafence.formats.features import Database, select_bbox
@@ -35,10 +35,16 @@ def osm_wants(paths):
     ]
 
 
-def read_file(path, rules, repaired, skipped):
+def is_openair(path) -> bool:
+    """Whether ``path`` is read as OpenAir: ``.openair``, or a ``.txt`` that starts with an
+    ``AC`` record."""
+    name = str(path).lower()
+    return name.endswith(openair.SUFFIXES) or name.endswith(".txt") and openair.sniff(path)
+
+
+def read_file(path, rules, repaired, skipped, notes=None, invalid=None):
     """The restricted features of one file, read by its suffix: OSM through pyosmium, JSON
-    as ED-269 when it looks like it, else as GeoJSON; KML/KMZ; OpenAir (``.openair``, or a
-    ``.txt`` that starts with an ``AC`` record).
+    as ED-269 when it looks like it, else as GeoJSON; KML/KMZ; OpenAir (:func:`is_openair`).
 
     Parameters
     ----------
@@ -48,6 +54,12 @@ def read_file(path, rules, repaired, skipped):
         Sources of invalid polygons are appended.
     skipped : collections.Counter
         Reasons for features left out are counted.
+    notes : list, optional
+        What was read other than as written is said here, a line each (OpenAir limits
+        without a numeric meaning, widened).
+    invalid : list, optional
+        When given, OpenAir airspaces that cannot be read as areas are left out and described
+        here; when None, they are raised, every one of the file at once.
 
     Returns
     -------
@@ -68,8 +80,8 @@ def read_file(path, rules, repaired, skipped):
         features = read_osm(path, rules, repaired, skipped)
     elif name.endswith(kml.SUFFIXES):
         features = kml.read_kml(path, rules, repaired, skipped)
-    elif name.endswith(openair.SUFFIXES) or name.endswith(".txt") and openair.sniff(path):
-        features = openair.read_openair(path, rules, repaired, skipped)
+    elif is_openair(path):
+        features = openair.read_openair(path, rules, repaired, skipped, notes, invalid)
     elif should_stream(path):
         features = [f for batch in iter_geojson(path, rules, repaired, skipped) for f in batch]
     elif name.endswith((".geojson", ".json")):
@@ -91,11 +103,53 @@ def read_file(path, rules, repaired, skipped):
     return features
 
 
-def read_database(paths, rules, bbox=None, *, bbox_name="the bounding box") -> Database:
+def read_openair_files(paths, rules, repaired, skipped, notes, invalid=None) -> dict:
+    """The restricted features of the OpenAir files among ``paths``, read before the rest
+    so that every fault of every one of them is known at once.
+
+    Parameters
+    ----------
+    paths : list
+    rules, repaired, skipped, notes, invalid
+        As :func:`read_file` takes them.
+
+    Returns
+    -------
+    dict
+        Index in ``paths`` -> its features.
+
+    Raises
+    ------
+    InputError
+        :class:`~alphafence.errors.InputErrors` when there are several faults, listing them
+        all, a line each.
+    """
+    read, faults = {}, []
+    for i, path in enumerate(paths):
+        if is_openair(path):
+            try:
+                read[i] = read_file(path, rules, repaired, skipped, notes, invalid)
+            except InputErrors as exc:
+                faults.extend(exc.errors)
+            except InputError as exc:
+                faults.append(exc)
+    if len(faults) == 1:
+        raise faults[0]
+    if faults:
+        raise InputErrors(", ".join(sorted({f.path for f in faults})), faults)
+    return read
+
+
+def read_database(
+    paths, rules, bbox=None, *, bbox_name="the bounding box", skip_invalid=False
+) -> Database:
     """Read every restricted feature (by ``rules``) from the given files.
 
     Raises InputError with a one-line message on bad input or an empty selection
-    (``bbox_name`` says what the box is in that message: the command line passes ``--bbox``).
+    (``bbox_name`` says what the box is in that message: the command line passes ``--bbox``);
+    every fault of the OpenAir files at once (:class:`~alphafence.errors.InputErrors`), unless
+    ``skip_invalid``: then the airspaces that cannot be read as areas are left out and listed
+    in the database's ``invalid``.
 
     Examples
     --------
@@ -108,15 +162,18 @@ def read_database(paths, rules, bbox=None, *, bbox_name="the bounding box") -> D
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]
-    repaired, skipped, features = [], Counter(), []
-    for path in paths:
-        features.extend(read_file(path, rules, repaired, skipped))
+    repaired, skipped, features, notes = [], Counter(), [], []
+    invalid = [] if skip_invalid else None
+    ahead = read_openair_files(paths, rules, repaired, skipped, notes, invalid)
+    for i, path in enumerate(paths):
+        features.extend(ahead[i] if i in ahead else read_file(path, rules, repaired, skipped))
     selected = select_bbox(features, bbox)
     if not selected:
         where = ", ".join(str(p) for p in paths)
         why = f" inside {bbox_name} {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
         raise InputError(where, f"no restricted features{why} (rules: {rules.source})")
-    return Database(selected, [str(p) for p in paths], repaired, skipped, bbox)
+    files = [str(p) for p in paths]
+    return Database(selected, files, repaired, skipped, bbox, notes, invalid or [])
 
 
 class DatabaseStream:
@@ -132,6 +189,10 @@ class DatabaseStream:
     bbox : tuple, optional
     count : int
         Restricted features yielded so far.
+    notes : list of str
+        What was read other than as written (see :func:`read_file`).
+    invalid : list of dict
+        With ``skip_invalid``: the OpenAir airspaces left out as no area, and why.
 
     Examples
     --------
@@ -143,7 +204,9 @@ class DatabaseStream:
     ([16], 16)
     """
 
-    def __init__(self, paths, rules, bbox=None, *, bbox_name="the bounding box"):
+    def __init__(
+        self, paths, rules, bbox=None, *, bbox_name="the bounding box", skip_invalid=False
+    ):
         if isinstance(paths, (str, Path)):
             paths = [paths]
         self.paths = list(paths)
@@ -152,6 +215,24 @@ class DatabaseStream:
         self.bbox = bbox
         self.bbox_name = bbox_name
         self.repaired, self.skipped, self.count = [], Counter(), 0
+        self.skip_invalid = skip_invalid
+        self.notes, self.invalid, self._ahead = [], [], None
+
+    def read_ahead(self) -> None:
+        """Read the OpenAir files now, before the others (:meth:`batches` does it first): a
+        build stops on their faults before it reads or writes anything else, and knows the
+        airspaces it leaves out (``skip_invalid``) before its outputs are opened.
+
+        Raises
+        ------
+        InputError
+            Every fault of the OpenAir files at once (unless ``skip_invalid``).
+        """
+        if self._ahead is None:
+            invalid = self.invalid if self.skip_invalid else None
+            self._ahead = read_openair_files(
+                self.paths, self.rules, self.repaired, self.skipped, self.notes, invalid
+            )
 
     def batches(self, sequences=None):
         """Lists of restricted features (inside the bbox), file by file.
@@ -170,11 +251,14 @@ class DatabaseStream:
         InputError
             As :func:`read_database`, including when no file holds a restricted feature.
         """
-        for path in self.paths:
-            parts = None
-            if sequences is not None and is_sequence(path):
+        self.read_ahead()
+        for i, path in enumerate(self.paths):
+            parts, inside = None, False
+            if i in self._ahead:
+                parts = [self._ahead.pop(i)]  # read whole, selected by the bbox below
+            elif sequences is not None and is_sequence(path):
                 parts = sequences(path, self.rules, self.bbox, self.repaired, self.skipped)
-            inside = parts is not None
+                inside = parts is not None
             if parts is None:
                 parts = self._parts(path)
             before = self.count
@@ -208,4 +292,12 @@ class DatabaseStream:
 
     def database(self, features=()) -> Database:
         """What was read, as a :class:`Database` (holding ``features``)."""
-        return Database(list(features), self.files, self.repaired, self.skipped, self.bbox)
+        return Database(
+            list(features),
+            self.files,
+            self.repaired,
+            self.skipped,
+            self.bbox,
+            self.notes,
+            self.invalid,
+        )

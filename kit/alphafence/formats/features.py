@@ -99,6 +99,12 @@ class Database:
         Reason -> how many features were left out for it.
     bbox : tuple, optional
         ``(minlon, minlat, maxlon, maxlat)`` the features were selected by.
+    notes : list of str
+        What was read other than as written, one line each (an OpenAir limit without a
+        numeric meaning, widened).
+    invalid : list of dict
+        Zones left out because they could not be read as areas (asked for with
+        ``skip_invalid``): ``file``, ``airspace``, ``line``, ``problem``.
     """
 
     features: list
@@ -106,6 +112,8 @@ class Database:
     repaired: list = field(default_factory=list)  # sources of invalid polygons that were repaired
     skipped: Counter = field(default_factory=Counter)  # reason -> count
     bbox: tuple | None = None
+    notes: list = field(default_factory=list)
+    invalid: list = field(default_factory=list)
 
 
 def geomtype_of(geom) -> str | None:

@@ -118,7 +118,7 @@ def widened_notes(path, space) -> list:
     """Notes on an airspace's limits that had no numeric meaning and were widened, one line
     each naming the file, the airspace and the line."""
     notes = []
-    for cmd, (line, text, why) in sorted(space.unread.items()):
+    for cmd, (line, text, why) in sorted(space.unread.items(), key=lambda kv: kv[1]):
         limit, _, wide = _LIMITS[cmd]
         notes.append(
             f"{path}: {space.label(line)}: {cmd} {text!r} is not read ({why}): "
@@ -359,7 +359,7 @@ def read_openair(path, rules, repaired, skipped, notes=None, invalid=None):
         if space is None or f.kind != "keep_in":
             kept.append(f)
             continue
-        for cmd, (line, text, why) in sorted(space.unread.items()):
+        for cmd, (line, text, why) in sorted(space.unread.items(), key=lambda kv: kv[1]):
             limit = _LIMITS[cmd][0]
             message = f"{cmd} {text!r} is not read ({why}): a keep-in's {limit} cannot be widened"
             faults.append(_fault(path, space, line, message))
