@@ -37,7 +37,8 @@ over and, with ``BRD_SD_FENCE`` above 0, its fence storage becomes that file's
 Faults (``Faults``) are scripted and deterministic: the numbered or seeded-random loss of
 mission-protocol messages (only MISSION_* messages are numbered and subject to loss, so that
 heartbeats and MAVSDK's discovery traffic cannot shift the numbering), late (re-ordered)
-messages, duplicated and out-of-order requests, NACKs, a stall and a disconnect. Everything
+messages, duplicated and out-of-order requests, NACKs, a stall and a disconnect, and a fence
+stored other than it was received and acknowledged (an item changed or left out). Everything
 the fake sees, sends and loses is recorded in ``FakeVehicle.log``.
 
 No threads and no mavutil: the kit's pymavlink-over-UDP endpoint
@@ -52,7 +53,7 @@ import random
 import socket
 import time
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -214,6 +215,11 @@ class Faults:
     # a faulty or hostile vehicle's downloads
     claim_count: int | None = None  # MISSION_COUNT says this many, whatever is stored
     item_fields: Mapping[int, Mapping] = field(default_factory=dict)  # seq -> fields replaced
+    # a vehicle that stores something else than it received and acknowledged (ACCEPTED): the
+    # items checked as received, then stored with these StoredItem fields replaced (item
+    # number -> fields) and without these item numbers; downloads give what is stored
+    store_fields: Mapping[int, Mapping] = field(default_factory=dict)
+    store_drop: Collection[int] = ()
 
 
 @dataclass
@@ -738,9 +744,18 @@ class FakeVehicle:
         if storage_bytes(up.items) > self.storage_size:
             self._end_upload(msg, mav.MAV_MISSION_ERROR, "Fence exceeds storage size")
             return
-        self._store(up.items)
+        self._store(self._as_stored(up.items))
         self._end_upload(msg, mav.MAV_MISSION_ACCEPTED)
         self._text("Fence Indexed OK", mav.MAV_SEVERITY_DEBUG, delay=TEXT_DELAY)
+
+    def _as_stored(self, items) -> list:
+        """The received items as this vehicle stores them (``store_fields``, ``store_drop``)."""
+        changed = self.faults.store_fields
+        return [
+            replace(it, **changed.get(seq, {}))
+            for seq, it in enumerate(items)
+            if seq not in self.faults.store_drop
+        ]
 
     def _store(self, items):
         self.fence = list(items)

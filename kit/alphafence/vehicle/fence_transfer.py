@@ -10,6 +10,7 @@ ArduPilot keeps its previous fence when an upload fails, and the kit checks that
 from __future__ import annotations
 
 import asyncio
+import difflib
 import math
 import time
 from dataclasses import dataclass
@@ -145,19 +146,52 @@ def _raw_item(i, r):
 
 
 def same_items(sent, got) -> list:
-    """Differences between two item lists (empty when they match to 1e-7 degrees)."""
+    """Differences between two item lists, empty when they match (positions to 1e-7 degrees).
+
+    Items are lined up by command and position (difflib's matching), so an item left out or
+    added is named as such and the items after it are not reported as changed: the counts
+    when they differ, then each item sent and not read back, read back and not sent, or read
+    back different (by its number in each list when the numbers differ).
+
+    Parameters
+    ----------
+    sent, got : sequence of FenceItem
+
+    Returns
+    -------
+    list of str
+        One line per difference.
+
+    Examples
+    --------
+    >>> a, b, c = (FenceItem(5003, 50.0, 14.5, lat) for lat in (35.9, 35.91, 35.92))
+    >>> for line in same_items([a, b, c], [a, c]):
+    ...     print(line)
+    3 items sent, 2 read back
+    item 1 not read back: FenceItem(command=5003, param1=50.0, lon=14.5, lat=35.91)
+    >>> same_items([a, b, c], [a, b, FenceItem(5003, 50.0, 14.5, 35.9200001)])[0][:48]
+    'item 2: sent FenceItem(command=5003, param1=50.0'
+    """
     diffs = []
     if len(sent) != len(got):
         diffs.append(f"{len(sent)} items sent, {len(got)} read back")
-    for i, (a, b) in enumerate(zip(sent, got)):
-        if (
-            a.command != b.command
-            or abs(a.param1 - b.param1) > 1e-3 * max(1.0, abs(a.param1))
-            or to_e7(a.lat) != to_e7(b.lat)
-            or to_e7(a.lon) != to_e7(b.lon)
-        ):
-            diffs.append(f"item {i}: sent {a}, read {b}")
+    keys = [[(int(it.command), to_e7(it.lat), to_e7(it.lon)) for it in seq] for seq in (sent, got)]
+    matcher = difflib.SequenceMatcher(None, *keys, autojunk=False)
+    for _, i1, i2, j1, j2 in matcher.get_opcodes():
+        n = min(i2 - i1, j2 - j1)  # replaced (or equal) items, paired in order
+        for i, j in zip(range(i1, i1 + n), range(j1, j1 + n)):
+            a, b = sent[i], got[j]
+            if keys[0][i] != keys[1][j] or not _same_param1(a.param1, b.param1):
+                read = f"read {b}" if i == j else f"read as item {j}: {b}"
+                diffs.append(f"item {i}: sent {a}, {read}")
+        diffs += [f"item {i} not read back: {sent[i]}" for i in range(i1 + n, i2)]
+        diffs += [f"read item {j} was not sent: {got[j]}" for j in range(j1 + n, j2)]
     return diffs
+
+
+def _same_param1(a, b) -> bool:
+    """Vertex counts equal, radii to 0.1 % (the vehicle keeps a float)."""
+    return abs(a - b) <= 1e-3 * max(1.0, abs(a))
 
 
 def _result_name(exc) -> str:
@@ -209,6 +243,9 @@ def _in_sequence(raw):
     return [by_seq[i] for i in range(len(by_seq))]
 
 
+SHOWN_DIFFS = 4  # differences a read-back that differs names (then how many more)
+
+
 async def upload_fence(vehicle, items, capacity: int | None = None) -> UploadReport:
     """Upload, then download and compare.
 
@@ -247,8 +284,10 @@ async def upload_fence(vehicle, items, capacity: int | None = None) -> UploadRep
     seconds = time.monotonic() - t0
     diffs = same_items(items, got)
     if diffs:
+        if len(diffs) > SHOWN_DIFFS:
+            diffs[SHOWN_DIFFS:] = [f"and {len(diffs) - SHOWN_DIFFS} more differences"]
         raise FenceTransferError(
-            "the fence read back differs from the one sent: " + "; ".join(diffs[:3]),
+            "the fence read back differs from the one sent: " + "; ".join(diffs),
             await vehicle.texts_since(t0, 0.0),
             f"the vehicle holds {len(got)} fence items",
         )
