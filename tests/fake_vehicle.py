@@ -37,8 +37,9 @@ over and, with ``BRD_SD_FENCE`` above 0, its fence storage becomes that file's
 Faults (``Faults``) are scripted and deterministic: the numbered or seeded-random loss of
 mission-protocol messages (only MISSION_* messages are numbered and subject to loss, so that
 heartbeats and MAVSDK's discovery traffic cannot shift the numbering), late (re-ordered)
-messages, duplicated and out-of-order requests, NACKs, a stall and a disconnect, and a fence
-stored other than it was received and acknowledged (an item changed or left out). Everything
+messages, duplicated and out-of-order requests, NACKs, a stall and a disconnect; a fence
+stored other than it was received and acknowledged (an item changed or left out), and a
+parameter that keeps its own value whatever is set (answered with that value). Everything
 the fake sees, sends and loses is recorded in ``FakeVehicle.log``.
 
 No threads and no mavutil: the kit's pymavlink-over-UDP endpoint
@@ -220,6 +221,11 @@ class Faults:
     # number -> fields) and without these item numbers; downloads give what is stored
     store_fields: Mapping[int, Mapping] = field(default_factory=dict)
     store_drop: Collection[int] = ()
+    # a parameter the vehicle keeps at this value whatever PARAM_SET asks (name -> value); it
+    # answers every read with the value it keeps, and the set with it too unless
+    # param_echo_set (then with the value asked for, as if it had taken it)
+    param_keeps: Mapping[str, float] = field(default_factory=dict)
+    param_echo_set: bool = False
 
 
 @dataclass
@@ -594,8 +600,8 @@ class FakeVehicle:
 
     # ---------------------------------------------------------------- parameters, reboot
 
-    def _param_value(self, name):
-        value = self.params[name]
+    def _param_value(self, name, value=None):
+        value = self.params[name] if value is None else value
         kind = mav.MAV_PARAM_TYPE_INT16 if isinstance(value, int) else mav.MAV_PARAM_TYPE_REAL32
         index = list(self.params).index(name)
         self._send(
@@ -616,9 +622,12 @@ class FakeVehicle:
         name = msg.param_id
         if name not in self.params:
             return
-        old = self.params[name]
-        self.params[name] = int(round(msg.param_value)) if isinstance(old, int) else msg.param_value
-        self._param_value(name)
+        integer = isinstance(self.params[name], int)
+        asked = int(round(msg.param_value)) if integer else msg.param_value
+        kept = name in self.faults.param_keeps
+        value = self.faults.param_keeps[name] if kept else asked
+        self.params[name] = int(round(value)) if integer else value
+        self._param_value(name, asked if kept and self.faults.param_echo_set else None)
 
     def _reboot(self, msg, src):
         """GCS_MAVLINK::handle_preflight_reboot, then AP_Vehicle::reboot: refused while armed;

@@ -1,10 +1,11 @@
 """What an upload verifies after the vehicle has acknowledged it, against the scripted ArduPilot
 peer (tests/fake_vehicle.py) on each vehicle link: a fence the vehicle stores other than it was
-sent (a vertex a few 1e-7 degrees off, an item left out) is a failure, and the failure says
-what the vehicle holds.
+sent (a vertex a few 1e-7 degrees off, an item left out) and a fence parameter that does not
+take the value set are failures, and the failure says what the vehicle holds.
 
-The vehicle acknowledges each of these uploads (MISSION_ACK ACCEPTED): only the read-back can
-tell. Without it (upload_fence's comparison) every upload test here fails.
+The vehicle acknowledges each of these uploads (MISSION_ACK ACCEPTED, or PARAM_VALUE): only
+the read-back can tell. Without it (upload_fence's comparison, apply_params' read-back) every
+upload test here fails.
 """
 
 from __future__ import annotations
@@ -22,8 +23,20 @@ from alphafence.mavlink.items import FenceItem
 from alphafence.vehicle import fence_transfer
 from alphafence.vehicle.fence_transfer import FenceTransferError, same_items, upload_fence
 from alphafence.vehicle.link import open_vehicle
+from alphafence.vehicle.params import PROFILES, ParamError, apply_params, read_params
 from tests.fake_vehicle import FakeVehicle, Faults
 from tests.test_upload_faults import NEW, PREVIOUS, held
+
+# the fence parameters as a vehicle has them before a profile is applied (the fake answers
+# integers as INT16, as ArduPilot declares FENCE_ENABLE, FENCE_TYPE and FENCE_ACTION)
+BEFORE = {
+    "FENCE_ENABLE": 0,
+    "FENCE_TYPE": 7,
+    "FENCE_ACTION": 1,
+    "FENCE_MARGIN": 3.0,
+    "FENCE_ALT_MAX": 100.0,
+}
+BRAKE = PROFILES["copter-brake"]  # FENCE_ACTION 4
 
 
 def off_by(seq, **e7):
@@ -167,3 +180,42 @@ async def test_cli_upload_says_what_the_vehicle_holds(tmp_path, capsys):
         f"item 3: sent {NEW[3]}, read {held(fake)[3]} | "
     ), line
     assert line.endswith(f" | the vehicle holds {len(NEW)} fence items"), line
+
+
+# ------------------------------------------------------------------ parameters
+
+
+@pytest.mark.parametrize("echo", [False, True], ids=["answers-kept-value", "answers-value-set"])
+@pytest.mark.usefixtures("link")
+async def test_a_parameter_that_keeps_its_value(echo):
+    # FENCE_ACTION stays 1 whatever is set: the vehicle answers the PARAM_SET with the value it
+    # kept, or (echo) with the value asked for while it keeps its own; reading it back tells
+    faults = Faults(param_keeps={"FENCE_ACTION": 1}, param_echo_set=echo)
+    async with FakeVehicle(params=BEFORE, faults=faults) as fake:
+        async with open_vehicle(fake.url, timeout=5.0) as vehicle:
+            with pytest.raises(ParamError) as err:
+                await asyncio.wait_for(apply_params(vehicle, BRAKE), 60.0)
+            after = await read_params(vehicle, BRAKE)
+    assert fake.params["FENCE_ACTION"] == after["FENCE_ACTION"] == 1  # what it holds
+    assert ("FENCE_ACTION", 4.0) in fake.received("PARAM_SET")  # it was asked for 4
+    if echo:
+        assert ("FENCE_ACTION", 4) in fake.sent("PARAM_VALUE")  # and said it took 4
+    assert str(err.value) == "read back differs: FENCE_ACTION set 4 reads 1"
+    # every other parameter was set
+    assert {k: v for k, v in after.items() if k != "FENCE_ACTION"} == {
+        k: v for k, v in BRAKE.items() if k != "FENCE_ACTION"
+    }
+
+
+@pytest.mark.usefixtures("link")
+async def test_cli_upload_reports_the_parameter_it_could_not_set(tmp_path, capsys):
+    faults = Faults(param_keeps={"FENCE_ACTION": 1})
+    async with FakeVehicle(fence=PREVIOUS, params=BEFORE, faults=faults) as fake:
+        code = await upload_cli(fake, tmp_path, "--params", "copter-brake")
+    captured = capsys.readouterr()
+    assert code == 3
+    assert same_items(NEW, held(fake)) == []  # the fence went, and was verified
+    assert "read them back identical" in captured.out
+    assert error_lines(captured) == [
+        "alphafence upload: error: read back differs: FENCE_ACTION set 4 reads 1"
+    ]

@@ -53,23 +53,50 @@ class ParamReport:
 
 
 async def apply_params(vehicle, values: dict) -> ParamReport:
-    """Set each parameter, then read every one back; raise ParamError on any mismatch."""
+    """Set each parameter, then read every one back; raise ParamError on any mismatch.
+
+    A set the link reports failed because the vehicle answered with a value of its own (MAVSDK
+    re-sends, then gives up) goes on to the next parameter: the read-back names every
+    parameter that holds another value than the one set, whichever link it is.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    values : dict
+        Parameter name -> value.
+
+    Raises
+    ------
+    ParamError
+        A set or read that failed, or ``read back differs: NAME set A reads B, ...``.
+    """
     for name, value in values.items():
         try:
             await _set(vehicle, name, value)
         except Exception as exc:
+            if await _holds_other(vehicle, name, value):
+                continue  # the read-back below says what it holds
             raise ParamError(f"setting {name} = {value} failed ({exc})") from None
     got = await read_params(vehicle, values)
-    bad = {
-        k: (v, got[k])
-        for k, v in values.items()
-        if abs(float(got[k]) - float(v)) > 1e-4 * max(1.0, abs(v))
-    }
+    bad = {k: (v, got[k]) for k, v in values.items() if not _same(got[k], v)}
     if bad:
         raise ParamError(
             "read back differs: " + ", ".join(f"{k} set {a} reads {b}" for k, (a, b) in bad.items())
         )
     return ParamReport(got)
+
+
+def _same(got, value) -> bool:
+    return abs(float(got) - float(value)) <= 1e-4 * max(1.0, abs(value))
+
+
+async def _holds_other(vehicle, name, value) -> bool:
+    """Whether the vehicle answers for ``name`` with another value than ``value`` (False when
+    it does not answer)."""
+    try:
+        return not _same(await _get(vehicle, name), value)
+    except Exception:
+        return False
 
 
 async def read_params(vehicle, names) -> dict:
