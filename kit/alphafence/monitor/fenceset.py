@@ -230,10 +230,14 @@ class FenceSet:
     def altitude_notes(self) -> list:
         """What comparing the fences' limits in their references approximates, one sentence
         each (flight levels, ellipsoid heights, AGL without terrain data)."""
-        limited = np.isfinite(self.limits[0]) | np.isfinite(self.limits[1])
-        said = {ref for k, pair in enumerate(self.references) if limited[k] for ref in pair}
-        notes = [AMSL_REFERENCES[r] for r in sorted(said & AMSL_REFERENCES.keys()) if r]
-        if limited.any() and said - AMSL_REFERENCES.keys():
+        said = {
+            self.references[k][j]
+            for j in (0, 1)
+            for k in np.flatnonzero(np.isfinite(self.limits[j]))
+        }  # the references of the limits there are
+        notes = [AMSL_REFERENCES[r] for r in sorted(said & AMSL_REFERENCES.keys())]
+        notes = [text for text in notes if text]  # plain AMSL needs no note
+        if said - AMSL_REFERENCES.keys():
             notes.append("AGL limits compared with the height above home (no terrain data)")
         return notes
 
