@@ -2,15 +2,15 @@
 leave (or come near the edge of) a keep-in fence, each leg at its altitudes against each
 fence's altitude band where the bands are given.
 
-A leg's altitude changes along it as its profile says (:class:`~alphafence.formats.mission.Waypoint`).
-A leg crosses a keep-out fence when the part of it within the fence's band enters it; it
-grazes the fence when it comes closer than the clearance to the fence's volume, measured as
-the larger of the horizontal and the vertical distance (a box around the fence: never more
-than the straight-line distance). A leg leaves a keep-in fence when any of it is outside the
-fence, or above or below its band; it is near the edge when closer than the clearance to a
-side, the floor or the ceiling. A leg whose altitude is not known, or a limit that cannot be
-compared with it (NaN in the bands), counts as within a keep-out fence's band throughout and
-as possibly outside a keep-in fence's band.
+A leg's altitude changes along it as its profile says
+(:class:`~alphafence.formats.mission_flight.Waypoint`). A leg crosses a keep-out fence when the
+part of it within the fence's band enters it; it grazes the fence when it comes closer than the
+clearance to the fence's volume, measured as the larger of the horizontal and the vertical
+distance (a box around the fence: never more than the straight-line distance). A leg leaves a
+keep-in fence when any of it is outside the fence, or above or below its band; it is near the
+edge when closer than the clearance to a side, the floor or the ceiling. A leg whose altitude
+is not known, or a limit that cannot be compared with it (NaN in the bands), counts as within a
+keep-out fence's band throughout and as outside a keep-in fence's band.
 """
 
 from __future__ import annotations
