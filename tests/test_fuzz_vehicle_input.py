@@ -14,7 +14,6 @@ import asyncio
 import json
 import math
 import os
-import time
 from types import SimpleNamespace
 
 import pytest
@@ -70,10 +69,9 @@ def one_line(exc) -> str:
 async def test_hostile_download_is_a_clean_error(faults, says, link):
     async with FakeVehicle(fence=NEW, faults=faults) as fake:
         async with open_vehicle(fake.url, 10) as vehicle:
-            t0 = time.monotonic()
+            # MAVSDK's own timeouts end it (no hang: the deadline only stops one)
             with pytest.raises(FenceTransferError) as err:
-                await download_fence(vehicle)
-            assert time.monotonic() - t0 < 20  # MAVSDK's own timeouts bound it: no hang
+                await asyncio.wait_for(download_fence(vehicle), 60.0)
     says = (says,) if isinstance(says, str) else says
     assert any(s in one_line(err.value) for s in says), err.value
 
