@@ -1,6 +1,8 @@
 """Independent checks used by the tests: a verifying metric frame that is *not* the one the
-kit used (transverse Mercator instead of azimuthal equidistant, another origin)."""
+kit used (transverse Mercator instead of azimuthal equidistant, another origin); and
+:func:`until`, the one way a test waits for a state no event announces."""
 
+import asyncio
 import json
 
 import numpy as np
@@ -52,3 +54,17 @@ def missing_area(fence, restricted, margin):
 def geojson_fences(text):
     doc = json.loads(text)
     return [(f["properties"], shapely.geometry.shape(f["geometry"])) for f in doc["features"]]
+
+
+async def until(predicate, what: str, timeout: float = 60.0, poll: float = 0.01):
+    """Wait until ``predicate()`` is true, looking every ``poll`` seconds: for a state that no
+    event announces (a file written, a task started, a count reached). ``predicate`` may
+    raise (an AssertionError when what it watches stopped). ``timeout`` is a deadline against
+    a hang, not a bound on how long it should take: past it, AssertionError saying ``what``
+    did not happen."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while not predicate():
+        if loop.time() > deadline:
+            raise AssertionError(f"not within {timeout:g} s: {what}")
+        await asyncio.sleep(poll)

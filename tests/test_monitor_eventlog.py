@@ -11,6 +11,8 @@ from pathlib import Path
 from alphafence.cli import main
 from alphafence.monitor.eventlog import EventLog
 
+from .helpers import until
+
 DEMO_SCENE = (
     Path(__file__).resolve().parents[1] / "kit" / "alphafence" / "data" / "demo-scene.geojson"
 )
@@ -31,21 +33,23 @@ async def test_a_failing_log_is_reported_once_and_close_returns(tmp_path):
     folder = tmp_path / "gone"
     folder.mkdir()
     seen = []
-    log = EventLog(folder / "events.jsonl", echo=seen.append)
+    path = folder / "events.jsonl"
+    log = EventLog(path, echo=seen.append)
     log.put({"time": 0, "event": "level"})
-    while not (folder / "events.jsonl").exists() or log.queue.qsize():  # the first line written
-        await asyncio.sleep(0.01)
-    folder.joinpath("events.jsonl").unlink()
+    await until(lambda: path.exists() and path.read_text().endswith("\n"), "the first line written")
+    path.unlink()
     folder.rmdir()  # the directory is gone: every later append fails
-    for i in range(1, 1001):
-        log.put({"time": i, "event": "level"})
-        if i % 100 == 0:
-            await asyncio.sleep(0.02)
+    for batch in range(10):  # ten writes that fail, each waited for (counted as lost)
+        for i in range(100 * batch + 1, 100 * batch + 101):
+            log.put({"time": i, "event": "level"})
+        await until(lambda n=100 * batch + 100: log.lost >= n, f"{100 * batch + 100} lines lost")
+    # what came after the failure is counted, not kept: the 1000 lines and the failure's own
+    await until(lambda: log.lost == 1001, "the failure's own line lost too")
+    assert not log.task.done() and log.queue.qsize() == 0  # the writer went on
     await asyncio.wait_for(log.close(), 30)  # the old writer made this wait forever
     failures = [e for e in seen if e["event"] == "log_write_failed"]
     assert len(failures) == 1 and "events.jsonl" in failures[0]["error"]
-    assert log.lost >= 1000 - 100  # what queued after the failure is counted, not kept
-    assert log.queue.qsize() == 0 or log.task.done()
+    assert log.lost == 1001
 
 
 async def test_memory_holds_only_the_latest_events():
@@ -119,13 +123,20 @@ async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
     task = asyncio.create_task(monitor.run(stop))
     # 50 positions a second: wait until the broken stream is reported and 100 positions came
     # after it (2 s at the stub's rate, longer on a busy host), so that a repeat would show
-    while not [e for e in log.events if e["event"] == "telemetry_task_ended"]:
+
+    def running(condition):
         assert not task.done(), log.events
-        await asyncio.sleep(0.02)
+        return condition()
+
+    await until(
+        lambda: running(lambda: [e for e in log.events if e["event"] == "telemetry_task_ended"]),
+        "the broken stream reported",
+    )
     ended_at = monitor.engine.checks
-    while monitor.engine.checks < ended_at + 100:
-        assert not task.done(), log.events
-        await asyncio.sleep(0.02)
+    await until(
+        lambda: running(lambda: monitor.engine.checks >= ended_at + 100),
+        "100 positions checked after it",
+    )
     stop.set()
     await asyncio.wait_for(task, 5)
     ended = [e for e in log.events if e["event"] == "telemetry_task_ended"]
