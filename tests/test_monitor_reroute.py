@@ -361,8 +361,15 @@ async def run_reroute(fences, records, goal_xy):
         if monitor.reroute.task is not None:
             break
     await asyncio.wait_for(monitor.reroute.task, 10)
-    await asyncio.sleep(0.05)  # the fallback action's own task
+    await asyncio.wait_for(settled(monitor), 30)  # the fallback action's own task, if any
     return monitor, action
+
+
+async def settled(monitor):
+    """Until every task the monitor spawned (actions, alerts) has ended, and those they
+    spawned."""
+    while monitor.pending:
+        await asyncio.wait(set(monitor.pending))
 
 
 async def test_runner_flies_the_route_to_the_guided_target(fences, records):
