@@ -23,6 +23,8 @@ from alphafence.sitl.instance import SitlInstance
 from alphafence.sitl.ports import RCIN_BASE_PORT, reserve_instance
 from alphafence.sitl.readiness import ReadyState
 
+from .helpers import until
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -214,8 +216,7 @@ async def test_stop_terminates_and_cleans_up(tmp_path):
         assert sitl.running and sitl.workdir.is_dir()
         assert sitl.connection_url == f"udpin://127.0.0.1:{sitl.port}"
         assert sitl.pymavlink_url == f"udpin:127.0.0.1:{sitl.port}"
-        while "started" not in sitl.log_tail():  # however long the shell takes to start
-            await asyncio.sleep(0.02)
+        await until(lambda: "started" in sitl.log_tail(), "the stand-in started")
         assert f"--serial0 udpclient:127.0.0.1:{sitl.port}" in sitl.log_tail()
         pid, workdir, instance = sitl.pid, sitl.workdir, sitl.instance
     assert sitl.process.returncode == -15
@@ -226,11 +227,10 @@ async def test_stop_terminates_and_cleans_up(tmp_path):
 async def test_stop_kills_what_ignores_sigterm(tmp_path):
     script = "#!/bin/sh\ntrap '' TERM\necho ignoring TERM\nwhile :; do sleep 0.05; done\n"
     sitl = await SitlInstance("egham", binary=_exe(tmp_path / "arducopter", script)).start()
-    while "ignoring TERM" not in sitl.log_tail():  # the trap is set
-        await asyncio.sleep(0.02)
-    t0 = time.monotonic()
-    assert await sitl.stop(timeout=0.5) == -9
-    assert time.monotonic() - t0 < 10  # SIGKILL after the 0.5 s, not a wait for an exit
+    await until(lambda: "ignoring TERM" in sitl.log_tail(), "the TERM trap set")
+    # it never exits on TERM: only the SIGKILL after the 0.5 s ends it (a wait for an exit
+    # would hang until the deadline)
+    assert await asyncio.wait_for(sitl.stop(timeout=0.5), 60) == -9
     assert _pid_gone(sitl.pid) and not sitl.workdir.exists()
 
 
@@ -251,11 +251,29 @@ async def test_ready_timeout_says_what_is_missing(tmp_path):
             s.bind(("127.0.0.1", sitl.port))
 
 
-async def test_readiness_from_a_fake_vehicle(tmp_path):
+class FrozenClock:
+    """A module's ``time`` whose monotonic clock stands still (the rest is the time module)."""
+
+    def __init__(self):
+        self.now = time.monotonic()
+
+    def monotonic(self):
+        return self.now
+
+    def __getattr__(self, name):
+        return getattr(time, name)
+
+
+async def test_readiness_from_a_fake_vehicle(tmp_path, monkeypatch):
     """wait_ready parses the vehicle's messages, asks it for the ones it needs, and returns
-    once all conditions hold, with the port free again."""
+    once all conditions hold, with the port free again. Its clock stands still here, so it
+    re-asks nothing ("then once a second" never comes) and its own timeout never fires: it is
+    ready only if it asked at the first heartbeat and one round of asks was enough."""
     from pymavlink.dialects.v20 import ardupilotmega as mav2
 
+    import alphafence.sitl.instance
+
+    monkeypatch.setattr(alphafence.sitl.instance, "time", FrozenClock())
     fake = _exe(tmp_path / "arducopter", "#!/bin/sh\nexec sleep 60\n")
     async with SitlInstance("egham", binary=fake) as sitl:
         vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -290,16 +308,16 @@ async def test_readiness_from_a_fake_vehicle(tmp_path):
                 await asyncio.sleep(0.05)
 
         flying = asyncio.create_task(fly())
-        t0 = time.monotonic()
-        try:
-            state = await sitl.wait_ready(10)
+        try:  # the deadline only stops a hang (the frozen clock keeps wait_ready's from firing)
+            state = await asyncio.wait_for(sitl.wait_ready(10), 60)
         finally:
             flying.cancel()
             vehicle.close()
         assert state.ready and state.home == pytest.approx((51.43, -0.55, 20.0))
-        assert {int(m.param1) for m in asked if m.command == 511} == {24, 33, 193}
-        assert {int(m.param1) for m in asked if m.command == 512} == {242}
-        assert time.monotonic() - t0 < 2  # asked at the first heartbeat, not a second later
+        # each asked for once (intervals above 0; 0 is the reset to the default rates after)
+        streams = sorted(int(m.param1) for m in asked if m.command == 511 and m.param2 > 0)
+        assert streams == [24, 33, 193]
+        assert [int(m.param1) for m in asked if m.command == 512] == [242]
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.bind(("127.0.0.1", sitl.port))
 
@@ -340,11 +358,8 @@ async def test_ready_at_speedup_1_then_mavsdk_connects(sitl_binary):
     import mavsdk.asyncio as ms
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
-    t0 = time.monotonic()
     async with SitlInstance("egham", speedup=1, binary=sitl_binary) as sitl:
-        state = await sitl.wait_ready(90)
-        took = time.monotonic() - t0
-        assert 10 < took < 90
+        state = await sitl.wait_ready(90)  # raises unless ready (EKF position, fix, home) by then
         assert _near(state.home, sitl.home) and _near(state.position, sitl.home)
         config = ms.Configuration.create_with_component_type(ms.ComponentType.GROUND_STATION)
         async with ms.Mavsdk(config) as mavsdk:
