@@ -100,7 +100,10 @@ async def _watch(sitl):
                 assert not task.done(), f"the monitor stopped: {log.events}"
                 await asyncio.sleep(0.05)
             t_conflict = time.monotonic()
-            await asyncio.sleep(0.5)  # let the alert task run
+            # the conflict's alert runs in a task of its own, spawned with the event: until it
+            # (and any other then under way) has ended, so that a failure would be logged
+            if monitor.pending:
+                await asyncio.wait(set(monitor.pending))
             aircraft = dict(engine.traffic.aircraft)
         finally:
             stop.set()
