@@ -49,7 +49,10 @@ def voronoi_edges(roadmap, bounds=None):
     if bounds is not None:
         b = np.asarray(bounds, float)
         fb = np.array([min(fb[0], b[0]), min(fb[1], b[1]), max(fb[2], b[2]), max(fb[3], b[3])])
-    pad = max(4.0 * roadmap.ce, 200.0)
+    # the pad grows with the extent (1/200 of its longer side) so the frame keeps at most about
+    # 3,200 samples however far the fences spread; a frame sample spacing of a quarter of the
+    # pad keeps the cells of fence samples inside the frame
+    pad = max(4.0 * roadmap.ce, 200.0, float(np.max(fb[2:] - fb[:2])) / 200.0)
     extent = fb + np.array([-pad, -pad, pad, pad])
     x0, y0, x1, y1 = extent
     frame = shapely.segmentize(shapely.box(x0, y0, x1, y1).exterior, max(4.0 * s, pad / 4))
