@@ -1,13 +1,17 @@
-"""Routes around keep-out fences: a reusable Voronoi roadmap, A*, line-of-sight smoothing;
-and the legs of any mission checked against fences. Missions are written and read in
+"""Routes around keep-out fences: a reusable Voronoi roadmap, A*, line-of-sight smoothing, a
+corridor planner that builds the roadmap over only the fences near start and goal; and the
+legs of any mission checked against fences. Missions are written and read in
 ``alphafence.formats``."""
 
+from alphafence.route.corridor import Corridor, CorridorPlanner
 from alphafence.route.legs import LegIssue, check_legs
 from alphafence.route.planner import FenceRoadmap, fence_label
 from alphafence.route.roadmap import EPS_CLEAR, NoRoute, Roadmap, Route
 
 __all__ = [
     "EPS_CLEAR",
+    "Corridor",
+    "CorridorPlanner",
     "FenceRoadmap",
     "LegIssue",
     "NoRoute",
