@@ -13,8 +13,10 @@ def register(sub):
         "route",
         help="plan a mission around the keep-out fences",
         description="Route from --from to --to on a Voronoi roadmap clear of every keep-out "
-        "fence by --clearance (warning layers cost more than open air), smooth it by line of "
-        "sight, and write a QGroundControl mission: takeoff, waypoints, RTL. "
+        "fence by --clearance (warning layers cost more than open air), built over the fences "
+        "in a corridor around the two (widened while the route comes too close to a fence "
+        "outside it), smooth it by line of sight, and write a QGroundControl mission: "
+        "takeoff, waypoints, RTL. "
         "Exit code 1 when no route exists (one line says what blocks it), 2 on bad input.",
     )
     p.add_argument("fences", metavar="FENCES", help="fences from 'alphafence build' (GeoJSON)")
@@ -63,7 +65,8 @@ def run(args) -> int:
     from alphafence.formats.fence_read import read_fence_file as read_fences
     from alphafence.formats.qgc_plan import mission_items
     from alphafence.formats.qgc_wpl import mission_waypoints_text
-    from alphafence.route import FenceRoadmap, NoRoute
+    from alphafence.route import CorridorPlanner, NoRoute
+    from alphafence.route.corridor import REACH_M
 
     need(("scipy", "routing"), *figure_wants(args.figure))
 
@@ -71,26 +74,31 @@ def run(args) -> int:
     records = read_fences(args.fences)
     if not any(r.kind == "keep_out" for r in records):
         out_console.print("[yellow]note:[/] no keep-out fences: the route is a straight line")
-    rm = FenceRoadmap(records, clearance=args.clearance, extra_lonlat=[start, goal])
+    planner = CorridorPlanner(records, start, goal, clearance=args.clearance)
+    if planner.out_of_reach:
+        out_console.print(
+            f"[yellow]note:[/] {planner.out_of_reach} fences more than "
+            f"{REACH_M / 1000:,.0f} km away are left out"
+        )
     try:
-        route, lonlat = rm.route(start, goal)
+        route, lonlat = planner.route(progress=_print_corridor)
     except NoRoute as exc:
         raise RoutingError(f"{args.fences}: no route: {exc}") from None
     items = mission_items(lonlat, args.alt, fly_back=not args.one_way)
     out = {args.output: plan.dumps(plan.plan_document([], start, items))}
     if args.waypoints:
         out[args.waypoints] = mission_waypoints_text(items, start)
+    if args.figure:  # drawn first: the slow part, before any file is written
+        from alphafence.plots.route import route_figure
+
+        route_figure(planner.roadmap, route, args.figure)
     write_all(out)
     if args.one_way:
         out_console.print(
             "[yellow]note:[/] --one-way: the final RTL flies straight home; "
             "check it with 'alphafence check-mission'"
         )
-    if args.figure:
-        from alphafence.plots.route import route_figure
-
-        route_figure(rm.roadmap, route, args.figure)
-    straight = float(sum((rm.to_local(goal) - rm.to_local(start)) ** 2) ** 0.5)
+    straight = float(sum((planner.goal_xy - planner.start_xy) ** 2) ** 0.5)
     out_console.print(
         f"route {route.length_m:.0f} m ({route.length_m / max(straight, 1e-9):.3f}x straight "
         f"line), {len(route.xy) - 1} legs, min clearance {route.min_clearance_m:.1f} m "
@@ -101,3 +109,15 @@ def run(args) -> int:
         "wrote " + ", ".join(str(p) for p in [*out, *([args.figure] if args.figure else [])])
     )
     return 0
+
+
+def _print_corridor(corridor):
+    """One line as the planner starts on a corridor (a wider one says why)."""
+    why = ""
+    if corridor.number > 1:
+        why = " (the last route came too close to fences outside)"
+    out_console.print(
+        f"corridor {corridor.number}: {len(corridor.fences)} of {corridor.total} keep-out "
+        f"fences within {corridor.half_width_m / 1000:,.1f} km of the line{why}",
+        highlight=False,
+    )
