@@ -8,8 +8,51 @@ attributes and predicates only.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import shapely
+
+
+def heard_out(fn, *args):
+    """``fn(*args)`` run in a worker thread while this one waits for it, so that Ctrl-C
+    (``KeyboardInterrupt``, raised in the main thread only) is heard while a long C call runs
+    that releases the GIL, as scipy's Qhull does for most of its work.
+
+    Parameters
+    ----------
+    fn : callable
+    *args
+        Its arguments.
+
+    Returns
+    -------
+    object
+        What ``fn`` returns (what it raises is raised here).
+
+    Examples
+    --------
+    >>> heard_out(sum, [1, 2, 3])
+    6
+    """
+    out = {}
+    done = threading.Event()
+
+    def work():
+        try:
+            out["value"] = fn(*args)
+        except BaseException as exc:  # handed to the waiting thread
+            out["error"] = exc
+        finally:
+            done.set()
+
+    # a daemon: when Ctrl-C stops the wait, the interpreter exits without waiting for it
+    threading.Thread(target=work, name=getattr(fn, "__name__", "worker"), daemon=True).start()
+    while not done.wait(0.05):
+        pass
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
 
 
 def voronoi_edges(roadmap, bounds=None):
@@ -67,7 +110,7 @@ def voronoi_edges(roadmap, bounds=None):
     from scipy.spatial import QhullError, Voronoi  # scipy (the build extra), used here only
 
     try:
-        vor = Voronoi(pts)
+        vor = heard_out(Voronoi, pts)
     except QhullError as exc:  # degenerate input, e.g. all samples collinear
         raise ValueError(f"cannot build the roadmap ({exc})") from None
     rv = np.asarray(vor.ridge_vertices)
