@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pyproj
 import shapely
+import shapely.errors
 
 
 class VerifyFrame:
@@ -18,21 +19,55 @@ class VerifyFrame:
         )
 
     def local(self, geom):
+        """``geom`` (lon/lat) in this frame, its edges read as straight lon/lat lines (as
+        GeoJSON, QGroundControl and ArduPilot read them): each edge is cut into pieces of at
+        most 2e-4 degrees (22 m) before projecting, short enough that no piece bows a
+        millimetre from its chord below 87 degrees of latitude."""
+
         def f(c):
             x, y = self.t.transform(c[:, 0], c[:, 1])
             return np.column_stack([x, y])
 
+        try:
+            geom = shapely.segmentize(_unwrapped(geom), 2e-4)
+        except shapely.errors.GEOSException:  # a degenerate line (repeated points) as it is
+            pass
         return shapely.transform(geom, f)
 
     def xy(self, lon, lat):
         return self.t.transform(lon, lat)
 
 
+def _unwrapped(geom):
+    """A geometry across the antimeridian with its western longitudes moved east by 360, so
+    that its edges are the short ones the kit reads (the verifying frame takes any lon)."""
+
+    def f(c):
+        lon = c[:, 0]
+        if lon.size and lon.max() - lon.min() > 180.0:
+            c = c.copy()
+            c[:, 0] = np.where(lon < 0.0, lon + 360.0, lon)
+        return c
+
+    if isinstance(geom, np.ndarray):
+        return np.array([shapely.transform(g, f) for g in geom], dtype=object)
+    return shapely.transform(geom, f)
+
+
+def _valid_local(frame, g):
+    """``g`` in ``frame``, made valid; a sliver that its densified edges make empty is made
+    valid first (a line, as the kit reads it)."""
+    out = shapely.make_valid(frame.local(g))
+    if out.is_empty and not g.is_empty:
+        out = shapely.make_valid(frame.local(shapely.make_valid(g)))
+    return out
+
+
 def restricted_in(frame, geoms_wgs84, widths):
     """The restricted area (points and lines widened as the rules say), computed
     independently in ``frame``; the discs are inscribed polygons, so they lie inside the
     true discs the kit must honour."""
-    local = [shapely.make_valid(frame.local(g)) for g in geoms_wgs84]
+    local = [_valid_local(frame, g) for g in geoms_wgs84]
     parts = [shapely.buffer(g, w, quad_segs=32) if w > 0 else g for g, w in zip(local, widths)]
     return shapely.union_all(parts)
 

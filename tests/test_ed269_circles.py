@@ -6,6 +6,7 @@ margin; sites of several zones keep polygon fences."""
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import shapely
 from pyproj import Geod
@@ -17,6 +18,8 @@ from alphafence.formats.rules import parse_rules
 from alphafence.mavlink.items import CIRCLE_EXCLUSION, CIRCLE_INCLUSION, fence_items
 from alphafence.mavlink.storage import CIRCLE_BYTES, END_BYTES, HEADER_BYTES, PROFILES
 from alphafence.onboard.compile import compile_fences
+
+from .ardupilot_model import location_distance_m
 
 DATA = Path(__file__).parent / "data"
 GEOD = Geod(ellps="WGS84")
@@ -40,6 +43,21 @@ def assert_circle_fence(fence, lon, lat, radius_m, margin_m):
     assert radius_m + margin_m <= r <= radius_m * 1.0013 + margin_m + 1.7
 
 
+def assert_vehicle_circle_holds(item, lon, lat, radius_m, outward=True):
+    """ArduPilot's circle of ``item`` (its own distance, :mod:`tests.ardupilot_model`)
+    contains the geodesic circle of ``radius_m`` about ``(lon, lat)`` (or lies inside it)."""
+    az = np.arange(0.0, 360.0, 0.25)
+    plon, plat, _ = GEOD.fwd(np.full(az.size, lon), np.full(az.size, lat), az,
+                             np.full(az.size, radius_m))  # fmt: skip
+    d = location_distance_m(plat, plon, item.lat, item.lon)
+    if outward:
+        assert d.max() < item.param1, f"ArduPilot reads the zone {d.max() - item.param1:.2f} m out"
+    else:
+        assert d.min() > item.param1, (
+            f"ArduPilot's circle reaches {item.param1 - d.min():.2f} m out"
+        )
+
+
 def test_a_one_circle_ed269_file_is_one_circle_item_for_a_copter(rules):
     """The issue's file: one 1000 ft circle. 32 items, 258 bytes of 560 before; one item now."""
     db = read_database([DATA / "ed269" / "feet-circle.json"], rules)
@@ -49,7 +67,11 @@ def test_a_one_circle_ed269_file_is_one_circle_item_for_a_copter(rules):
     assert fences["warning"].circle is not None  # its warning layer: a circle 30 m further
     assert fences["warning"].circle[2] == pytest.approx(fences["keep_out"].circle[2] + 30.0)
     (item,) = fence_items([fences["keep_out"]])
-    assert item.command == CIRCLE_EXCLUSION and item.param1 == fences["keep_out"].circle[2]
+    assert item.command == CIRCLE_EXCLUSION
+    # the item's radius as ArduPilot measures distance: the zone plus margin (a geodesic
+    # circle) lies inside it, and it is no more than 0.7 % larger than the fence's radius
+    assert_vehicle_circle_holds(item, 8.5421, 47.3769, 304.8 + 10.0)
+    assert fences["keep_out"].circle[2] <= item.param1 <= fences["keep_out"].circle[2] * 1.007
     box = shapely.box(8.53, 47.37, 8.55, 47.385)
     onboard = compile_fences(result.fences, box, PROFILES["copter"])
     assert [p.chosen.kind for p in onboard.pieces] == ["circle"]

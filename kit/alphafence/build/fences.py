@@ -16,6 +16,7 @@ import shapely
 from shapely.ops import polylabel
 
 from alphafence.build import METHODS
+from alphafence.build.as_read import ground_margins, hold_fences, reads_covering
 from alphafence.build.fence_types import Fence, FenceOptions
 from alphafence.build.sites import circle_steps
 from alphafence.build.zone_circle import zone_circle
@@ -241,15 +242,22 @@ def _fence_sites(sites, opts):
         margins.append(margin)
         zones.append(zone)
     steps = circle_steps(QUAD_SEGS)
+    ground = ground_margins(geoms, margins)  # as wide on the ground as the rules say
     regions = shapely.buffer(
-        _array(geoms), [(m + PAD_M) * steps for m in margins], quad_segs=QUAD_SEGS
+        _array(geoms), [(m + PAD_M) * steps for m in ground], quad_segs=QUAD_SEGS
     )
     fenced = iter(outer_fences([r for r, z in zip(regions, zones) if z is None], opts))
     made = [next(fenced) if z is None else (circle_polygon(*z), z, None) for z in zones]
     locals_, circles, alphas = (list(col) for col in zip(*made)) if made else ([], [], [])
-    repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
+    frames = [sites[k].frame for k in todo]
+    locals_, held = hold_fences(locals_, frames)  # as their lon/lat vertices will be read
+    repaired = [not ok for ok in _covers_required(locals_, circles, geoms, ground)]
     for i in (i for i, bad in enumerate(repaired) if bad):
-        locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], regions[i])), None
+        locals_[i], circles[i] = _repair(locals_[i], regions[i], frames[i])
+    for i in (i for i, h in enumerate(held) if h and not repaired[i]):
+        if not reads_covering(locals_[i], frames[i], geoms[i], ground[i]):
+            locals_[i], circles[i] = _repair(locals_[i], regions[i], frames[i])
+            repaired[i] = True
     mains = []
     for i, k in enumerate(todo):
         method = opts.method if zones[i] is None else "circle"
@@ -260,10 +268,17 @@ def _fence_sites(sites, opts):
         mains.append(main)
     warn = [i for i, k in enumerate(todo) if sites[k].kind == "keep_out"]
     if opts.warn_distance_m > 0 and warn:
-        layers = _warning_layers([mains[i] for i in warn], [geoms[i] for i in warn], opts)
+        layers = _warning_layers(
+            [mains[i] for i in warn], [geoms[i] for i in warn], opts, [ground[i] for i in warn]
+        )
         for i, fence in zip(warn, layers):
             out[todo[i]].append(fence)
     return [f for fences in out for f in fences]
+
+
+def _repair(local, region, frame):
+    """A fence that failed its check united with its required region, held as read."""
+    return hold_fences([fill_holes(shapely.union(local, region))], [frame])[0][0], None
 
 
 def _base(site):
@@ -303,10 +318,11 @@ def _covers_required(fences, circles, geoms, margins):
     return ok
 
 
-def _warning_layers(mains, geoms, opts):
-    """The warning layer of each keep-out fence in ``mains``, around ``geoms``."""
+def _warning_layers(mains, geoms, opts, ground):
+    """The warning layer of each keep-out fence in ``mains``, around ``geoms`` (``ground``:
+    the mains' margins as wide on the ground)."""
     warn = opts.warn_distance_m
-    margins = [m.margin_m + warn for m in mains]
+    margins = ground_margins(geoms, [g + warn for g in ground])
     circles = [None if m.circle is None else (*m.circle[:2], m.circle[2] + warn) for m in mains]
     locals_ = _array([m.local for m in mains])
     if opts.method == "exact":
@@ -319,15 +335,19 @@ def _warning_layers(mains, geoms, opts):
     else:
         simplified = iter(_simplify_parts(grown[polygonal], opts))
     locals_ = [circle_polygon(*c) if c is not None else next(simplified) for c in circles]
+    frames = [m.frame for m in mains]
+    locals_, held = hold_fences(locals_, frames)
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
-    for i in (i for i, bad in enumerate(repaired) if bad):
-        region = required_region(geoms[i], margins[i])
-        locals_[i], circles[i] = fill_holes(shapely.union(locals_[i], region)), None
+    for i, (bad, h) in enumerate(zip(repaired, held)):
+        if bad or (h and not reads_covering(locals_[i], frames[i], geoms[i], margins[i])):
+            region = required_region(geoms[i], margins[i])
+            locals_[i], circles[i] = _repair(locals_[i], region, frames[i])
+            repaired[i] = True
     return [
         Fence(
             kind="warning",
             method=m.method,
-            margin_m=margins[i],
+            margin_m=m.margin_m + warn,
             local=locals_[i],
             circle=circles[i],
             alpha_m=m.alpha_m,
@@ -371,6 +391,7 @@ def _keep_in(site, geometry, margin, opts, base, zone=None):
         local = poly
     else:
         local = simplify_polygon(poly, opts.max_vertices, opts.tolerance_m, outward=False)
+    local = hold_fences([local], [site.frame], outward=False)[0][0]  # inside, as read
     return Fence(
         kind="keep_in", method=opts.method, margin_m=margin, local=local, circle=circle, **base
     )

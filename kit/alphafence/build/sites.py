@@ -19,6 +19,7 @@ import shapely
 from alphafence.build.regions import _components, region_labels
 from alphafence.formats.features import make_valid_polygonal
 from alphafence.geo.frame import LocalFrame
+from alphafence.geo.lonlat import densify_lonlat
 
 SMALL_REGION_M = 20_000.0  # a region this size shares one frame: distortion < 1 mm
 
@@ -225,6 +226,7 @@ def regions_sites(features, spans, rules, join_m=25.0):
 
 
 def _regions_sites(feats, geoms, widths, spans, join_m):
+    geoms = densify_lonlat(geoms)  # long edges followed along their lon/lat lines
     counts = shapely.get_num_coordinates(geoms)
     if not len(spans) or np.any(counts == 0) or np.any(shapely.has_z(geoms)):
         out = []  # the general path, region by region (empty or 3-D geometry)

@@ -135,6 +135,27 @@ class LocalFrame:
         """A WGS84 geometry (or array of them) in this frame's metres."""
         return shapely.transform(geom, self._fwd)
 
+    def read_geom(self, geom, tolerance_m=0.05):
+        """A WGS84 geometry (or array of them) in this frame's metres as its readers mean it:
+        its edges straight lines in lon/lat (GeoJSON, QGroundControl, ArduPilot), followed to
+        within ``tolerance_m`` (:func:`alphafence.geo.lonlat.densify_lonlat`), not the
+        chords between its projected vertices.
+
+        Examples
+        --------
+        >>> import shapely
+        >>> frame = LocalFrame(10.5, 64.0)
+        >>> strip = shapely.box(10.0, 63.99, 11.0, 64.0)  # 49 km along the parallel at 64°N
+        >>> chords = frame.geom_to_local(strip)
+        >>> round(chords.difference(frame.read_geom(strip)).area / 1e6, 2)  # km² cut off north
+        3.13
+        """
+        from alphafence.geo.lonlat import densify_lonlat
+
+        if isinstance(geom, np.ndarray):
+            return self.geom_to_local(densify_lonlat(geom, tolerance_m).reshape(geom.shape))
+        return self.geom_to_local(densify_lonlat([geom], tolerance_m)[0])
+
     def geom_to_wgs84(self, geom):
         """A geometry (or array of them) in this frame's metres back to WGS84 (lon, lat)."""
         return shapely.transform(geom, self._inv)

@@ -3,11 +3,14 @@ and waypoint writers (and, later, the uploader)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import shapely
 
+from alphafence.geo.lonlat import frame_scale
+from alphafence.geo.vehicle_distance import vehicle_radius
 from alphafence.mavlink import ids
 
 # short names for the fence item commands (the numbers live in mavlink.ids)
@@ -107,7 +110,9 @@ def exterior_vertices(geoms) -> np.ndarray:
 
 def fence_items(fences):
     """Items for the fences a vehicle can hold: keep-out as exclusions, keep-in as
-    inclusions. Warning layers have no onboard equivalent and are left to the companion."""
+    inclusions. Warning layers have no onboard equivalent and are left to the companion.
+    A circle's radius is the one ArduPilot's own distance needs
+    (:func:`~alphafence.geo.vehicle_distance.vehicle_radius`)."""
     items = []
     for f in fences:
         if f.kind not in ("keep_out", "keep_in"):
@@ -115,6 +120,8 @@ def fence_items(fences):
         inclusion = f.kind == "keep_in"
         if f.circle is not None:
             lon, lat, r = f.circle_wgs84
+            x, y = f.circle[:2]  # the site frame's metres read a little long off its origin
+            r = vehicle_radius(lon, lat, r * frame_scale(math.hypot(x, y) + r), not inclusion)
             items.append(
                 FenceItem(CIRCLE_INCLUSION if inclusion else CIRCLE_EXCLUSION, r, lon, lat)
             )

@@ -135,7 +135,7 @@ class FenceSet:
         return cls(records)
 
     def _build(self, geoms):
-        self.local = self.frame.geom_to_local(geoms)
+        self.local = self.frame.read_geom(geoms)  # edges straight in lon/lat, as ArduPilot reads
         shapely.prepare(self.local)
         self.boundary = shapely.boundary(self.local)
         self.tree = shapely.STRtree(self.local)

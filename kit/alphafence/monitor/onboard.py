@@ -151,7 +151,7 @@ class OnboardLayer:
 def _outside_band(inclusion, frame):
     """The keep-out band around an inclusion (WGS84): a box reaching ``OUTSIDE_BAND_M`` beyond
     it, minus the inclusion."""
-    local = frame.geom_to_local(inclusion)
+    local = frame.read_geom(inclusion)
     x0, y0, x1, y1 = local.bounds
     d = OUTSIDE_BAND_M
     return frame.geom_to_wgs84(shapely.box(x0 - d, y0 - d, x1 + d, y1 + d).difference(local))

@@ -170,7 +170,7 @@ class Rerouter:
         self.frame = self.planner.frame
         self.roadmap = self.planner.roadmap
         keep_in = [r for r in records if r.kind == "keep_in"]
-        self.keep_in = [self.frame.geom_to_local(r.geometry) for r in keep_in]
+        self.keep_in = [self.frame.read_geom(r.geometry) for r in keep_in]
         self.keep_in_names = [fence_label(r) for r in keep_in]
 
     @classmethod

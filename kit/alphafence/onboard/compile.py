@@ -161,7 +161,7 @@ def compile_fences(
     0.002
     """
     frame = LocalFrame.around(area)
-    area_local = frame.geom_to_local(area)
+    area_local = frame.read_geom(area)
     corridor = Corridor.around(area_local, distance_m)
     if max_items is not None:
         profile = Profile(
@@ -171,7 +171,7 @@ def compile_fences(
     for rec in records:
         if rec.kind not in ("keep_out", "keep_in"):
             continue
-        local = frame.geom_to_local(rec.geometry)
+        local = frame.read_geom(rec.geometry)  # its edges straight in lon/lat, as written
         if not local.is_valid:
             # a ring that projects to a self-touching one: keep all of it, spikes included
             local = shapely.buffer(shapely.make_valid(local), 1e-3, join_style="mitre")

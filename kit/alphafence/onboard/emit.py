@@ -10,6 +10,9 @@ import shapely
 
 from alphafence.errors import InputError
 from alphafence.geo.coords import quantize_e7
+from alphafence.geo.hold import hold_as_read
+from alphafence.geo.lonlat import READ_TOLERANCE_M, as_read, frame_scale
+from alphafence.geo.vehicle_distance import vehicle_radius
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     POLYGON_EXCLUSION,
@@ -24,6 +27,14 @@ def _round_lonlat(frame, xy):
     lon = np.array([quantize_e7(v) for v in np.atleast_1d(lon)])
     lat = np.array([quantize_e7(v) for v in np.atleast_1d(lat)])
     return lon, lat
+
+
+def _covers(outer, inner, slack_m=READ_TOLERANCE_M + 0.01):
+    """``outer`` covers ``inner`` but for slivers thinner than ``slack_m`` (bows left as
+    they are, rounding to 1e-7 degrees) that the pieces' own pad absorbs."""
+    if outer.covers(inner):
+        return True
+    return shapely.buffer(outer, slack_m, join_style="mitre").covers(inner)
 
 
 def emit_items(pieces, frame, return_point=None):
@@ -59,6 +70,9 @@ def emit_items(pieces, frame, return_point=None):
         if o.kind == "circle":
             x, y, r = o.circle
             lon, lat = _round_lonlat(frame, [(x, y)])
+            # the geodesic radius (the frame reads a little long off its origin), then the
+            # radius ArduPilot's own distance needs to contain it
+            r = vehicle_radius(lon[0], lat[0], r * frame_scale(math.hypot(x, y) + r))
             items.append(
                 FenceItem(
                     CIRCLE_EXCLUSION,
@@ -68,18 +82,21 @@ def emit_items(pieces, frame, return_point=None):
                 )
             )
             continue
-        ring = shapely.LinearRing(o.local.exterior)
+        # held so that its lon/lat reading (ArduPilot's) contains what the polygon contains,
+        # or lies inside it for an inclusion that must not grow
+        held = hold_as_read(shapely.Polygon(o.local.exterior), frame, outward=p.grows)
+        ring = shapely.LinearRing(held.exterior)
         pts = np.asarray(ring.coords)[:-1]
         if not ring.is_ccw:
             pts = pts[::-1]
         lon, lat = _round_lonlat(frame, pts)
-        check = shapely.Polygon(np.column_stack(frame.to_local(lon, lat)))
-        ok = check.is_valid and (check.covers(p.local) if p.grows else p.local.covers(check))
-        if not ok:
+        check = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
+        ok = check.is_valid and (_covers(check, p.local) if p.grows else _covers(p.local, check))
+        if not ok or len(pts) > o.items:
             raise InputError(
                 "compile",
-                f"fence {', '.join(p.sources)}: rounding to 1e-7 degrees broke "
-                "containment; please report this",
+                f"fence {', '.join(p.sources)}: rounding to 1e-7 degrees or reading its edges "
+                "as lon/lat lines broke containment; please report this",
             )
         cmd = POLYGON_INCLUSION if p.inclusion else POLYGON_EXCLUSION
         items.extend(FenceItem(cmd, float(len(pts)), float(a), float(b)) for a, b in zip(lon, lat))

@@ -1,0 +1,103 @@
+"""Fences that hold as they are read: every polygon a build writes contains its restricted area
+plus margin when its edges are straight lon/lat lines (GeoJSON, QGroundControl, ArduPilot),
+not only in the site's metric frame where it was made.
+
+The fences are made in the metric frame; here each one whose edges are long enough to bow
+(:func:`alphafence.geo.lonlat.bow_free`) is held outward (keep-out and warning fences) or
+inward (keep-in) by :func:`alphafence.geo.hold.hold_as_read`, and checked again as read.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+from alphafence.geo.hold import hold_as_read
+from alphafence.geo.lonlat import READ_TOLERANCE_M, ZONE_TOLERANCE_M, as_read, bow_free, frame_scale
+
+# what the lon/lat readings may leave: the zone's densified edges and the check's own
+READ_SLACK_M = ZONE_TOLERANCE_M + READ_TOLERANCE_M
+
+
+def ground_margins(geoms, margins):
+    """Each margin widened by its frame's scale where the site reaches far from the frame's
+    origin (an azimuthal equidistant frame reads distances across its radius too long: a
+    700 km site's 100 m margin is 0.2 m short on the ground unless widened). Margins of
+    sites whose widening is below a millimetre come back as they are.
+
+    Parameters
+    ----------
+    geoms : sequence of shapely geometry
+        The sites' restricted areas, metres in their frames.
+    margins : sequence of float
+
+    Returns
+    -------
+    list of float
+    """
+    out = list(margins)
+    if not len(out):
+        return out
+    b = shapely.bounds(np.asarray(geoms, dtype=object))
+    with np.errstate(invalid="ignore"):
+        reach = np.nan_to_num(np.hypot(np.fmax(np.abs(b[:, 0]), np.abs(b[:, 2])),
+                                       np.fmax(np.abs(b[:, 1]), np.abs(b[:, 3]))))  # fmt: skip
+    for i, (m, r) in enumerate(zip(out, reach.tolist())):
+        if m > 0 and r > 20_000.0:
+            wide = m * frame_scale(r + m)
+            if wide - m > 1e-3:
+                out[i] = wide
+    return out
+
+
+def hold_fences(locals_, frames, outward=True):
+    """Each fence held so that its lon/lat reading contains (``outward``) or stays inside
+    what it contains in its frame; fences whose edges cannot bow come back as they are.
+
+    Parameters
+    ----------
+    locals_ : sequence of shapely geometry
+        Metres, each in its frame.
+    frames : sequence of LocalFrame
+    outward : bool
+
+    Returns
+    -------
+    list of shapely geometry
+    list of bool
+        Which fences were changed.
+    """
+    out = list(locals_)
+    changed = [False] * len(out)
+    for i, (geom, frame) in enumerate(zip(out, frames)):
+        if geom is None or bow_free([geom], frame)[0]:
+            continue
+        held = hold_as_read(geom, frame, outward)
+        if held is not geom:
+            out[i], changed[i] = held, True
+    return out, changed
+
+
+def reads_covering(local, frame, geometry, margin_m) -> bool:
+    """Whether ``local``'s lon/lat reading contains ``geometry`` with ``margin_m`` around it
+    and the readings' tolerances beyond it (the zone's densified edges, the check's own),
+    checked in ``frame``'s metres.
+
+    Parameters
+    ----------
+    local : shapely geometry
+        The fence, metres.
+    frame : LocalFrame
+    geometry : shapely geometry
+        The restricted area, metres.
+    margin_m : float
+
+    Returns
+    -------
+    bool
+    """
+    read = as_read(frame.geom_to_wgs84(local), frame)
+    read = shapely.make_valid(read) if not read.is_valid else read
+    if not shapely.covers(read, geometry):
+        return False
+    return bool(shapely.distance(geometry, shapely.boundary(read)) >= margin_m + READ_SLACK_M)

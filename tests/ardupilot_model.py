@@ -1,0 +1,194 @@
+"""A small model of how ArduPilot decides a fence breach, and a containment check that owes
+nothing to the kit's metric frames.
+
+ArduPilot (``AC_PolyFence_loader::breached``) tests a position against a polygon with
+``Polygon_outside`` on the latitude and longitude integers (1e-7 degrees) of the position and
+of the vertices: straight lines in lat/lng, no wrap at the antimeridian. A circle is breached
+by ``Location::get_distance`` to its centre: a flat-earth distance on a 6,378,137 m sphere,
+the longitude difference scaled by the cosine of the centre's latitude.
+
+:func:`clearance` measures, for the zone's boundary as its file means it (straight lon/lat
+edges, sampled densely), whether ArduPilot would call every sample inside a fence, and the
+geodesic distance (pyproj's ``Geod`` on WGS84) from each sample to the fence's boundary read
+as straight lon/lat lines.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from pyproj import Geod
+from scipy.spatial import cKDTree
+
+GEOD = Geod(ellps="WGS84")
+LATLON_TO_M = 0.011131884502145034  # ArduPilot's LATLON_TO_M: 6378137 m * pi / 180 * 1e-7
+
+
+def e7(deg):
+    """Degrees -> ArduPilot's int32 1e-7 degrees (as the kit's items carry them)."""
+    return np.rint(np.asarray(deg, float) * 1e7).astype(np.int64)
+
+
+def polygon_outside(lat, lon, ring_lat, ring_lon):
+    """ArduPilot's ``Polygon_outside`` for many positions: True where outside.
+
+    Every argument in degrees; all are taken to 1e-7 degree integers first, as the vehicle
+    holds them. The ring is not closed."""
+    px, py = e7(lat), e7(lon)
+    vx, vy = e7(ring_lat), e7(ring_lon)
+    outside = np.ones(px.shape, bool)
+    n = len(vx)
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        crosses = (vy[i] > py) != (vy[j] > py)
+        if not crosses.any():
+            continue
+        dx1, dx2 = px - vx[i], vx[j] - vx[i]
+        dy1, dy2 = py - vy[i], vy[j] - vy[i]
+        if dy2 < 0:
+            flip = dx1 * dy2 > dx2 * dy1
+        else:
+            flip = dx1 * dy2 < dx2 * dy1
+        outside ^= crosses & flip
+    return outside
+
+
+def location_distance_m(lat, lon, clat, clon):
+    """ArduPilot's ``Location::get_distance`` from positions to a circle's centre (metres)."""
+    dlat = (e7(clat) - e7(lat)).astype(float)
+    dlng = (e7(clon) - e7(lon)).astype(float)
+    dlng = np.where(dlng > 1.8e9, dlng - 3.6e9, np.where(dlng < -1.8e9, dlng + 3.6e9, dlng))
+    scale = max(math.cos(math.radians(float(e7(clat)) * 1e-7)), 0.01)
+    return np.hypot(dlat, dlng * scale) * LATLON_TO_M
+
+
+def _unwrap(lon):
+    step = np.diff(lon)
+    jump = np.where(step > 180.0, -360.0, np.where(step < -180.0, 360.0, 0.0))
+    return lon + np.concatenate([[0.0], np.cumsum(jump)])
+
+
+def boundary_samples(geom, spacing_m):
+    """Points along every ring of a lon/lat geometry, edges read as straight lon/lat lines
+    (the short way across the antimeridian), no two more than ``spacing_m`` apart.
+
+    Returns (lon, lat) arrays, longitudes in [-180, 180)."""
+    lons, lats = [], []
+    for poly in shapely.get_parts(geom):
+        if poly.geom_type == "Point":
+            c = np.asarray(poly.coords)
+            lons.append(c[:, 0])
+            lats.append(c[:, 1])
+            continue
+        rings = [poly] if poly.geom_type in ("LineString", "LinearRing") else [
+            poly.exterior, *poly.interiors]  # fmt: skip
+        for ring in rings:
+            c = np.asarray(ring.coords)[:, :2]
+            lon, lat = _unwrap(c[:, 0]), c[:, 1]
+            dx = (
+                np.diff(lon)
+                * 111_320.0
+                * np.cos(np.radians(np.maximum(np.abs(lat[:-1]), np.abs(lat[1:]))))
+            )
+            dy = np.diff(lat) * 111_320.0
+            k = np.maximum(np.ceil(np.hypot(dx, dy) / spacing_m).astype(int), 1)
+            for a in range(len(k)):
+                t = np.arange(k[a] + (a == len(k) - 1)) / k[a]
+                lons.append(lon[a] + (lon[a + 1] - lon[a]) * t)
+                lats.append(lat[a] + (lat[a + 1] - lat[a]) * t)
+    lon = np.concatenate(lons) if lons else np.empty(0)
+    lat = np.concatenate(lats) if lats else np.empty(0)
+    return (lon + 180.0) % 360.0 - 180.0, lat
+
+
+def _xyz(lon, lat):
+    lo, la = np.radians(lon), np.radians(lat)
+    return np.column_stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)])
+
+
+def clearance(zone, rings, spacing_m=None, margin_m=0.0):
+    """How a zone sits in a fence made of lon/lat ``rings``, as ArduPilot reads them.
+
+    Parameters
+    ----------
+    zone : shapely geometry
+        Lon/lat, its edges meant as straight lon/lat lines.
+    rings : list of ndarray
+        Each a polygon's (n, 2) lon/lat vertices: the fence's parts (a point is inside the
+        fence when it is inside any part).
+    spacing_m : float, optional
+        Sample spacing along the zone's boundary (default: a tenth of the margin, at most
+        50 m, at least 0.5 m).
+    margin_m : float
+
+    Returns
+    -------
+    outside : int
+        Zone samples ArduPilot would call outside every part.
+    distance : float
+        The least geodesic distance (metres) from a zone sample to a part's boundary (inf
+        when none is within twice the margin plus a kilometre); the parts' shared edges
+        along the antimeridian are not boundary.
+    """
+    if spacing_m is None:
+        spacing_m = min(max(margin_m / 10.0, 0.5), 50.0)
+    lon, lat = boundary_samples(zone, spacing_m)
+    inside = np.zeros(lon.shape, bool)
+    for ring in rings:
+        inside |= ~polygon_outside(lat, lon, ring[:, 1], ring[:, 0])
+    # the fence's boundary, sampled along its lon/lat edges
+    segs = []
+    for ring in rings:
+        closed = np.vstack([ring, ring[:1]])
+        for a, b in zip(closed[:-1], closed[1:]):
+            if abs(a[0]) == 180.0 and abs(b[0]) == 180.0:
+                continue  # a cut along the antimeridian between two parts
+            segs.append((a, b))
+    if not segs:
+        return int((~inside).sum()), math.inf
+    a = np.array([s[0] for s in segs])
+    b = np.array([s[1] for s in segs])
+    b[:, 0] = a[:, 0] + (b[:, 0] - a[:, 0] + 180.0) % 360.0 - 180.0
+    fine = max(spacing_m, 1.0)
+    length = np.hypot((b[:, 0] - a[:, 0]) * np.cos(np.radians(np.maximum(abs(a[:, 1]),
+                                                                        abs(b[:, 1])))),
+                      b[:, 1] - a[:, 1]) * 111_320.0  # fmt: skip
+    k = np.maximum(np.ceil(length / fine).astype(int), 1)
+    seg_of = np.repeat(np.arange(len(segs)), k + 1)
+    t = np.concatenate([np.arange(n + 1) / n for n in k])
+    slon = a[seg_of, 0] + (b[seg_of, 0] - a[seg_of, 0]) * t
+    slat = a[seg_of, 1] + (b[seg_of, 1] - a[seg_of, 1]) * t
+    tree = cKDTree(_xyz(slon, slat))
+    reach = (2.0 * margin_m + 2.0 * fine + 1000.0) / 6_371_000.0  # farther: clear enough
+    _, near = tree.query(_xyz(lon, lat), k=min(4, len(slon)), distance_upper_bound=reach)
+    near = near.reshape(len(lon), -1)
+    best = np.full(len(lon), np.inf)
+    for column in near.T:
+        # the nearest point of each candidate segment, found in a plane tangent at the sample
+        found = column < len(slon)
+        s = seg_of[np.where(found, column, 0)]
+        cos = np.cos(np.radians(lat))
+        ax = ((a[s, 0] - lon + 180.0) % 360.0 - 180.0) * cos
+        bx = ax + (b[s, 0] - a[s, 0]) * cos
+        ay, by = a[s, 1] - lat, b[s, 1] - lat
+        dx, dy = bx - ax, by - ay
+        dd = dx * dx + dy * dy
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = np.clip(np.where(dd > 0, -(ax * dx + ay * dy) / dd, 0.0), 0.0, 1.0)
+        qlon = a[s, 0] + (b[s, 0] - a[s, 0]) * u
+        qlat = a[s, 1] + (b[s, 1] - a[s, 1]) * u
+        _, _, dist = GEOD.inv(lon, lat, (qlon + 180.0) % 360.0 - 180.0, qlat)
+        best = np.minimum(best, np.where(found, dist, np.inf))
+    return int((~inside).sum()), float(best.min()) if len(best) else math.inf
+
+
+def excursion_m(zone, rings, margin_m, spacing_m=None):
+    """How far the zone plus ``margin_m`` reaches beyond the fence as ArduPilot reads it
+    (0 when it holds): the margin less the least clearance, or the margin plus the least
+    clearance when zone samples lie outside."""
+    outside, dist = clearance(zone, rings, spacing_m, margin_m)
+    if outside:
+        return margin_m + dist
+    return max(0.0, margin_m - dist)
