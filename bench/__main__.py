@@ -22,6 +22,7 @@ from bench import (
     monitor_cpu_bench,
     rolling_bench,
     route_bench,
+    route_national_bench,
     scale_bench,
     soak_bench,
     upload_bench,
@@ -88,6 +89,7 @@ def main(argv=None) -> int:
         rows += rolling_bench.in_flight(args.osm, build_bench.Row)
     if args.only in (None, "route"):
         rows += route_bench.run(args.osm, build_bench.Row)
+        rows += route_national_bench.run(build_bench.Row)
     if args.only in (None, "scale"):
         rows += scale_bench.run(args.osm, build_bench.Row, console, args.scale_sizes)
     if args.only == "soak":
