@@ -182,18 +182,19 @@ async def retry(what, call, timeout):
             await asyncio.sleep(1.0)
 
 
-async def fence_and_telemetry(vehicle, log, items, poll=0.05):
+async def fence_and_telemetry(vehicle, log, items, poll=0.05, params="copter-rtl"):
     """The common start of a fenced SITL flight: upload the exclusion ``items`` and the
-    ``copter-rtl`` parameters (each read back by the kit), stream positions and velocities at
-    10 Hz and FENCE_STATUS at 2 Hz, and wait for the first of each; the vehicle must not be in
-    breach on the ground at home."""
+    ``params`` profile's parameters (each read back by the kit), stream positions and
+    velocities at 10 Hz and FENCE_STATUS at 2 Hz, and wait for the first of each; the vehicle
+    must not be in breach on the ground at home."""
     from alphafence.vehicle.fence_transfer import upload_fence
     from alphafence.vehicle.params import PROFILES, apply_params
 
     report = await upload_fence(vehicle, items)
     assert report.verified and report.items == len(items)
-    params = await apply_params(vehicle, PROFILES["copter-rtl"])
-    assert params.values["FENCE_ENABLE"] == 1 and params.values["FENCE_ACTION"] == 1
+    got = await apply_params(vehicle, PROFILES[params])
+    action = PROFILES[params]["FENCE_ACTION"]
+    assert got.values["FENCE_ENABLE"] == 1 and got.values["FENCE_ACTION"] == action
 
     await vehicle.telemetry.set_rate_position(10.0)
     await vehicle.telemetry.set_rate_velocity_ned(10.0)

@@ -1,44 +1,49 @@
-"""The uploaded fence is enforced by ArduPilot itself: real copter SITL, a flight into it.
+"""ArduPilot alone keeps a copter out of a restricted zone behind a kit-built fence: real copter
+SITL, flown straight at the zone in GUIDED, no companion monitor.
 
-An exclusion square (100 m x 100 m, near edge 150 m north of home) is uploaded with the kit's
-own uploader, the ``copter-rtl`` parameters are applied (FENCE_ACTION 1: RTL or land), and the
-copter takes off in GUIDED to 20 m and is sent to a point 400 m north, *beyond* the square (a
-GUIDED target inside an exclusion zone is silently ignored, so the track has to cross it). The
-test asserts that ArduPilot reports the breach (FENCE_STATUS breach_status 1, a boundary
-breach, "Polygon fence breached") where the square is, switches to RTL within a few seconds of
-it, never gets across the square, and flies back out of it.
+The zone is a hospital's grounds (an 80 m wide polygon, its near edge 200 m north of home).
+The kit builds its fence (``build_fences`` with the default rules: keep-out, the hospital
+margin), compiles it for a Copter's storage (``compile_fences``) and uploads it with the
+``copter-brake`` parameters (FENCE_ACTION 4: brake or land; or ``copter-rtl``, 1: RTL), each
+read back. The copter takes off to 20 m in GUIDED and is sent at the zone, to a point beyond
+it (a GUIDED target inside an exclusion is ignored), at 5 or 10 m/s. ArduPilot declares the
+breach as it crosses the fence and switches to BRAKE (RTL); the test waits for the copter to
+stand still (to be back out of the fence) and measures, from every GLOBAL_POSITION_INT, with
+geodesic distances (pyproj Geod, WGS84), how deep it got past the fence it holds and how close
+it came to the zone itself. It asserts that ArduPilot acted (a breach reported, then the
+mode) and that the margin absorbed the overshoot (never inside the zone).
 
-MAVSDK's telemetry has no FENCE_STATUS, so it is read as a MAVLink message (the Vehicle's
-``messages``, on either link) on the same connection (only one program can own the SITL UDP
-port), after asking for it with MAV_CMD_SET_MESSAGE_INTERVAL. ArduPilot streams nothing by
-default on this link: positions and velocities are asked for with ``set_rate_*`` too.
-
-Measured (egham, speedup 5, 2-core machine; 6 runs, two of them side by side; wall-clock
-seconds, x5 for sim time): arming succeeds at the first try (the fixture already waited for a
-position estimate); takeoff command to 18 m 2.44 s; goto to breach 3.50 s; takeoff command to
-breach 5.94-5.96 s; ground speed 10.0 m/s; the last position before the breach report
-149.4-150.1 m north, i.e. the breach is declared at the square's edge itself (FENCE_MARGIN does
-not move it); flight mode RTL reported 0.006-0.012 s after the FENCE_STATUS breach (the same
-scheduler tick: ArduPilot switches mode as it declares the breach); the STATUSTEXTs "Polygon
-fence breached", "Manual recovery started", later "Fence breach cleared"; farthest north
-171.2-171.8 m (about 21 m past the edge); back out of the square and FENCE_STATUS clear
-2.15-2.20 s after the breach. The test takes about 17 s wall, SITL start included.
+Measured (egham, speedup 5, ``+`` quad, FENCE_ACTION 4, FENCE_MARGIN 2, GLOBAL_POSITION_INT
+at 10 Hz of sim time): the breach is reported within 0.7 m of the fence (the last position
+before the report) and BRAKE 0.03 s of sim time after it; the copter stands still about 4.5 s
+(5 m/s) and 5 s (10 m/s) of sim time later, 9.3-9.4 m (5 m/s, 2 runs) and 21.0-21.3 m
+(10 m/s, 5 runs) past the fence; the same at speedup 1 (21.1 m). With FENCE_ACTION 1 (RTL)
+6.6 m (5 m/s) and 21.2-21.6 m (10 m/s, 3 runs). The hospital's 30 m margin keeps it 21 m and 9.5 m from the zone.
 """
 
 from __future__ import annotations
 
+import asyncio
 import time
 
+import numpy as np
+import pyproj
 import pytest
+import shapely
 
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.features import Feature
+from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.geo.coords import from_e7
 from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink import ids
+from alphafence.mavlink.items import POLYGON_EXCLUSION
+from alphafence.mavlink.storage import PROFILES as STORAGE
+from alphafence.onboard.compile import compile_fences
 from alphafence.vehicle.link import open_vehicle
 from tests.sitl_flight import (
     ALTITUDE,
-    FAR_EDGE,
-    NEAR_EDGE,
     FlightLog,
-    exclusion_items,
     fence_and_telemetry,
     take_off,
     until,
@@ -50,100 +55,158 @@ from tests.sitl_flight import (
 pytestmark = pytest.mark.sitl
 
 EGHAM = {"home": "egham", "speedup": 5}
+GEOD = pyproj.Geod(ellps="WGS84")
 
-# metres north of home (the square: tests/sitl_flight.py)
-TARGET_NORTH = 400.0  # beyond the square: GUIDED ignores targets inside an exclusion zone
-SPEED = 10.0  # m/s: WPNAV_SPEED's default, also asked for with DO_CHANGE_SPEED
-
-WALL_TIMEOUT = 120.0  # the whole flight, from connecting to the vehicle
-MODE_SWITCH_MAX = 3.0  # wall seconds between the breach report and RTL (measured: ~0)
-
-FENCE_BREACH_BOUNDARY = 3
-
-
-@pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
-async def test_uploaded_exclusion_is_enforced_with_rtl(sitl):
-    log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
-    await within(_fly_into_the_fence(sitl, log), WALL_TIMEOUT, log)
+# The hospital's grounds, metres east (x) / north (y) of home: the near edge square to the
+# track (the worst case: the whole overshoot goes into the margin), the rest irregular.
+ZONE_XY = [(-40.0, 200.0), (40.0, 200.0), (55.0, 240.0), (10.0, 265.0), (-35.0, 250.0)]
+HOSPITAL = {"amenity": "hospital", "name": "St. Egham's"}
+TARGET_NORTH = 600.0  # beyond the zone and its fence
+STOPPED_MPS = 0.2  # standing still: horizontal speed under this
+HELD_FIXES = 20  # positions after standing still, to see that it stays stopped (2 s of sim time)
+WALL_TIMEOUT = 180.0  # the whole flight: a hang fails, it is no bound on how long it takes
+STEP_DEG = 2e-6  # boundaries sampled at most 0.27 m apart: a distance reads at most 0.14 m long
 
 
-async def _fly_into_the_fence(sitl, log: FlightLog):
-    home = sitl.home
+def kit_fence(home, rules, tags):
+    """The zone (lon/lat polygon), its keep-out fence as the kit builds it, and the items the
+    kit compiles from it for a Copter, with the rule that made it."""
+    frame = LocalFrame(home.lon, home.lat)
+    xs, ys = np.array(ZONE_XY).T
+    zone = shapely.Polygon(np.column_stack(frame.to_wgs84(xs, ys)))
+    rule = rules.match(tags.get, "area")
+    result = build_fences([Feature(zone, tags, "way/1", "test", rule)], rules, BuildOptions())
+    fence = next(f for f in result.fences if f.kind == "keep_out")
+    records = [FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m) for f in result.fences]
+    path = shapely.LineString([frame.to_wgs84(0.0, 0.0), frame.to_wgs84(0.0, TARGET_NORTH)])
+    compiled = compile_fences(records, path, STORAGE["copter"], distance_m=1000)
+    return zone, fence, compiled.items, rule
+
+
+def onboard_polygon(items):
+    """The exclusion polygon the vehicle holds, lon/lat (ArduPilot reads its edges as straight
+    lines in lon/lat, as shapely does here)."""
+    assert items and all(i.command == POLYGON_EXCLUSION for i in items), items
+    return shapely.Polygon([(i.lon, i.lat) for i in items])
+
+
+def geodesic_to_boundary(polygon, lon, lat):
+    """Geodesic distance (m) from each position to ``polygon``'s boundary, its edges straight
+    in lon/lat, sampled every STEP_DEG; negative outside, positive inside."""
+    ring = shapely.get_coordinates(shapely.segmentize(polygon.boundary, STEP_DEG))
+    lon, lat = np.asarray(lon, float), np.asarray(lat, float)
+    out = np.empty(lon.size)
+    for k, (x, y) in enumerate(zip(lon, lat)):
+        _, _, d = GEOD.inv(np.full(len(ring), x), np.full(len(ring), y), ring[:, 0], ring[:, 1])
+        out[k] = d.min()
+    return np.where(shapely.contains_xy(polygon, lon, lat), out, -out)
+
+
+async def fly_at_the_zone(sitl, log, items, speed, fixes, params="copter-brake"):
+    """Upload ``items`` and ``params``, take off and fly GUIDED at ``speed`` at the zone until
+    ArduPilot has braked the copter to a standstill (FENCE_ACTION 4) or flown it back out of
+    the fence (RTL); ``fixes`` collects every GLOBAL_POSITION_INT as (t, lon, lat, vx, vy).
+    Returns the times of the goto and of the breach."""
     frame = log.frame
     async with open_vehicle(sitl.connection_url) as vehicle:
         log.texts = vehicle.texts
-        action = vehicle.action
-        watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence")
+        sysid = await vehicle.system_id()
+
+        async def positions():
+            async for m in vehicle.messages("GLOBAL_POSITION_INT"):
+                if m.system_id == sysid:
+                    f = m.fields
+                    lon, lat = from_e7(f["lon"]), from_e7(f["lat"])
+                    fixes.append((time.monotonic(), lon, lat, f["vx"], f["vy"]))
+
+        watchers = watch(log, vehicle, "positions", "modes", "custom_modes", "fence")
+        watchers.append(asyncio.create_task(positions()))
         try:
-            # -- the fence and its parameters, each read back by the kit
-            await fence_and_telemetry(vehicle, log, exclusion_items(frame))
-
-            # -- arm and take off in GUIDED (named OFFBOARD, as MAVSDK names it)
-            t_takeoff, t_up = await take_off(action, log)
+            await fence_and_telemetry(vehicle, log, items, params=params)
+            await take_off(vehicle.action, log)
             assert not log.first_breach(), "breach before the vehicle was sent anywhere"
-
-            # -- across the square: a target beyond it, 400 m north, at 10 m/s
             lon, lat = frame.to_wgs84(0.0, TARGET_NORTH)
-            await action.set_current_speed(SPEED)
-            await action.goto_location(float(lat), float(lon), home.alt + ALTITUDE, 0.0)
+            await vehicle.action.goto_location(float(lat), float(lon), sitl.home.alt + ALTITUDE)
+            # after the goto: GUIDED's first target after the takeoff resets WPNAV_SPEED
+            await vehicle.action.set_current_speed(speed)
             t_goto = time.monotonic()
-
-            # (a) ArduPilot reports the breach, at the square's near edge
-            await until("FENCE_STATUS breach", log.first_breach, 60, log, poll=0.01)
-            t_breach, status = log.first_breach()
-            assert status["breach_type"] == FENCE_BREACH_BOUNDARY, status
-            assert status["breach_count"] >= 1, status
-            _, x, y, alt = log.last_position(before=t_breach)
-            assert abs(x) < 10 and NEAR_EDGE - 15 <= y <= NEAR_EDGE + 15, (x, y)
-            assert alt > 0.8 * ALTITUDE, alt
-            speed = max(s for t, s in log.speeds if t_goto <= t <= t_breach)
-            assert speed > 0.8 * SPEED, f"only {speed:.1f} m/s on the way in"
-
-            # (b) ... and switches to the configured action, RTL, within a few seconds
+            await until("FENCE_STATUS breach", log.first_breach, 90, log, poll=0.01)
+            t_breach = log.first_breach()[0]
+            want = ids.COPTER_MODE_BRAKE if params == "copter-brake" else ids.COPTER_MODE_RTL
             await until(
-                "RTL after the breach",
-                lambda: log.mode() == "RETURN_TO_LAUNCH",
-                MODE_SWITCH_MAX,
+                f"mode {want} after the breach",
+                lambda: log.custom_modes[-1][1] == want,
+                30,
                 log,
                 poll=0.01,
             )
-            t_rtl = next(t for t, m in log.modes if m == "RETURN_TO_LAUNCH")
-            assert abs(t_rtl - t_breach) <= MODE_SWITCH_MAX
-            await until(
-                "the breach STATUSTEXT",
-                lambda: any(
-                    "fence breached" in text.lower() for t, text in vehicle.texts if t >= t_takeoff
-                ),
-                5,
-                log,
-            )
-
-            # the vehicle never got across the square (it overshoots the edge by about 20 m at
-            # 10 m/s), and RTL brings it back out of it
-            t_out = await until(
-                "back south of the square",
-                lambda: log.positions[-1][2] < NEAR_EDGE - 10,
-                30,
-                log,
-            )
-            t_clear = await until(
-                "FENCE_STATUS breach cleared",
-                lambda: log.fence[-1][1]["breach_status"] == 0,
-                30,
-                log,
-            )
-            farthest = max(p[2] for p in log.positions)
-            assert farthest < NEAR_EDGE + 40 < FAR_EDGE, f"flew {farthest:.0f} m north"
-            assert log.mode() == "RETURN_TO_LAUNCH", log.mode()
-            said = [text for t, text in vehicle.texts if t >= t_takeoff]
-
-            print(
-                f"\nenforcement: takeoff->{ALTITUDE * 0.9:.0f} m {t_up - t_takeoff:.2f} s, "
-                f"goto->breach {t_breach - t_goto:.2f} s, takeoff->breach "
-                f"{t_breach - t_takeoff:.2f} s, breach at y={y:.1f} m, {speed:.1f} m/s, "
-                f"RTL {t_rtl - t_breach:+.3f} s after the breach, farthest {farthest:.1f} m, "
-                f"out {t_out - t_breach:.2f} s and cleared {t_clear - t_breach:.2f} s after it, "
-                f"speedup {sitl.speedup:g} | {'; '.join(said)}"
-            )
+            if want == ids.COPTER_MODE_BRAKE:
+                await until(
+                    "standing still in BRAKE",
+                    lambda: (
+                        fixes[-1][0] > t_breach and np.hypot(*fixes[-1][3:]) < STOPPED_MPS * 100
+                    ),
+                    60,
+                    log,
+                )
+                n = len(fixes)
+                await until(
+                    "positions after stopping", lambda: len(fixes) >= n + HELD_FIXES, 30, log
+                )
+            else:
+                polygon = onboard_polygon(items)
+                await until(
+                    "back out of the fence",
+                    lambda: (
+                        fixes[-1][0] > t_breach
+                        and not shapely.contains_xy(polygon, fixes[-1][1], fixes[-1][2])
+                    ),
+                    60,
+                    log,
+                )
+            return t_goto, t_breach
         finally:
             await unwatch(watchers)
+
+
+def measure(zone, fence, items, fixes, t_goto, t_breach):
+    """What the flight did, from its positions after the goto: speed before the breach (m/s),
+    depth at the breach report and deepest past the onboard fence and the kit's fence (m),
+    least distance to the zone (m, negative inside it)."""
+    t, lon, lat, vx, vy = (np.array(c) for c in zip(*[f for f in fixes if f[0] >= t_goto]))
+    onboard = geodesic_to_boundary(onboard_polygon(items), lon, lat)
+    kit = geodesic_to_boundary(fence.geometry, lon, lat)
+    to_zone = -geodesic_to_boundary(zone, lon, lat)
+    before = t <= t_breach
+    return {
+        "speed": float(np.hypot(vx, vy)[before].max() / 100.0),
+        "at_breach": float(onboard[before][-1]),
+        "past_onboard": float(onboard.max()),
+        "past_fence": float(kit.max()),
+        "to_zone": float(to_zone.min()),
+    }
+
+
+@pytest.mark.parametrize(
+    "params, speed", [("copter-brake", 5.0), ("copter-brake", 10.0), ("copter-rtl", 10.0)]
+)
+@pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
+async def test_arducopter_stops_before_a_kit_built_zone(sitl, rules, params, speed):
+    zone, fence, items, rule = kit_fence(sitl.home, rules, HOSPITAL)
+    assert rule.kind == "keep_out" and fence.margin_m == rule.margin_m
+    log = FlightLog(LocalFrame(sitl.home.lon, sitl.home.lat))
+    fixes = []
+    t_goto, t_breach = await within(
+        fly_at_the_zone(sitl, log, items, speed, fixes, params), WALL_TIMEOUT, log
+    )
+    m = measure(zone, fence, items, fixes, t_goto, t_breach)
+    said = "; ".join(text for _, text in log.texts)
+    print(
+        f"\n{params} {speed:g} m/s ({rule.category}, margin {rule.margin_m:g} m): flew "
+        f"{m['speed']:.1f} m/s, breach reported {m['at_breach']:+.2f} m past the onboard fence, "
+        f"deepest {m['past_onboard']:.2f} m past it ({m['past_fence']:.2f} m past the kit's "
+        f"fence), closest to the zone {m['to_zone']:.2f} m | {said}"
+    )
+    assert 0.9 * speed < m["speed"] < 1.1 * speed, f"{m['speed']:.1f} m/s on the way in"
+    assert m["past_onboard"] > 0, "ArduPilot acted before the fence: nothing was measured"
+    assert m["to_zone"] > 0, f"entered the zone: {-m['to_zone']:.1f} m deep"
