@@ -63,14 +63,16 @@ def test_a_one_circle_ed269_file_is_one_circle_item_for_a_copter(rules):
     db = read_database([DATA / "ed269" / "feet-circle.json"], rules)
     result = build_fences(db.features, rules)
     fences = zone_fences(result, "FT-C01")
-    assert_circle_fence(fences["keep_out"], 8.5421, 47.3769, 304.8, 10.0)
+    (zone,) = [f for f in db.features if f.source == "FT-C01"]
+    margin = zone.rule.margin_m  # the rules' geozone margin
+    assert_circle_fence(fences["keep_out"], 8.5421, 47.3769, 304.8, margin)
     assert fences["warning"].circle is not None  # its warning layer: a circle 30 m further
     assert fences["warning"].circle[2] == pytest.approx(fences["keep_out"].circle[2] + 30.0)
     (item,) = fence_items([fences["keep_out"]])
     assert item.command == CIRCLE_EXCLUSION
     # the item's radius as ArduPilot measures distance: the zone plus margin (a geodesic
     # circle) lies inside it, and it is no more than 0.7 % larger than the fence's radius
-    assert_vehicle_circle_holds(item, 8.5421, 47.3769, 304.8 + 10.0)
+    assert_vehicle_circle_holds(item, 8.5421, 47.3769, 304.8 + margin)
     assert fences["keep_out"].circle[2] <= item.param1 <= fences["keep_out"].circle[2] * 1.007
     box = shapely.box(8.53, 47.37, 8.55, 47.385)
     onboard = compile_fences(result.fences, box, PROFILES["copter"])
@@ -82,7 +84,8 @@ def test_a_one_circle_ed269_file_is_one_circle_item_for_a_copter(rules):
 def test_an_ed318_point_with_a_circle_extent(rules):
     db = read_database([DATA / "ed269" / "ed318.json"], rules)
     fences = zone_fences(build_fences(db.features, rules), "E318C2")
-    assert_circle_fence(fences["keep_out"], 8.6201, 47.4101, 500.0, 10.0)
+    (zone,) = [f for f in db.features if f.source == "E318C2"]
+    assert_circle_fence(fences["keep_out"], 8.6201, 47.4101, 500.0, zone.rule.margin_m)
     # the polygon zone of the same file stays a polygon
     assert zone_fences(build_fences(db.features, rules), "E318P1")["keep_out"].circle is None
 

@@ -58,3 +58,16 @@ def test_bad_rules_are_one_line_errors(tmp_path, text, expected):
     with pytest.raises(InputError) as err:
         load_rules(f)
     assert str(err.value).startswith(str(f)) and expected in str(err.value)
+
+
+def test_default_keep_out_margins_absorb_arducopters_own_stop_at_10_m_s(rules):
+    """ArduPilot alone (FENCE_ACTION brake or RTL) stops a copter flown at 10 m/s about 21 m
+    past its fence (tests/test_enforcement_sitl.py measures it): every keep-out margin of the
+    default rules is at least the margin the kit documents for 10 m/s."""
+    from alphafence.vehicle.params import MARGIN_FOR_SPEED_M, STOP_OVERSHOOT_M
+
+    need = MARGIN_FOR_SPEED_M[10.0]
+    assert need > STOP_OVERSHOOT_M[10.0]
+    keep_out = [r for r in rules.rules if r.kind == "keep_out"]
+    assert keep_out
+    assert [(r.category, r.margin_m) for r in keep_out if r.margin_m < need] == []

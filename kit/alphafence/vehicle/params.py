@@ -40,6 +40,21 @@ PROFILES = {
 }
 INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "BRD_SD_FENCE"}
 
+# How far a Copter goes past the fence it holds when ArduPilot alone acts on the breach
+# (FENCE_ACTION 4, copter-brake, or 1, copter-rtl), flown straight at the fence at each ground
+# speed (m/s): the deepest position past it, metres, measured on Copter SITL (+ quad, no wind,
+# exact positions; the breach is declared at the fence itself, FENCE_MARGIN 2 does not move
+# it). BRAKE: 9.3-9.4 m at 5 m/s, 21.0-21.3 m at 10 m/s; RTL: 6.6 m and 21.2-21.8 m. Each is
+# the deepest measured rounded up to leave at least half a metre (5 m/s) and a metre (10 m/s)
+# for where the breach is caught (ArduPilot checks the fence 25 times a second).
+STOP_OVERSHOOT_M = {5.0: 10.0, 10.0: 23.0}
+# The margin a keep-out fence needs around its zone at each speed when the vehicle's own fence
+# is all that stops it: at least 2 m beyond the overshoot, in steps of 5 m. What is left of it
+# (about 3.5 m at 10 m/s) is all there is for the vehicle's position error and wind. The default
+# rules' keep-out margins are at least the 10 m/s one (WPNAV_SPEED's default); flying faster
+# needs wider margins (``--margin``, or a rules file).
+MARGIN_FOR_SPEED_M = {5.0: 15.0, 10.0: 25.0}
+
 
 class ParamError(VehicleError):
     """A fence parameter could not be set or read, or reads back differently."""
