@@ -9,11 +9,20 @@ inward (keep-in) by :func:`alphafence.geo.hold.hold_as_read`, and checked again 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import shapely
 
 from alphafence.geo.hold import hold_as_read
-from alphafence.geo.lonlat import READ_TOLERANCE_M, ZONE_TOLERANCE_M, as_read, bow_free, frame_scale
+from alphafence.geo.lonlat import (
+    READ_TOLERANCE_M,
+    ZONE_TOLERANCE_M,
+    as_read,
+    bow_free,
+    frame_scale,
+    unwrap_lon,
+)
 
 # what the lon/lat readings may leave: the zone's densified edges and the check's own
 READ_SLACK_M = ZONE_TOLERANCE_M + READ_TOLERANCE_M
@@ -101,3 +110,71 @@ def reads_covering(local, frame, geometry, margin_m) -> bool:
     if not shapely.covers(read, geometry):
         return False
     return bool(shapely.distance(geometry, shapely.boundary(read)) >= margin_m + READ_SLACK_M)
+
+
+def split_at_antimeridian(fences):
+    """Fences that reach across ±180° of longitude, split into a part on each side
+    (RFC 7946 §3.1.9): ArduPilot and every lon/lat reader join vertices without wrapping, so
+    one ring from 179.99° to -179.99° would span the world. The split is made on the lon/lat
+    reading itself (each edge crossing the antimeridian cut where its straight lon/lat line
+    meets it), so the parts read together exactly as the whole did; the parts' shared edges
+    run along the meridian, straight in lon/lat. The split geometry becomes the fence's
+    ``wgs84``. Fences far from the antimeridian are not looked at.
+
+    Parameters
+    ----------
+    fences : list of Fence
+
+    Returns
+    -------
+    list of Fence
+        The same fences, those across the antimeridian with their parts set.
+    """
+    for f in fences:
+        frame = f.frame
+        b = shapely.bounds(f.local)
+        reach = float(np.nanmax(np.abs(b))) if np.isfinite(b).all() else 0.0
+        scale = max(math.cos(math.radians(min(abs(frame.lat0) + reach / 111_000.0, 89.9))), 1e-3)
+        if abs(frame.lon0) + reach / (111_000.0 * scale) < 179.0:
+            continue
+        split = split_lonlat(f.geometry)
+        if split is not None:
+            f.wgs84 = split
+    return fences
+
+
+def split_lonlat(geom):
+    """A lon/lat polygon whose rings step across ±180° (read the short way) split into parts
+    on each side, or None when it does not cross.
+
+    Examples
+    --------
+    >>> square = shapely.box(179.99, 0.0, 180.01, 0.01)  # as a frame writes it: wrapped
+    >>> wrapped = shapely.Polygon([(179.99, 0), (-179.99, 0), (-179.99, 0.01), (179.99, 0.01)])
+    >>> [p.bounds for p in split_lonlat(wrapped).geoms]
+    [(179.99, 0.0, 180.0, 0.01), (-180.0, 0.0, -179.99, 0.01)]
+    """
+    parts = shapely.get_parts(geom)
+    crossing = False
+    moved = []
+    for part in parts.tolist():
+        rings = [part.exterior, *part.interiors]
+        out = []
+        for ring in rings:
+            c = np.asarray(ring.coords)[:, :2]
+            lon = unwrap_lon(c[:, 0])
+            crossing |= bool(lon.max() > 180.0 or lon.min() < -180.0)
+            if lon.min() < -180.0:
+                lon = lon + 360.0
+            out.append(np.column_stack([lon, c[:, 1]]))
+        moved.append(shapely.Polygon(out[0], out[1:]))
+    if not crossing:
+        return None
+    whole = shapely.union_all(moved)
+    east = shapely.intersection(whole, shapely.box(-180.0, -90.0, 180.0, 90.0))
+    west = shapely.intersection(whole, shapely.box(180.0, -90.0, 540.0, 90.0))
+    west = shapely.transform(west, lambda c: c - np.array([360.0, 0.0]))
+    pieces = [
+        p for g in (east, west) for p in shapely.get_parts(g).tolist() if p.geom_type == "Polygon"
+    ]
+    return shapely.MultiPolygon(pieces)

@@ -29,6 +29,9 @@ class FenceOptions:
         Width of the warning layer around keep-out fences (0: none).
     margin_m : float, optional
         Overrides every rule's margin (0 is the paper's setting).
+    max_overshoot_m : float, optional
+        No simplified fence reaches farther than this beyond the shape its method drew
+        (more vertices than ``max_vertices`` where needed); None: the budget alone.
     """
 
     method: str = "alpha"
@@ -37,6 +40,7 @@ class FenceOptions:
     tolerance_m: float = 1.0
     warn_distance_m: float = 30.0
     margin_m: float | None = None  # overrides every rule's margin (0 = the paper's setting)
+    max_overshoot_m: float | None = None  # bounds simplification by distance, not only count
 
 
 @dataclass
@@ -67,6 +71,12 @@ class Fence:
         The fence failed its containment check and was united with the required region.
     properties : dict
         ED-269 restriction, reasons, references and applicability, when the features had them.
+    growth : float
+        Its area over the area of its restricted area plus margin (1 for a fence that is
+        that region; the build's summary names fences far larger).
+    wgs84 : shapely geometry, optional
+        Its lon/lat geometry when it is not ``local``'s vertices transformed: a fence across
+        the antimeridian, split into a part on each side.
 
     Examples
     --------
@@ -95,10 +105,14 @@ class Fence:
     alpha_m: float | None = None
     repaired: bool = False
     properties: dict = field(default_factory=dict)
+    growth: float = 1.0
+    wgs84: object = None
 
     @property
     def geometry(self):
         """The fence in WGS84 (lon, lat)."""
+        if self.wgs84 is not None:
+            return self.wgs84
         g = getattr(self, "_wgs84", None)
         if g is None:
             g = self.frame.geom_to_wgs84(self.local)

@@ -16,13 +16,18 @@ import shapely
 from shapely.ops import polylabel
 
 from alphafence.build import METHODS
-from alphafence.build.as_read import ground_margins, hold_fences, reads_covering
+from alphafence.build.as_read import (
+    ground_margins,
+    hold_fences,
+    reads_covering,
+    split_at_antimeridian,
+)
+from alphafence.build.budget import plain_polygons, simplify_parts
 from alphafence.build.fence_types import Fence, FenceOptions
 from alphafence.build.sites import circle_steps
 from alphafence.build.zone_circle import zone_circle
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
 from alphafence.geo.outward import simplify_polygon
-from alphafence.geo.outward_many import simplify_polygons
 
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
 QUAD_SEGS = 6
@@ -59,34 +64,6 @@ def enclosing_circle(region):
     return cx, cy, r * (1 + 1e-9) + 1e-6
 
 
-def _simplify_parts(geoms, opts):
-    """Each geometry's polygons simplified outward (all of them in one pass), a geometry of
-    several united again with their holes filled."""
-    geoms = _array(geoms)
-    plain = _plain_polygons(geoms)
-    if plain.all():  # each geometry is its one polygon
-        return simplify_polygons(geoms, opts.max_vertices, opts.tolerance_m, outward=True)
-    polys = [[g] if one else outer_polygons(g) for g, one in zip(geoms.tolist(), plain.tolist())]
-    flat = simplify_polygons(
-        [p for ps in polys for p in ps], opts.max_vertices, opts.tolerance_m, outward=True
-    )
-    out, at = [], 0
-    for ps in polys:
-        parts, at = flat[at : at + len(ps)], at + len(ps)
-        out.append(parts[0] if len(parts) == 1 else fill_holes(shapely.union_all(parts)))
-    return out
-
-
-def _plain_polygons(geoms):
-    """Which of ``geoms`` are non-empty polygons without holes (their own
-    :func:`outer_polygons`), for all of them at once."""
-    return (
-        (shapely.get_type_id(geoms) == 3)
-        & ~shapely.is_empty(geoms)
-        & (shapely.get_num_interior_rings(geoms) == 0)
-    )
-
-
 def outer_fence(region, opts):
     """An enclosing fence of ``region`` (metres) by ``opts.method``.
 
@@ -112,16 +89,16 @@ def outer_fences(regions, opts):
     method = opts.method
     if method == "alpha":
         regions = _array(regions)
-        plain = _plain_polygons(regions) & (opts.alpha_radius is None)  # one part: alpha 0
+        plain = plain_polygons(regions) & (opts.alpha_radius is None)  # one part: alpha 0
         made = [
             (r, 0.0) if one else alpha_shape(r, opts.alpha_radius)
             for r, one in zip(regions.tolist(), plain.tolist())
         ]
-        shapes = _simplify_parts([shape for shape, _ in made], opts)
+        shapes = simplify_parts([shape for shape, _ in made], opts)
         return [(f, None, alpha) for f, (_, alpha) in zip(shapes, made)]
     if method == "polygon":
         hulls = shapely.convex_hull(_array(regions))
-        return [(f, None, None) for f in _simplify_parts(hulls, opts)]
+        return [(f, None, None) for f in simplify_parts(hulls, opts)]
     if method == "circle":
         return [(circle_polygon(*c), c, None) for c in map(enclosing_circle, regions)]
     if method == "exact":
@@ -220,7 +197,7 @@ def fence_sites(sites, opts: FenceOptions) -> list:
     collect = gc.isenabled()
     gc.disable()  # hundreds of thousands of small tuples (simplification heaps), no cycles:
     try:  # the collector would only walk them, and every other live object, again and again
-        return _fence_sites(sites, opts)
+        return split_at_antimeridian(_fence_sites(sites, opts))
     finally:
         if collect:
             gc.enable()
@@ -259,11 +236,12 @@ def _fence_sites(sites, opts):
             locals_[i], circles[i] = _repair(locals_[i], regions[i], frames[i])
             repaired[i] = True
     mains = []
+    growth = shapely.area(_array(locals_)) / np.maximum(shapely.area(regions), 1e-9)
     for i, k in enumerate(todo):
         method = opts.method if zones[i] is None else "circle"
         main = Fence(kind=sites[k].kind, method=method, margin_m=margins[i],
                      local=locals_[i], circle=circles[i], alpha_m=alphas[i],
-                     repaired=repaired[i], **bases[i])  # fmt: skip
+                     repaired=repaired[i], growth=float(growth[i]), **bases[i])  # fmt: skip
         out[k].append(main)
         mains.append(main)
     warn = [i for i, k in enumerate(todo) if sites[k].kind == "keep_out"]
@@ -333,7 +311,7 @@ def _warning_layers(mains, geoms, opts, ground):
     if opts.method == "exact":
         simplified = iter(grown[polygonal])
     else:
-        simplified = iter(_simplify_parts(grown[polygonal], opts))
+        simplified = iter(simplify_parts(grown[polygonal], opts))
     locals_ = [circle_polygon(*c) if c is not None else next(simplified) for c in circles]
     frames = [m.frame for m in mains]
     locals_, held = hold_fences(locals_, frames)

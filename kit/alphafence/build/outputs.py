@@ -29,6 +29,8 @@ def build_meta(db, rules, options) -> dict:
         meta["alpha_radius_m"] = options.alpha_radius
     if options.margin_m is not None:
         meta["margin_override_m"] = options.margin_m
+    if getattr(options, "max_overshoot_m", None) is not None:
+        meta["max_overshoot_m"] = options.max_overshoot_m
     if db.bbox:
         meta["bbox"] = list(db.bbox)
     if any(".osm" in f or f.endswith(".pbf") for f in db.files):

@@ -96,7 +96,17 @@ def fence_rows(fences):
     fences = list(fences)
     vertices, areas = fence_numbers(fences)
     return [
-        (f.category, f.kind, n, area, f.repaired, f.site_id, f.circle is not None, items)
+        (
+            f.category,
+            f.kind,
+            n,
+            area,
+            f.repaired,
+            f.site_id,
+            f.circle is not None,
+            items,
+            f.growth,
+        )  # fmt: skip
         for f, n, area, items in zip(fences, vertices, areas, item_counts(fences))
     ]
 

@@ -51,6 +51,9 @@ def job_size(features: int) -> int:
     return int(min(TARGET_FEATURES, max(200, -(-features // 8))))
 
 
+LOOSE = 4.0  # a fence this many times its restricted area plus margin is named in the summary
+
+
 @dataclass
 class FenceStats:
     """What the build's summary says about its fences, gathered job by job in constant
@@ -69,6 +72,10 @@ class FenceStats:
     oversized_count : int
     items : int
         Fence items the keep-out and keep-in fences make.
+    loose : list of tuple
+        ``(growth, site_id)`` of the main fences covering more than :data:`LOOSE` times
+        their restricted area plus margin, the largest first (first 20).
+    loose_count : int
     """
 
     fences: int = 0
@@ -78,10 +85,15 @@ class FenceStats:
     oversized: list = field(default_factory=list)
     oversized_count: int = 0
     items: int = 0
+    loose: list = field(default_factory=list)
+    loose_count: int = 0
 
     def add(self, rows, max_vertices=MAX_POLYGON_VERTICES):
         """Count a job's rows (:func:`alphafence.build.tile_jobs.fence_rows`)."""
-        for category, kind, vertices, area, repaired, site_id, circle, items in rows:
+        for category, kind, vertices, area, repaired, site_id, circle, items, growth in rows:
+            if kind != "warning" and growth > LOOSE:
+                self.loose_count += 1
+                self.loose = sorted([*self.loose, (growth, site_id)], reverse=True)[:20]
             entry = self.by_kind.setdefault((category, kind), [0, 0.0, Counter()])
             entry[0] += 1
             entry[1] += area

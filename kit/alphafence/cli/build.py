@@ -172,7 +172,7 @@ def summary(db, result, opts, written):
     and what does not fit a vehicle."""
     from rich.markup import escape
 
-    from alphafence.build.tiled import median_of
+    from alphafence.build.tiled import LOOSE, median_of
     from alphafence.mavlink.items import MAX_POLYGON_VERTICES
     from alphafence.mavlink.storage import PROFILES
 
@@ -217,6 +217,14 @@ def summary(db, result, opts, written):
         notes.append(
             f"{stats.oversized_count} polygon(s) exceed ArduPilot's {MAX_POLYGON_VERTICES} "
             f"vertices: {', '.join(stats.oversized[:3])}"
+        )
+    if stats.loose_count:
+        growth, site = stats.loose[0]
+        bound = "" if opts.max_overshoot_m is not None else "; --max-overshoot M bounds it"
+        notes.append(
+            f"{stats.loose_count} fence(s) cover more than {LOOSE:.0f}x their restricted area "
+            f"plus margin (most: {site}, {growth:.0f}x) at --max-vertices {opts.max_vertices}"
+            f"{bound}"
         )
     if stats.items > copter_items:
         notes.append(

@@ -164,7 +164,7 @@ def add_database_options(p: argparse.ArgumentParser) -> None:
     """Add the geofence database and site-grouping options of ``build`` and ``compare``.
 
     Their values become ``args.databases``, ``args.rules``, ``args.bbox``, ``args.join``,
-    ``args.margin`` and ``args.max_vertices``; :func:`build_options` turns them into the
+    ``args.margin``, ``args.max_vertices`` and ``args.max_overshoot``; :func:`build_options` turns them into the
     library's :class:`~alphafence.build.pipeline.BuildOptions`.
     """
     p.add_argument(
@@ -201,6 +201,15 @@ def add_database_options(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="vertex budget per fence polygon (default 32)",
     )
+    p.add_argument(
+        "--max-overshoot",
+        type=non_negative("--max-overshoot", "metres"),
+        default=None,
+        metavar="M",
+        help="no simplified fence reaches more than M metres beyond the shape its method "
+        "draws (alpha shape, hull): large sites take more vertices than --max-vertices "
+        "where needed (default: the vertex budget alone)",
+    )
 
 
 def build_wants(databases, figure=None):
@@ -229,6 +238,7 @@ def build_options(args):
         max_vertices=args.max_vertices,
         warn_distance_m=getattr(args, "warn_distance", 30.0),
         margin_m=args.margin,
+        max_overshoot_m=getattr(args, "max_overshoot", None),
         join_m=args.join,
     )
 

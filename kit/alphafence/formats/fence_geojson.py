@@ -287,7 +287,9 @@ def _features(fences):
     local = np.array([f.local for f in fences], dtype=object)
     kinds = shapely.get_type_id(local)
     structure = ring_structure(local, kinds)
-    if structure is None:  # anything but flat (multi)polygons of non-empty parts: GEOS writes
+    if structure is None or any(getattr(f, "wgs84", None) is not None for f in fences):
+        # anything but flat (multi)polygons of non-empty parts, or fences split at the
+        # antimeridian: GEOS writes
         return [_feature(f, json.loads(shapely.to_geojson(f.geometry))) for f in fences]
     size, ring_part, owner = structure
     fence_ends = np.cumsum(shapely.get_num_coordinates(local)).tolist()

@@ -9,6 +9,7 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from alphafence.geo.lonlat import READ_TOLERANCE_M, left_bows
+from alphafence.geo.rings import ring_coords
 
 
 def _meeting_points(pts, n, push):
@@ -183,7 +184,7 @@ def hold_as_read(geom, frame, outward=True, tolerance_m=READ_TOLERANCE_M):
         rings = [poly.exterior, *poly.interiors]
         held = []
         for ring in rings:
-            pts = np.asarray(ring.coords)[:-1, :2]
+            pts = ring_coords(np.asarray(ring.coords)[:, :2])  # no repeated vertices
             out = hold_ring(frame, pts, tolerance_m) if len(pts) >= 3 else pts
             changed |= out is not pts
             held.append(out)
