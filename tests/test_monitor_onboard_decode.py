@@ -10,6 +10,7 @@ import math
 import os
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import shapely
 from hypothesis import HealthCheck, given, settings
@@ -27,6 +28,8 @@ from alphafence.mavlink.items import (
     fence_items,
 )
 from alphafence.onboard.decode import decode_fence
+
+from .ardupilot_model import GEOD, LATLON_TO_M, location_distance_m
 
 N = int(os.environ.get("ALPHAFENCE_FUZZ_EXAMPLES", "60"))
 FUZZ = settings(max_examples=N, deadline=None, suppress_health_check=list(HealthCheck))
@@ -68,7 +71,19 @@ def test_items_become_named_polygons_and_circles():
     assert fences[1].radius_m == 40.0 and fences[1].lonlat == ((items[5].lon, items[5].lat),)
     disc = FRAME.geom_to_local(fences[1].geometry())
     assert disc.centroid.distance(shapely.Point(300, 0)) < 0.01
-    assert math.pi * 40**2 < disc.area < math.pi * 40**2 * 1.002
+    # ArduPilot's circle (its flat-earth distance, tests/ardupilot_model.py): every point the
+    # vehicle measures within 40 m of the centre lies inside the disc, which is barely more
+    c = items[5]
+    az = np.radians(np.arange(0.0, 360.0, 1.0))
+    for d in (39.9, 40.1):
+        # positions at distance d as ArduPilot measures (dlat, dlon scaled at the centre)
+        lat = c.lat + d * np.cos(az) / (LATLON_TO_M * 1e7)
+        lon = c.lon + d * np.sin(az) / (LATLON_TO_M * 1e7 * math.cos(math.radians(c.lat)))
+        measured = location_distance_m(lat, lon, c.lat, c.lon)
+        x, y = FRAME.to_local(lon, lat)
+        inside = shapely.contains_xy(disc, x, y)
+        assert inside[measured < 40.0].all()
+    assert 0.98 * math.pi * 40**2 < disc.area < math.pi * 40**2 * 1.002
     assert FRAME.geom_to_local(fences[5].geometry()).area < math.pi * 2000**2
 
 
@@ -152,17 +167,26 @@ def test_any_item_list_is_a_fence_or_one_clean_line(items):
     st.booleans(),
 )
 def test_a_circle_is_drawn_to_the_safe_side(lon, lat, radius, inclusion):
+    """As ArduPilot measures distance (tests/ardupilot_model.py, on 1e-7 degree integers):
+    an exclusion's polygon, read in lon/lat, holds every position the vehicle measures
+    inside the circle; an inclusion's holds none it measures outside."""
     command = CIRCLE_INCLUSION if inclusion else CIRCLE_EXCLUSION
     (fence,) = decode_fence([FenceItem(command, radius, lon, lat)])
-    frame = LocalFrame(lon, lat)  # geodesic distances from the centre
-    local = frame.geom_to_local(fence.geometry())
-    rim = shapely.Point(0, 0).buffer(radius, quad_segs=64).exterior
-    if inclusion:  # every vertex on the circle: the (convex) polygon lies inside it
-        assert max(math.hypot(x, y) for x, y in local.exterior.coords) <= radius * (1 + 1e-6)
-        assert local.area > math.pi * radius**2 * 0.99
-    else:  # the polygon contains the circle, and not much more
-        assert local.buffer(radius * 1e-6).covers(rim)
-        assert local.area < math.pi * radius**2 * 1.01
+    poly = fence.geometry()
+    az = np.arange(0.0, 360.0, 2.0)
+    n = az.size
+    for scale in (0.98, 0.995, 1.005, 1.02):
+        plon, plat, _ = GEOD.fwd(np.full(n, lon), np.full(n, lat), az, np.full(n, radius * scale))
+        measured = location_distance_m(plat, plon, lat, lon)
+        inside = shapely.contains_xy(poly, plon, plat)
+        slack = 0.02  # a centimetre or two: positions are 1e-7 degree integers to the vehicle
+        if inclusion:
+            assert not inside[measured > radius + slack].any()
+        else:
+            assert inside[measured < radius - slack].all()
+    frame = LocalFrame(lon, lat)  # and not much more (or less) than the circle
+    area = frame.geom_to_local(poly).area
+    assert math.pi * radius**2 * 0.98 < area < math.pi * radius**2 * 1.02
 
 
 @FUZZ

@@ -234,8 +234,10 @@ def compile_fences(
         overshoot(corridor, onboard, full),
     )
     used = storage_bytes(items)
-    if len(items) > profile.items or used > profile.bytes:  # pragma: no cover - guarded above
+    if len(items) > profile.items or used > profile.bytes:  # a fence split at 180° grew
         raise InputError(
-            "compile", f"internal error: {len(items)} items / {used} bytes exceed {profile.name}"
+            "compile",
+            f"{len(items)} items / {used} bytes exceed {profile.name}: fences across the "
+            "antimeridian are stored as a part on each side; narrow the operating area",
         )
     return result

@@ -13,11 +13,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import shapely
 
 from alphafence.errors import InputError
 from alphafence.geo.coords import valid_lonlat
 from alphafence.geo.frame import LocalFrame
+from alphafence.geo.vehicle_distance import LATLON_TO_M
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     CIRCLE_INCLUSION,
@@ -71,6 +73,15 @@ class OnboardFence:
     radius_m: float | None = None
 
     @property
+    def wraps(self) -> bool:
+        """A polygon whose vertices span more than 180° of longitude: ArduPilot never wraps,
+        so it reads the polygon the long way round the world, not across the antimeridian."""
+        return (
+            self.shape == "polygon"
+            and max(x for x, _ in self.lonlat) - min(x for x, _ in self.lonlat) > 180.0
+        )
+
+    @property
     def kind(self) -> str:
         """``"exclusion"`` or ``"inclusion"``."""
         return "inclusion" if self.inclusion else "exclusion"
@@ -99,9 +110,11 @@ class OnboardFence:
 
         A polygon is made valid the way ArduPilot reads one (even-odd: a bow-tie is its two
         lobes); what has no area (all vertices on a line) is empty. A circle is a polygon of
-        ``segments`` sides drawn in a frame centred on it, erring to the safe side: an
+        ``segments`` sides drawn as ArduPilot measures distance (its flat-earth
+        ``Location::get_distance``: an ellipse in lon/lat), erring to the safe side: an
         exclusion's polygon contains the circle (its sides touch it), an inclusion's lies
-        within it (its vertices are on it).
+        within it (its vertices are on it). A polygon whose vertices span more than 180° of
+        longitude is read the long way round, as ArduPilot reads it (:attr:`wraps`).
 
         Returns
         -------
@@ -109,16 +122,21 @@ class OnboardFence:
             Possibly empty (a polygon without area).
         """
         if self.shape == "circle":
+            # ArduPilot's own circle: its flat-earth distance, an ellipse in lon/lat
             lon, lat = self.lonlat[0]
-            frame = LocalFrame(lon, lat)
+            if self.radius_m < LATLON_TO_M * 1e-7:  # within one step of the vehicle's degrees
+                return shapely.Polygon()
             r = self.radius_m if self.inclusion else self.radius_m / math.cos(math.pi / segments)
-            disc = frame.geom_to_wgs84(
-                shapely.Point(0.0, 0.0).buffer(r, quad_segs=max(1, segments // 4))
-            )
+            ang = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
+            scale = max(math.cos(math.radians(lat)), 0.01)
+            dlat = r / LATLON_TO_M * np.cos(ang)
+            dlon = r / (LATLON_TO_M * scale) * np.sin(ang)
+            disc = shapely.Polygon(np.column_stack([lon + dlon, lat + dlat])[::-1])
             # a circle too small for degrees to tell its vertices apart has no area
             return disc if disc.is_valid and disc.area > 0 else shapely.Polygon()
-        # validity is judged in metres, in a frame centred on the polygon (a polygon across
-        # the antimeridian is a small one there)
+        if self.wraps:
+            return _long_way(self.lonlat)
+        # validity is judged in metres, in a frame centred on the polygon
         frame = LocalFrame.around_coords(self.lonlat)
         poly = frame.geom_to_local(shapely.Polygon(self.lonlat))
         if not poly.is_valid:
@@ -132,6 +150,21 @@ class OnboardFence:
             return shapely.Polygon()
         local = parts[0] if len(parts) == 1 else shapely.MultiPolygon(parts)
         return frame.geom_to_wgs84(local)
+
+
+def _long_way(lonlat):
+    """A polygon whose vertices span more than 180° of longitude as ArduPilot reads it: its
+    edges straight in lon/lat, never across the antimeridian (the long way round), given as
+    its parts west and east of the prime meridian, each narrower than 180°."""
+    poly = shapely.make_valid(shapely.Polygon(lonlat))
+    halves = [shapely.box(-180.0, -90.0, 0.0, 90.0), shapely.box(0.0, -90.0, 180.0, 90.0)]
+    parts = [
+        p
+        for half in halves
+        for p in shapely.get_parts(shapely.intersection(poly, half)).tolist()
+        if isinstance(p, shapely.Polygon) and p.area > 0
+    ]
+    return shapely.MultiPolygon(parts) if parts else shapely.Polygon()
 
 
 def decode_fence(items, source: str = "the vehicle's fence") -> list:

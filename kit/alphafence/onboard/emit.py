@@ -8,6 +8,7 @@ import math
 import numpy as np
 import shapely
 
+from alphafence.build.as_read import split_lonlat
 from alphafence.errors import InputError
 from alphafence.geo.coords import quantize_e7
 from alphafence.geo.hold import hold_as_read
@@ -35,6 +36,22 @@ def _covers(outer, inner, slack_m=READ_TOLERANCE_M + 0.01):
     if outer.covers(inner):
         return True
     return shapely.buffer(outer, slack_m, join_style="mitre").covers(inner)
+
+
+def _sides(lon, lat):
+    """A ring's vertices, or its parts on each side of the antimeridian when it steps
+    across it (:func:`~alphafence.build.as_read.split_lonlat`), each counter-clockwise."""
+    ring = np.column_stack([lon, lat])
+    if np.ptp(lon) <= 180.0:
+        return [ring.tolist()]
+    parts = split_lonlat(shapely.Polygon(ring))
+    out = []
+    for part in parts.geoms:
+        pts = np.asarray(shapely.LinearRing(part.exterior).coords)[:-1]
+        if not shapely.LinearRing(pts).is_ccw:
+            pts = pts[::-1]
+        out.append([(quantize_e7(a), quantize_e7(b)) for a, b in pts])
+    return out
 
 
 def emit_items(pieces, frame, return_point=None):
@@ -99,5 +116,6 @@ def emit_items(pieces, frame, return_point=None):
                 "as lon/lat lines broke containment; please report this",
             )
         cmd = POLYGON_INCLUSION if p.inclusion else POLYGON_EXCLUSION
-        items.extend(FenceItem(cmd, float(len(pts)), float(a), float(b)) for a, b in zip(lon, lat))
+        for part in _sides(lon, lat):  # ArduPilot never wraps: a part on each side of 180°
+            items.extend(FenceItem(cmd, float(len(part)), float(a), float(b)) for a, b in part)
     return items
