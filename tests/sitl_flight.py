@@ -21,6 +21,7 @@ HALF_WIDTH = 50.0
 NEAR_EDGE = 150.0
 FAR_EDGE = 250.0
 ALTITUDE = 20.0  # m above home
+FENCE_STATUS_HZ = 2.0  # of the vehicle's own time: the rate fence_and_telemetry asks for
 ARM_TIMEOUT = 60.0  # "Need Position Estimate" and friends: keep retrying this long
 
 
@@ -169,6 +170,14 @@ async def until(what, predicate, timeout, log, poll=0.05):
     return time.monotonic()
 
 
+async def fence_reports(log, seconds, what, timeout=60.0):
+    """Wait for the FENCE_STATUS reports of ``seconds`` more of the vehicle's own time (they
+    come at FENCE_STATUS_HZ of it, whatever the speedup): a watch kept on the vehicle's clock,
+    failing saying ``what`` if they stop coming; returns when the last arrived."""
+    n = len(log.fence) + math.ceil(seconds * FENCE_STATUS_HZ)
+    return await until(what, lambda: len(log.fence) >= n, timeout, log)
+
+
 async def retry(what, call, timeout):
     """``await call()`` until it succeeds (ArduPilot refuses arming until its checks pass;
     either link's refusal is an exception of its own)."""
@@ -185,8 +194,8 @@ async def retry(what, call, timeout):
 async def fence_and_telemetry(vehicle, log, items, poll=0.05, params="copter-rtl"):
     """The common start of a fenced SITL flight: upload the exclusion ``items`` and the
     ``params`` profile's parameters (each read back by the kit), stream positions and
-    velocities at 10 Hz and FENCE_STATUS at 2 Hz, and wait for the first of each; the vehicle
-    must not be in breach on the ground at home."""
+    velocities at 10 Hz and FENCE_STATUS at FENCE_STATUS_HZ, and wait for the first of each;
+    the vehicle must not be in breach on the ground at home."""
     from alphafence.vehicle.fence_transfer import upload_fence
     from alphafence.vehicle.params import PROFILES, apply_params
 
@@ -198,7 +207,7 @@ async def fence_and_telemetry(vehicle, log, items, poll=0.05, params="copter-rtl
 
     await vehicle.telemetry.set_rate_position(10.0)
     await vehicle.telemetry.set_rate_velocity_ned(10.0)
-    await ask_fence_status(vehicle, 2.0)
+    await ask_fence_status(vehicle, FENCE_STATUS_HZ)
     await until("a FENCE_STATUS", lambda: log.fence, 15, log, poll)
     await until("a position", lambda: log.positions, 15, log, poll)
     assert log.fence[-1][1]["breach_status"] == 0, "breached on the ground at home"

@@ -80,6 +80,7 @@ from tests.sitl_flight import (
     FlightLog,
     exclusion_items,
     fence_and_telemetry,
+    fence_reports,
     retry,
     speedup_options,
     square_local,
@@ -235,7 +236,8 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
                 await until(
                     "stopped at the goal", lambda: log.speed() < STOPPED_MPS, 30, log, poll=0.02
                 )
-                await asyncio.sleep(2.0)  # 10 s of flight: still there, still no breach
+                # 10 s of the vehicle's time: still there, still no breach
+                await fence_reports(log, 10.0, "FENCE_STATUS at the goal")
             results["t_end"] = time.monotonic()
             assert not monitor_task.done(), "the monitor stopped by itself"
             results["checks"] = monitor.engine.checks
