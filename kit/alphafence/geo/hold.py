@@ -37,7 +37,8 @@ def _shifted_ring(pts, push):
     ``pts``: neighbouring lines meet at the new vertices. Nearly collinear neighbours moved
     by different amounts would meet far away: both move by the larger. Where lines still
     meet far away or not at all (a hairpin), two vertices cut the corner (a bevel).
-    Returns the ring and each edge's push."""
+    Returns the ring, each edge's push, and which edge of ``pts`` each edge of the ring
+    lies along (-1 for a bevel's own edge)."""
     d = np.roll(pts, -1, axis=0) - pts
     length = np.hypot(d[:, 0], d[:, 1])
     n = np.column_stack([d[:, 1], -d[:, 0]]) / length[:, None]  # right normals
@@ -45,7 +46,7 @@ def _shifted_ring(pts, push):
     for _ in range(len(pts)):
         meet, far = _meeting_points(pts, n, push)
         if not far.any():
-            return meet, push
+            return meet, push, np.arange(len(pts))
         before = np.roll(push, 1)
         level = np.maximum(push, before)
         grow = far & ((push < level) | (before < level))
@@ -55,14 +56,16 @@ def _shifted_ring(pts, push):
         before_idx = (np.flatnonzero(grow) - 1) % len(pts)
         push[before_idx] = np.maximum(push[before_idx], level[grow])
     n0 = np.roll(n, 1, axis=0)
-    out = []
+    out, edge_of = [], []
     for i in range(len(pts)):
         if far[i]:
             out.append(pts[i] + n0[i] * (push[i - 1] + 1e-6))
             out.append(pts[i] + n[i] * (push[i] + 1e-6))
+            edge_of += [-1, i]  # the bevel's own short edge, then edge i
         else:
             out.append(meet[i])
-    return np.asarray(out), push
+            edge_of.append(i)
+    return np.asarray(out), push, np.asarray(edge_of)
 
 
 def _densified_on_chords(frame, pts, bows, tolerance_m):
@@ -80,17 +83,19 @@ def _densified_on_chords(frame, pts, bows, tolerance_m):
 
 def _pushed(frame, pts, bows, tolerance_m, rounds):
     """``pts`` with every bowing edge moved right until its reading clears its original
-    line, or None when that fails (moved edges cross, or it does not settle)."""
+    line (a hairpin bevelled: one vertex more), or None when that fails (moved edges cross,
+    or it does not settle)."""
     push = np.where(bows > tolerance_m, bows + 1e-3, 0.0)
     for _ in range(rounds):
-        ring, push = _shifted_ring(pts, push)
-        if len(ring) != len(pts):
-            return None
-        now = left_bows(frame, ring)
-        short = now > push + 1e-4
+        ring, push, edge_of = _shifted_ring(pts, push)
+        along = edge_of >= 0  # a bevel's own edge is a few pushes long: it does not bow
+        now = left_bows(frame, ring)[along]
+        short = now > push[edge_of[along]] + 1e-4
         if not short.any():
             return ring if shapely.Polygon(ring).is_valid else None
-        push = np.where(short, now + 1e-3, push)
+        need = np.zeros(len(pts))
+        np.maximum.at(need, edge_of[along][short], now[short] + 1e-3)
+        push = np.maximum(push, need)
     return None
 
 

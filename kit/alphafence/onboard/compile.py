@@ -214,10 +214,21 @@ def compile_fences(
     budget_items = profile.items - fixed_items
     budget_bytes = profile.bytes - fixed_bytes
     merges = []
-    fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model)
-    upgrade(pieces, budget_items, budget_bytes)
-    merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, model=model)
-    items = emit_items(pieces, frame, return_point)
+    spare = 0
+    for _ in range(6):  # held as read, a hairpin or a part across 180° may take more items
+        fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model)
+        upgrade(pieces, budget_items, budget_bytes)
+        merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, model=model)
+        items = emit_items(pieces, frame, return_point)
+        over_items = len(items) - profile.items
+        over_bytes = storage_bytes(items) - profile.bytes
+        if over_items <= 0 and over_bytes <= 0:
+            break
+        spare = max(2 * spare, over_items, -(-over_bytes // 8), 1)  # vertices to leave free
+        budget_items -= spare
+        budget_bytes -= 8 * spare
+        for p in pieces:
+            p.choice = 0
     onboard = tuple(
         [p.chosen.local for p in pieces if p.inclusion == kind and not (kind and p.grows)]
         for kind in (False, True)
@@ -237,7 +248,8 @@ def compile_fences(
     if len(items) > profile.items or used > profile.bytes:  # a fence split at 180° grew
         raise InputError(
             "compile",
-            f"{len(items)} items / {used} bytes exceed {profile.name}: fences across the "
-            "antimeridian are stored as a part on each side; narrow the operating area",
+            f"the fences near the area do not fit a {profile.name} as ArduPilot reads them "
+            f"({len(items)} items / {used} bytes: edges held as read, parts on each side of "
+            "180°); narrow the operating area",
         )
     return result

@@ -109,7 +109,7 @@ def emit_items(pieces, frame, return_point=None):
         lon, lat = _round_lonlat(frame, pts)
         check = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
         ok = check.is_valid and (_covers(check, p.local) if p.grows else _covers(p.local, check))
-        if not ok or len(pts) > o.items:
+        if not ok:
             raise InputError(
                 "compile",
                 f"fence {', '.join(p.sources)}: rounding to 1e-7 degrees or reading its edges "
