@@ -93,6 +93,11 @@ def run(args) -> int:
 
         route_figure(planner.roadmap, route, args.figure)
     write_all(out)
+    if planner.added:
+        out_console.print(
+            f"[yellow]note:[/] {planner.added} waypoints added along long legs: ArduPilot flies "
+            "a leg as a straight line in lon/lat, which bows away from the planned line"
+        )
     if args.one_way:
         out_console.print(
             "[yellow]note:[/] --one-way: the final RTL flies straight home; "

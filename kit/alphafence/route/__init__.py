@@ -3,7 +3,7 @@ corridor planner that builds the roadmap over only the fences near start and goa
 legs of any mission checked against fences. Missions are written and read in
 ``alphafence.formats``."""
 
-from alphafence.route.corridor import Corridor, CorridorPlanner
+from alphafence.route.corridor import Corridor, CorridorPlanner, FenceView
 from alphafence.route.legs import LegIssue, check_legs
 from alphafence.route.planner import FenceRoadmap, fence_label
 from alphafence.route.roadmap import EPS_CLEAR, NoRoute, Roadmap, Route
@@ -12,6 +12,7 @@ __all__ = [
     "EPS_CLEAR",
     "Corridor",
     "CorridorPlanner",
+    "FenceView",
     "FenceRoadmap",
     "LegIssue",
     "NoRoute",
