@@ -11,6 +11,11 @@ keep-in fence when any of it is outside the fence, or above or below its band; i
 edge when closer than the clearance to a side, the floor or the ceiling. A leg whose altitude
 is not known, or a limit that cannot be compared with it (NaN in the bands), counts as within a
 keep-out fence's band throughout and as outside a keep-in fence's band.
+
+Legs and fences are taken as ArduPilot takes them: a fence's edges, and the line a leg is
+flown along, are straight lines in lon/lat (followed in the metric frame to within a
+centimetre, :func:`~alphafence.route.planner.read_legs`), not the straight chords between
+their projected ends: a 50 km leg at 64° N bows about 100 m toward the equator.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import numpy as np
 import shapely
 
 from alphafence.geo.frame import LocalFrame
+from alphafence.route.planner import READ_M, lonlat_legs
 from alphafence.route.planner import fence_label as default_fence_label
 
 KINDS = ("keep_out", "keep_in", "warning")
@@ -92,18 +98,19 @@ def _within(profile, lo, hi):
     return out
 
 
-def _part_distance(ends, profile, lo, hi, fence):
+def _part_distance(frame, ends, profile, lo, hi, fence):
     """Horizontal distance from the part of the leg within ``[lo, hi]`` to ``fence`` (inf when
-    no part is)."""
+    no part is); ``ends`` the leg's (lon, lat), the part as flown along its lon/lat line."""
     spans = _within(profile, lo, hi)
     if not spans:
         return math.inf
     a, b = ends
     t = np.asarray(spans, float)[..., None]
-    return float(shapely.distance(shapely.linestrings(a + t * (b - a)), fence).min())
+    parts = frame.read_geom(shapely.linestrings(a + t * (b - a)), READ_M)
+    return float(shapely.distance(parts, fence).min())
 
 
-def _box_distance(ends, profile, lo, hi, fence, clearance, whole):
+def _box_distance(frame, ends, profile, lo, hi, fence, clearance, whole):
     """The leg's distance to a fence's volume (0: it enters it), the larger of the horizontal
     and the vertical distance, or None when not within ``clearance``; ``whole`` is the whole
     leg's horizontal distance, the answer when its altitude is within the band throughout or
@@ -113,14 +120,14 @@ def _box_distance(ends, profile, lo, hi, fence, clearance, whole):
     zs = [z for _, z in profile]
     if not profile or lo <= min(zs) and max(zs) <= hi:
         return whole
-    if _part_distance(ends, profile, lo, hi, fence) == 0.0:
+    if _part_distance(frame, ends, profile, lo, hi, fence) == 0.0:
         return 0.0
-    if _part_distance(ends, profile, lo - clearance, hi + clearance, fence) > clearance:
+    if _part_distance(frame, ends, profile, lo - clearance, hi + clearance, fence) > clearance:
         return None
     low, high = 0.0, clearance  # the least m whose part within m of the band is within m
     for _ in range(32):
         m = 0.5 * (low + high)
-        if _part_distance(ends, profile, lo - m, hi + m, fence) <= m:
+        if _part_distance(frame, ends, profile, lo - m, hi + m, fence) <= m:
             high = m
         else:
             low = m
@@ -142,8 +149,9 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
     """Legs between consecutive waypoints that cross (distance 0) or graze (closer than
     ``clearance``) a keep-out fence, or leave (distance 0) or come closer than ``clearance``
     to the edge of a keep-in fence (the vehicle must stay inside each, as ArduPilot and the
-    monitor have it), computed exactly in one local metric frame; each leg at its altitudes
-    against each fence's band when ``bands`` are given (see the module).
+    monitor have it), computed exactly in one local metric frame; each leg as flown (a
+    straight line in lon/lat) at its altitudes against each fence's band when ``bands`` are
+    given (see the module).
 
     Parameters
     ----------
@@ -198,9 +206,9 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
         [ends.reshape(-1, 2)] + [shapely.get_coordinates(r.geometry) for r in keep_out + keep_in]
     )
     frame = LocalFrame.around_coords(coords)
-    x, y = frame.to_local(ends[..., 0].ravel(), ends[..., 1].ravel())
-    xy = np.column_stack([x, y]).reshape(-1, 2, 2)
-    segs = shapely.linestrings(xy)
+    lines = lonlat_legs(ends[:, 0], ends[:, 1])  # each end's longitude the short way
+    ends = shapely.get_coordinates(lines).reshape(-1, 2, 2)
+    segs = frame.read_geom(lines, READ_M)  # the legs as flown, straight in lon/lat
     profiles = [_profile(b) if b.frame is not None else () for _, b in pairs]
     limits = {}
 
@@ -214,7 +222,7 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
         return float(limits[ref][0][k]), float(limits[ref][1][k])
 
     def box(a, k, geom, whole, reach):
-        return _box_distance(xy[a], profiles[a], *band(a, k), geom, reach, whole)
+        return _box_distance(frame, ends[a], profiles[a], *band(a, k), geom, reach, whole)
 
     issues = []
 
@@ -223,7 +231,7 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
         issues.append(LegIssue(a + 1, start.label, end.label, fence, dist, crosses, inside))
 
     if keep_out:
-        ko = frame.geom_to_local(np.array([r.geometry for r in keep_out], dtype=object))
+        ko = frame.read_geom(np.array([r.geometry for r in keep_out], dtype=object), READ_M)
         tree = shapely.STRtree(ko)
         i, j = tree.query(segs, predicate="dwithin", distance=clearance)
         d = shapely.distance(segs[i], ko[j])
@@ -232,7 +240,7 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
             if dist is not None:
                 issue(a, label(keep_out[b]), float(dist), dist <= 0.0)
     for k, r in zip(index["keep_in"], keep_in):
-        area = frame.geom_to_local(r.geometry)
+        area = frame.read_geom(r.geometry, READ_M)
         shapely.prepare(area)
         inside = shapely.covers(area, segs)
         edge = shapely.distance(segs, area.boundary)
@@ -245,7 +253,7 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
     issues.sort(key=lambda t: (t.leg, t.keep_in))
     warning_legs = set()
     if warning:
-        wa = frame.geom_to_local(np.array([r.geometry for r in warning], dtype=object))
+        wa = frame.read_geom(np.array([r.geometry for r in warning], dtype=object), READ_M)
         i, j = shapely.STRtree(wa).query(segs, predicate="intersects")
         warning_legs = {
             int(a) + 1
