@@ -25,7 +25,6 @@ from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.predict import Braking, stopping_distance
 from alphafence.monitor.reroute import (
     Rerouter,
-    goal_beyond_xy,
     leg_timeout_s,
     mission_goal,
     parse_position_target,
@@ -251,9 +250,8 @@ def test_goal_beyond_skips_gaps_narrower_than_the_clearance():
     r = Rerouter(
         [record("a", "keep_out", SQUARE), record("b", "keep_out", second)], clearance=CLEARANCE
     )
-    q = goal_beyond_xy(r.roadmap, r.to_xy(*FRAME.to_wgs84(0.0, 100.0)), (0.0, 1.0))
-    lon, lat = r.to_lonlat(q)
-    x, y = (float(v) for v in FRAME.to_local(lon, lat))
+    lon, lat = (float(v) for v in FRAME.to_wgs84(0.0, 100.0))
+    x, y = (float(v) for v in FRAME.to_local(*r.goal_beyond(lon, lat, 0.0, 10.0)))
     assert y > 400 + CLEARANCE - 0.5 and abs(x) < 1, (x, y)
 
 

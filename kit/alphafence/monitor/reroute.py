@@ -1,9 +1,16 @@
 """In-flight re-routing around keep-out fences (``--imminent-action reroute``).
 
-A :class:`Rerouter` holds the route planner's roadmap (``alphafence.route.FenceRoadmap``) over the
-monitor's fences. It is built once when the monitor starts (``await Rerouter.build(...)``: on
-a large fence set that takes about a second, so it runs in a worker thread) and every query
-is independent, so the monitor plans in a worker thread too and never blocks the event loop.
+A :class:`Rerouter` plans as ``alphafence route`` does (``alphafence.route.CorridorPlanner``): a
+roadmap over only the fences in a corridor around the vehicle and its goal, widened while the
+route comes too close to a fence left out, so that a national fence file costs no more than
+the fences near the flight. The fences are read (edges straight in lon/lat, as ArduPilot
+reads them) into a frame near the vehicle, kept while the vehicle and its goals stay within
+``VIEW_REUSE_M`` of its origin. It is made when the monitor starts (``await
+Rerouter.build(...)``, in a worker thread), and every query is independent, so the monitor
+plans in a worker thread too and never blocks the event loop. The legs of a plan are flown as
+ArduPilot flies them, straight in lon/lat: legs whose lon/lat line would come too close to a
+fence are split (:func:`alphafence.route.planner.split_legs`) and the clearance is that of the
+legs as flown.
 
 This module holds the planning; :mod:`alphafence.monitor.reroute_flight` flies the plans. The
 pieces it needs are pure functions of positions, velocities and fences, tested without
@@ -32,9 +39,10 @@ import shapely
 
 from alphafence.errors import RoutingError
 from alphafence.geo.coords import from_e7_float
-from alphafence.geo.frame import EARTH_RADIUS_M
+from alphafence.geo.frame import EARTH_RADIUS_M, LocalFrame
 from alphafence.mavlink import ids
 from alphafence.monitor.predict import Braking
+from alphafence.route.planner import fence_label, flown_distance, read_legs
 from alphafence.route.roadmap import NoRoute
 from alphafence.vehicle.values import fields_of
 
@@ -43,6 +51,7 @@ GOAL_PAD_M = 1.0  # the goal lies this much beyond the clearance (the vehicle ho
 LEAD_STEP_M = 2.0
 LEG_MIN_SPEED_MPS = 2.0  # a leg taking longer than at this speed (plus slack) has failed
 LEG_SLACK_S = 20.0
+VIEW_REUSE_M = 50_000.0  # fences read into a frame serve positions this close to its origin
 # mission item frames whose x, y are latitude, longitude (1e-7 degrees in MISSION_ITEM_INT)
 GLOBAL_FRAMES = frozenset(
     {
@@ -130,7 +139,9 @@ def goal_beyond_xy(roadmap, start_xy, direction_xy, max_m=GOAL_SEARCH_M, pad_m=G
     """The first point along the ray from ``start_xy`` in ``direction_xy`` (metres in the
     roadmap's frame) that lies beyond a keep-out fence's clearance band and is clear of every
     keep-out by the clearance (plus ``pad_m``); None if the ray meets no fence, or ends
-    inside one, within ``max_m``."""
+    inside one, within ``max_m``. ``roadmap`` is a :class:`~alphafence.route.Roadmap` or a
+    :class:`~alphafence.route.corridor.FenceView`: its ``tree``, ``keep_out``, ``ce`` and
+    ``point_clear``."""
     p = np.asarray(start_xy, float).reshape(2)
     d = np.asarray(direction_xy, float).reshape(2)
     norm = float(np.hypot(*d))
@@ -159,53 +170,61 @@ def goal_beyond_xy(roadmap, start_xy, direction_xy, max_m=GOAL_SEARCH_M, pad_m=G
 
 
 class Rerouter:
-    """The route planner over the monitor's fences, built once (see :meth:`build`)."""
+    """The route planner over the monitor's fences (see :meth:`build`): each plan over the
+    fences in a corridor around the vehicle and its goal.
+
+    Parameters
+    ----------
+    records : list of FenceRecord
+    clearance : float
+        Least distance of a re-route from any keep-out fence, metres.
+    """
 
     def __init__(self, records, clearance: float = 20.0):
-        from alphafence.route.planner import FenceRoadmap, fence_label
-
-        records = list(records)
+        self.records = list(records)
         self.clearance = float(clearance)
-        self.planner = FenceRoadmap(records, clearance=self.clearance)
-        self.frame = self.planner.frame
-        self.roadmap = self.planner.roadmap
-        keep_in = [r for r in records if r.kind == "keep_in"]
-        self.keep_in = [self.frame.read_geom(r.geometry) for r in keep_in]
-        self.keep_in_names = [fence_label(r) for r in keep_in]
+        self.view = None  # the fences read into a frame near the vehicle (see view_for)
 
     @classmethod
     async def build(cls, records, clearance: float = 20.0) -> Rerouter:
         """Build in a worker thread: the event loop (the monitor's checks) never waits."""
         return await asyncio.to_thread(cls, records, clearance)
 
-    def to_xy(self, lon, lat) -> np.ndarray:
-        """``(lon, lat)`` -> ``[x, y]`` metres in the planner's frame."""
-        x, y = self.frame.to_local(lon, lat)
-        return np.array([float(x), float(y)])
+    def view_for(self, *lonlat):
+        """The fences read into a frame that serves every ``(lon, lat)`` given: the last one,
+        when they are all within ``VIEW_REUSE_M`` of its origin, else a new one centred on
+        them (:class:`~alphafence.route.corridor.FenceView`)."""
+        from alphafence.route.corridor import FenceView
 
-    def to_lonlat(self, xy) -> tuple:
-        """``[x, y]`` metres in the planner's frame -> ``(lon, lat)``."""
-        lon, lat = self.frame.to_wgs84(float(xy[0]), float(xy[1]))
-        return (float(lon), float(lat))
+        pts = np.asarray(lonlat, float).reshape(-1, 2)
+        view = self.view
+        if view is not None:
+            x, y = view.frame.to_local(pts[:, 0], pts[:, 1])
+            if np.all(np.hypot(x, y) <= VIEW_REUSE_M):
+                return view
+        self.view = FenceView(self.records, LocalFrame.around_coords(pts), self.clearance)
+        return self.view
 
-    def _velocity_xy(self, lon, lat, ve, vn) -> np.ndarray:
-        """East/north velocity as a direction in the frame (the frame's grid north is not
-        true north away from its origin)."""
-        p = self.to_xy(lon, lat)
+    def _velocity_xy(self, view, lon, lat, ve, vn) -> np.ndarray:
+        """East/north velocity as a direction in the view's frame (the frame's grid north is
+        not true north away from its origin)."""
+        p = view.to_xy((lon, lat))
         dlat = vn / EARTH_RADIUS_M * 180.0 / math.pi
         dlon = ve / (EARTH_RADIUS_M * max(math.cos(math.radians(lat)), 1e-6)) * 180.0 / math.pi
-        return self.to_xy(lon + dlon, lat + dlat) - p
+        return view.to_xy((lon + dlon, lat + dlat)) - p
 
     def goal_beyond(self, lon, lat, ve, vn, max_m=GOAL_SEARCH_M):
         """(lon, lat) beyond the fence ahead along the track, or None."""
         if math.hypot(ve, vn) < 0.5:
             return None  # no track to follow
+        view = self.view_for((lon, lat))
         q = goal_beyond_xy(
-            self.roadmap, self.to_xy(lon, lat), self._velocity_xy(lon, lat, ve, vn), max_m
+            view, view.to_xy((lon, lat)), self._velocity_xy(view, lon, lat, ve, vn), max_m
         )
-        return None if q is None else self.to_lonlat(q)
+        return None if q is None else view.to_lonlat(q)
 
-    def start_xy(self, xy, direction_xy, lead_m: float) -> np.ndarray:
+    @staticmethod
+    def start_xy(view, xy, direction_xy, lead_m: float) -> np.ndarray:
         """Where the planned route begins: ``lead_m`` along the track (where the vehicle will
         be by the time it turns: it cannot turn on the spot), pulled back until that point and
         the track to it are clear; the vehicle's position if no such point is."""
@@ -217,28 +236,36 @@ class Rerouter:
         u = d / norm
         for ahead in np.arange(float(lead_m), 0.0, -LEAD_STEP_M):
             q = xy + u * ahead
-            if self.roadmap.point_clear(q)[0] and self.roadmap.clear(xy, q)[0]:
+            if view.point_clear(q)[0] and view.clear(xy, q)[0]:
                 return q
         return xy
 
     def plan(self, lon, lat, ve, vn, goal_lonlat, lead_m: float = 0.0) -> Plan:
         """The re-route from the vehicle at (lon, lat) moving at (ve, vn) m/s to ``goal_lonlat``.
         Raises ``NoRoute`` with the planner's one-line reason."""
-        here = self.to_xy(lon, lat)
-        start = self.start_xy(here, self._velocity_xy(lon, lat, ve, vn), lead_m)
-        start_lonlat = (lon, lat) if np.allclose(start, here) else self.to_lonlat(start)
-        _, lonlat = self.planner.route(start_lonlat, goal_lonlat)
-        xy = np.column_stack(self.frame.to_local(lonlat[:, 0], lonlat[:, 1]))
+        from alphafence.route.corridor import CorridorPlanner
+
+        view = self.view_for((lon, lat), goal_lonlat)
+        here = view.to_xy((lon, lat))
+        start = self.start_xy(view, here, self._velocity_xy(view, lon, lat, ve, vn), lead_m)
+        start_lonlat = (lon, lat) if np.allclose(start, here) else view.to_lonlat(start)
+        planner = CorridorPlanner(None, start_lonlat, goal_lonlat, view=view)
+        _, lonlat = planner.route()
         # the vehicle flies from where it is to the first vertex past the planned start when
-        # that leg is clear, else through the planned start itself
-        first = 1 if len(xy) > 1 else 0
-        if first and not np.allclose(start, here) and not self.roadmap.clear(here, xy[1])[0]:
-            first = 0
-        flown = np.vstack([here, xy[first:]])
-        self._check_keep_in(here, flown)
-        legs = (flown[:-1], flown[1:])
-        length = float(np.hypot(*np.diff(flown, axis=0).T).sum())
-        clearance = float(self.roadmap.clearance_of(*legs).min()) if len(flown) > 1 else math.inf
+        # that leg, as flown, is clear, else through the planned start itself
+        first = 1 if len(lonlat) > 1 else 0
+        if first and not np.allclose(start, here):
+            ahead = view.to_xy(lonlat[1])
+            reading = read_legs(view.frame, [(lon, lat), lonlat[1]])
+            chord = shapely.linestrings([[here, ahead]])
+            if not view.clear(here, ahead)[0] or view.at_fault(reading, chord)[0]:
+                first = 0
+        flown = np.vstack([(lon, lat), lonlat[first:]])
+        legs = read_legs(view.frame, flown)
+        self._check_keep_in(view, here, legs)
+        xy = np.column_stack(view.frame.to_local(flown[:, 0], flown[:, 1]))
+        length = float(np.hypot(*np.diff(xy, axis=0).T).sum())
+        clearance = float(flown_distance(view.tree, legs).min()) if len(legs) else math.inf
         return Plan(
             waypoints=waypoints(lonlat[first:], skip_start=False),
             goal=(float(goal_lonlat[0]), float(goal_lonlat[1])),
@@ -247,9 +274,13 @@ class Rerouter:
             clearance_m=clearance,
         )
 
-    def _check_keep_in(self, here, flown):
+    @staticmethod
+    def _check_keep_in(view, here, legs):
+        """NoRoute when the legs (as flown) leave a keep-in fence the vehicle is in."""
         p = shapely.Point(here)
-        path = shapely.LineString(flown) if len(flown) > 1 else p
-        for poly, name in zip(self.keep_in, self.keep_in_names):
+        path = shapely.union_all(legs) if len(legs) else p
+        for poly, record in zip(view.keep_in, view.keep_in_records):
             if poly.covers(p) and not poly.covers(path):
-                raise NoRoute(f"the route around the keep-out leaves keep-in fence {name}")
+                raise NoRoute(
+                    f"the route around the keep-out leaves keep-in fence {fence_label(record)}"
+                )

@@ -108,8 +108,9 @@ class RerouteFlight:
             self._fetch_mission()
 
     async def build_planner(self) -> None:
-        """The route planner over every fence, built once, in a worker thread
-        (``reroute_ready``, or ``reroute_unavailable``: every re-route then brakes)."""
+        """The route planner over the fences, made once, in a worker thread (each re-route
+        then routes over the fences near the vehicle and its goal only): ``reroute_ready``,
+        or ``reroute_unavailable`` (every re-route then brakes)."""
         from alphafence.monitor.reroute import Rerouter
 
         t0 = time.monotonic()
