@@ -14,6 +14,7 @@ from rich.console import Console
 from rich.table import Table
 
 from bench import (
+    as_read_bench,
     build_bench,
     cli_bench,
     compile_bench,
@@ -41,6 +42,7 @@ def main(argv=None) -> int:
     p.add_argument(
         "--only",
         choices=[
+            "as-read",
             "build",
             "cli",
             "compile",
@@ -70,6 +72,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     console = Console(width=150)
     rows = []
+    if args.only in (None, "as-read"):
+        rows += as_read_bench.run(build_bench.Row)
     if args.only in (None, "build"):
         rows += build_bench.run(args.osm, args.optimize_sites, console)
     if args.only in (None, "cli"):

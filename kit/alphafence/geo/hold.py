@@ -92,11 +92,31 @@ def _pushed(frame, pts, bows, tolerance_m, rounds):
         now = left_bows(frame, ring)[along]
         short = now > push[edge_of[along]] + 1e-4
         if not short.any():
-            return ring if shapely.Polygon(ring).is_valid else None
+            return _valid(ring, pts)
         need = np.zeros(len(pts))
         np.maximum.at(need, edge_of[along][short], now[short] + 1e-3)
-        push = np.maximum(push, need)
+        # a moved edge grows, and bows more: move it half as far again as it falls short
+        push = np.where(need > push, push + 1.5 * (need - push), push)
     return None
+
+
+def _valid(ring, pts):
+    """``ring`` if it is a simple ring; where moved edges cross (a narrow inlet closing), the
+    outline of what it encloses, if that still covers ``pts``' polygon; else None."""
+    poly = shapely.Polygon(ring)
+    if poly.is_valid:
+        return ring
+    parts = [p for p in shapely.get_parts(shapely.make_valid(poly)) if p.geom_type == "Polygon"]
+    if not parts:
+        return None
+    whole = shapely.union_all(parts)
+    if whole.geom_type != "Polygon":
+        return None
+    outline = shapely.Polygon(whole.exterior)
+    if not outline.covers(shapely.Polygon(pts)):
+        return None
+    out = np.asarray(outline.exterior.coords)[:-1]
+    return out if shapely.LinearRing(out).is_ccw == shapely.LinearRing(pts).is_ccw else out[::-1]
 
 
 def _split(pts, bows, tolerance_m, parts=4):
@@ -108,7 +128,7 @@ def _split(pts, bows, tolerance_m, parts=4):
                            for a, b, n in zip(pts, nxt, k.tolist())])  # fmt: skip
 
 
-def hold_ring(frame, pts, tolerance_m=READ_TOLERANCE_M, rounds=16):
+def hold_ring(frame, pts, tolerance_m=READ_TOLERANCE_M, rounds=40):
     """A metric ring whose lon/lat reading stays right of where ``pts``' edges are.
 
     Each edge is moved right (away from the area on its left) by the bow of its lon/lat

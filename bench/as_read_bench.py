@@ -1,0 +1,182 @@
+"""Fences as they are read, on a national-scale synthetic set: how far any zone plus its margin
+reaches beyond its fence when the fence is read as ArduPilot reads it (straight lon/lat edges
+on its 1e-7 degree integers; ``tests/ardupilot_model.py``, geodesic distances), and how much
+larger than their zones the fences are.
+
+The set is synthetic and deterministic: border strips of 100 to 900 km along parallels and
+diagonals, military areas (long overlapping strips at 60 to 67°N), regional zones of 20 to 80
+km, all with straight lon/lat edges as a national restriction file draws them; margin 100 m.
+The peer is the same build with its fences written as they were made in the metric frame
+(no densified zones, no held edges): what the kit wrote before it read fences as they are read.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from contextlib import ExitStack
+from unittest import mock
+
+import numpy as np
+import shapely
+from pyproj import Geod
+
+from alphafence.build import as_read, sites
+from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.formats.geojson import read_geojson_doc
+from alphafence.formats.rules import parse_rules
+
+GEOD = Geod(ellps="WGS84")
+MARGIN_M = 100.0
+SEED = 7
+
+
+def _strip(lon, lat, az, length, width):
+    a = GEOD.fwd(lon, lat, az, length)[:2]
+    left = [GEOD.fwd(x, y, az - 90.0, width / 2)[:2] for x, y in ((lon, lat), a)]
+    right = [GEOD.fwd(x, y, az + 90.0, width / 2)[:2] for x, y in ((lon, lat), a)]
+    return shapely.Polygon([*left, *right[::-1]])
+
+
+def zones(seed=SEED):
+    """The synthetic national set: (name, lon/lat polygon) pairs."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(6):  # border strips
+        az = float(rng.choice([90.0, 60.0, 120.0]))
+        out.append((f"border/{i}", _strip(5.0 + 3 * i, 46.0 + i, az, rng.uniform(1e5, 9e5),
+                                          rng.uniform(2e3, 8e3))))  # fmt: skip
+    for i in range(8):  # military strips, overlapping, 60-67 N
+        az = float(rng.uniform(40.0, 140.0))
+        out.append((f"military/{i}", _strip(12.0 + 1.5 * i, 60.0 + 0.8 * i, az,
+                                            rng.uniform(2e5, 6e5), rng.uniform(5e3, 3e4))))  # fmt: skip
+    for i in range(16):  # regional zones: simple polygons around a centre
+        lon, lat = 2.0 + 1.3 * i, 44.0 + 0.5 * (i % 6)
+        poly = None
+        while poly is None or not poly.is_valid:
+            k = int(rng.integers(6, 16))
+            ang = np.sort(rng.uniform(0, 360, k))
+            r = rng.uniform(1e4, 4e4, k)
+            poly = shapely.Polygon([GEOD.fwd(lon, lat, a, d)[:2] for a, d in zip(ang, r)])
+        out.append((f"region/{i}", poly))
+    return out
+
+
+def _features(named, rules):
+    doc = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {"restricted": "yes", "osm_id": str(k)},
+                "geometry": shapely.geometry.mapping(z),
+            }
+            for k, (_, z) in enumerate(named)
+        ],
+    }
+    return read_geojson_doc("national.geojson", doc, rules, [], collections.Counter())
+
+
+def _measure(result, named, margin):
+    from tests.ardupilot_model import excursion_m
+
+    worst, where = 0.0, ""
+    for f in result.fences:
+        if f.kind != "keep_out":
+            continue
+        rings = [np.asarray(p.exterior.coords)[:-1] for p in shapely.get_parts(f.geometry)]
+        for s in f.sources:
+            name, zone = named[int(s.rsplit("/", 1)[-1])]
+            out = excursion_m(zone, rings, margin, spacing_m=50.0, reach_m=200_000.0)
+            if out > worst:
+                worst, where = out, name
+    return worst, where
+
+
+def _growth(result, named, margin):
+    fences = [f for f in result.fences if f.kind == "keep_out"]
+    area = sum(f.area_m2 for f in fences)
+    zone_area = sum(
+        shapely.area(f.frame.read_geom(shapely.union_all([named[int(s.rsplit("/", 1)[-1])][1]
+                                                          for s in f.sources])).buffer(margin))
+        for f in fences
+    )  # fmt: skip
+    return area / zone_area, max(f.vertices for f in fences)
+
+
+def run(Row):
+    named = zones()
+    rules = parse_rules(
+        {
+            "defaults": {"point_radius_m": 15.0, "line_width_m": 6.0},
+            "rule": [
+                {
+                    "category": "zone",
+                    "kind": "keep_out",
+                    "tags": {"restricted": "*"},
+                    "margin_m": MARGIN_M,
+                }
+            ],
+        }
+    )
+    features = _features(named, rules)
+    rows = []
+    t = time.perf_counter()
+    held = build_fences(features, rules, BuildOptions(warn_distance_m=0.0))
+    held_s = time.perf_counter() - t
+    with ExitStack() as stack:  # the peer: fences written as made in the metric frame
+        stack.enter_context(mock.patch.object(sites, "densify_lonlat", lambda g: np.asarray(g)))
+        stack.enter_context(
+            mock.patch(
+                "alphafence.build.fences.hold_fences",
+                lambda locs, frames, outward=True: (list(locs), [False] * len(locs)),
+            )
+        )
+        stack.enter_context(mock.patch.object(as_read, "split_lonlat", lambda g: None))
+        t = time.perf_counter()
+        before = build_fences(features, rules, BuildOptions(warn_distance_m=0.0))
+        before_s = time.perf_counter() - t
+    worst, where = _measure(held, named, MARGIN_M)
+    peer, peer_where = _measure(before, named, MARGIN_M)
+    rows.append(
+        Row(
+            f"as read: worst reach of zone + {MARGIN_M:.0f} m margin beyond its fence "
+            f"({len(named)} national zones, ArduPilot's reading)",
+            f"{worst:.2f} m" + (f" ({where})" if worst else ""),
+            "0 m",
+            f"metric-frame fences: {peer:.0f} m ({peer_where})",
+            f"build {held_s:.1f} s vs {before_s:.1f} s",
+            worst <= 0.01,
+        )
+    )
+    with mock.patch("alphafence.geo.hold._pushed", lambda *a: None):  # edges cut, not moved
+        cut = build_fences(features, rules, BuildOptions(warn_distance_m=0.0))
+    ratio, most = _growth(held, named, MARGIN_M)
+    cut_ratio, cut_most = _growth(cut, named, MARGIN_M)
+    rows.append(
+        Row(
+            "as read: held by moving bowing edges out vs cutting them along their chords",
+            f"{ratio:.3f}x the zones' area, {sum(f.vertices for f in held.fences)} vertices",
+            "fewer vertices",
+            f"cut: {cut_ratio:.3f}x, {sum(f.vertices for f in cut.fences)} vertices",
+            f"{sum(f.vertices for f in held.fences) / sum(f.vertices for f in cut.fences):.2f}",
+            sum(f.vertices for f in held.fences) <= sum(f.vertices for f in cut.fences),
+        )
+    )
+    for label, opts in (
+        ("--max-vertices 32", BuildOptions(warn_distance_m=0.0)),
+        ("--max-overshoot 1000", BuildOptions(warn_distance_m=0.0, max_overshoot_m=1000.0)),
+    ):
+        result = held if opts.max_overshoot_m is None else build_fences(features, rules, opts)
+        ratio, most = _growth(result, named, MARGIN_M)
+        rows.append(
+            Row(
+                f"as read: fence area / (zone + margin) area, {label}",
+                f"{ratio:.2f}x, at most {most} vertices",
+                "stated",
+                "-",
+                "-",
+                True,
+            )
+        )
+    return rows
