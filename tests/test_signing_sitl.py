@@ -67,17 +67,46 @@ async def alphafence(*args, timeout=60.0):
     return proc.returncode, out.decode(), err.decode()
 
 
-async def monitor_checks(*args, seconds):
-    """Run ``alphafence monitor`` for ``seconds``, stop it as systemd would (SIGTERM), and
-    return the number of checks it reports."""
+async def monitor_checks(sitl, *args, heartbeats):
+    """Run ``alphafence monitor`` until it is up (it prints the onboard fence it downloaded),
+    then for ``heartbeats`` more of the vehicle's HEARTBEATs (1 Hz of its own time, watched on
+    SERIAL0), stop it as systemd would (SIGTERM), and return the number of checks it reports."""
     proc = await _spawn(args)
-    await asyncio.sleep(seconds + 2.0)  # + start-up: imports, the bridge, MAVSDK discovery
-    proc.send_signal(signal.SIGTERM)
-    out, err = await asyncio.wait_for(proc.communicate(), 20)
+    said = []
+    try:
+        await asyncio.wait_for(_until_line(proc.stdout, "onboard fence:", said), 60)
+        await asyncio.wait_for(_heartbeats(sitl.connection_url, heartbeats), 60)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = await asyncio.wait_for(proc.communicate(), 20)
+    out = "".join(said) + out.decode()
     assert proc.returncode == 0, err.decode()
-    found = re.search(r"stopped after (\d+) checks", out.decode())
-    assert found, out.decode()
+    found = re.search(r"stopped after (\d+) checks", out)
+    assert found, out
     return int(found.group(1))
+
+
+async def _until_line(stream, text, said):
+    """Read ``stream`` until a line holding ``text`` (every line read kept in ``said``)."""
+    while line := (await stream.readline()).decode():
+        said.append(line)
+        if text in line:
+            return
+    raise AssertionError(f"ended without {text!r}: {''.join(said)}")
+
+
+async def _heartbeats(url, n):
+    """Wait for ``n`` HEARTBEATs of the autopilot at ``url``."""
+    from alphafence.mavlink import ids
+    from alphafence.vehicle.link import open_vehicle
+
+    async with open_vehicle(url) as vehicle:
+        sysid, seen = await vehicle.system_id(), 0
+        async for m in vehicle.messages("HEARTBEAT"):
+            ours = m.system_id == sysid and m.fields["autopilot"] != ids.MAV_AUTOPILOT_INVALID
+            seen += ours
+            if seen >= n:
+                return
 
 
 @pytest.mark.parametrize("sitl", [{"radio": True}], indirect=True)
@@ -126,8 +155,8 @@ async def test_signing_refuses_wrong_and_missing_keys(sitl, tmp_path):
     monitor = ("monitor", "--allow-unsigned", "--connect", url, "--fences", fences)
     code, out, err = await alphafence(*monitor, "--signing-key", wrong, "--timeout", "4")
     assert code == 3 and "signed with another key" in err, err
-    checks = await monitor_checks(*monitor, "--signing-key", key, seconds=4.0)
-    assert checks >= 10  # positions at 10 Hz (sim time) for 4 s of wall time at speedup 5
+    checks = await monitor_checks(sitl, *monitor, "--signing-key", key, heartbeats=5)
+    assert checks >= 10  # positions at 10 Hz of the vehicle's time: 59 measured
 
     # switching signing off needs the current key; afterwards the plain link works again
     code, out, err = await alphafence("signing", "remove", "--connect", url, "--signing-key", key)
