@@ -1,7 +1,7 @@
 """The companion monitor in a real flight (copter SITL): it warns before ArduPilot's own fence
 breach, and with ``enforce`` it stops the vehicle before the fence.
 
-The setup is test_enforcement_sitl.py's: an exclusion square (100 m x 100 m, near edge 150 m
+The setup is tests/sitl_flight.py's: an exclusion square (100 m x 100 m, near edge 150 m
 north of home) uploaded to ArduPilot with the ``copter-rtl`` parameters, a GUIDED takeoff to
 20 m and a goto 400 m north at 10 m/s, straight through the square. The monitor gets the same
 square as a keep-out fence plus a 30 m warning layer around it, and runs as
