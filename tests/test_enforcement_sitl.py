@@ -19,10 +19,10 @@ documents the speed needs (``MARGIN_FOR_SPEED_M``), absorbed it (never inside th
 Measured (egham, speedup 5, ``+`` quad, FENCE_ACTION 4, FENCE_MARGIN 2, GLOBAL_POSITION_INT
 at 10 Hz of sim time): the breach is reported within 0.7 m of the fence (the last position
 before the report) and BRAKE 0.03 s of sim time after it; the copter stands still about 4.5 s
-(5 m/s) and 5 s (10 m/s) of sim time later, 9.3-9.4 m (5 m/s, 5 runs) and 21.0-21.3 m
-(10 m/s, 10 runs) past the fence; the same at speedup 1 (21.1 m). With FENCE_ACTION 1 (RTL)
-6.6 m (5 m/s) and 21.2-21.8 m (10 m/s, 5 runs). The hospital's 30 m margin keeps the copter
-21.5 m (5 m/s) and 9-9.8 m (10 m/s) from the zone, the geozone's 25 m 4.4-4.6 m (10 m/s); with
+(5 m/s) and 5 s (10 m/s) of sim time later, 9.3-9.4 m (5 m/s, 6 runs) and 21.0-21.3 m
+(10 m/s, 12 runs) past the fence; the same at speedup 1 (21.1 m). With FENCE_ACTION 1 (RTL)
+6.6 m (5 m/s) and 21.2-21.8 m (10 m/s, 6 runs). The hospital's 30 m margin keeps the copter
+21.5 m (5 m/s) and 9-9.8 m (10 m/s) from the zone, the geozone's 25 m 4.4-4.7 m (10 m/s); with
 the geozone's former 10 m it would have ended about 11 m inside the zone.
 """
 
