@@ -8,6 +8,11 @@ kept on the fence (``lower_reference``, ``upper_reference``, ``circle``). This m
 them into :class:`~alphafence.formats.features.Feature` lists (rules decide the kind) or
 :class:`~alphafence.formats.fence_geojson.FenceRecord` lists (the volume *is* the fence).
 Circles are drawn circumscribed (outward): never cutting into the circle.
+
+A reader whose volumes can be read two ways (KML's long edges, straight in lon/lat or along
+geodesics: :mod:`alphafence.formats.kml_geodesic`) passes *readings* as well: for such a
+volume the area a keep-out or warning zone holds and the one a keep-in zone holds, taken
+once the volume's kind is known.
 """
 
 from __future__ import annotations
@@ -82,7 +87,19 @@ def circle_polygon(lon, lat, radius_m):
     return shapely.Polygon(np.column_stack([lons, lats]))
 
 
-def features_from_volumes(path, volumes, rules, repaired, skipped, what):
+def _held(path, geom, readings, k, kind, label):
+    """The area volume ``k`` holds as a zone of ``kind``: its keep-in or keep-out reading
+    when it has ``readings``, else ``geom``."""
+    if readings is None or readings[k] is None:
+        return geom
+    held = readings[k][1 if kind == "keep_in" else 0]
+    if held.is_empty:
+        msg = "a keep-in zone whose edges read straight in lon/lat and along great circles"
+        raise InputError(path, f"{msg} share no area", label)
+    return held
+
+
+def features_from_volumes(path, volumes, rules, repaired, skipped, what, readings=None):
     """Restricted features of the volumes a reader yielded, each matched against ``rules``
     (a volume's band wins over its rule's; missing limits come from the rule).
 
@@ -98,6 +115,9 @@ def features_from_volumes(path, volumes, rules, repaired, skipped, what):
         Volumes no rule matches are counted, by ``what`` and class.
     what : str
         The format, for those counts (``"OpenAir airspace"``).
+    readings : list, optional
+        One per volume: None, or the ``(keep_out, keep_in)`` areas it holds as a zone of
+        that kind (a warning as a keep-out); its own geometry is checked and flagged.
 
     Returns
     -------
@@ -106,7 +126,8 @@ def features_from_volumes(path, volumes, rules, repaired, skipped, what):
     Raises
     ------
     InputError
-        A coordinate out of range or an empty geometry, naming the volume.
+        A coordinate out of range or an empty geometry, naming the volume; a keep-in zone
+        whose readings share no area.
     """
     if not volumes:
         return []
@@ -114,18 +135,19 @@ def features_from_volumes(path, volumes, rules, repaired, skipped, what):
     check_coordinates(path, geoms, lambda k: f"{what} {volumes[k][2]}")
     geoms = flag_invalid(geoms, [v[2] for v in volumes], repaired)
     out = []
-    for g, (_, tags, source, lower, upper, props) in zip(geoms, volumes):
+    for k, (g, (_, tags, source, lower, upper, props)) in enumerate(zip(geoms, volumes)):
         rule = rules.match(tags.get, geomtype_of(g) or "area")
         if rule is None:
             skipped[f"{what} of class {tags.get('airspace:class', '?')} (no rule)"] += 1
             continue
+        g = _held(path, g, readings, k, rule.kind, f"{what} {source}")
         alt_min = lower if lower is not None else rule.alt_min_m
         alt_max = upper if upper is not None else rule.alt_max_m
         out.append(Feature(g, tags, source, str(path), rule, alt_min, alt_max, props))
     return out
 
 
-def fences_from_volumes(path, volumes, what):
+def fences_from_volumes(path, volumes, what, readings=None):
     """The volumes as fences read as they are (no rules, no margin): ``keep_out`` unless a
     volume's ``alphafence:kind`` tag says ``keep_in`` or ``warning``.
 
@@ -136,6 +158,8 @@ def fences_from_volumes(path, volumes, what):
         As for :func:`features_from_volumes`; points need a ``circle`` property.
     what : str
         The format, for messages and site ids (``"kml"``).
+    readings : list, optional
+        As for :func:`features_from_volumes`.
 
     Returns
     -------
@@ -145,7 +169,8 @@ def fences_from_volumes(path, volumes, what):
     Raises
     ------
     InputError
-        A point without a radius, a line, a coordinate out of range, naming the volume.
+        A point without a radius, a line, a coordinate out of range, naming the volume; a
+        keep-in zone whose readings share no area.
     """
     from alphafence.formats.fence_geojson import FenceRecord
 
@@ -155,7 +180,7 @@ def fences_from_volumes(path, volumes, what):
     check_coordinates(path, geoms, lambda k: f"{what} {volumes[k][2]}")
     geoms = make_valid_polygonal(geoms)
     out = []
-    for g, (_, tags, source, lower, upper, props) in zip(geoms, volumes):
+    for k, (g, (_, tags, source, lower, upper, props)) in enumerate(zip(geoms, volumes)):
         label = f"{source} ({tags['name']})" if tags.get("name") else source
         g = polygonal(g)
         if g is None:
@@ -169,6 +194,7 @@ def fences_from_volumes(path, volumes, what):
                 f"alphafence:kind must be one of {', '.join(FENCE_KINDS)}, not {kind!r}",
                 label,
             )
+        g = _held(path, g, readings, k, kind, label)
         circle = tuple(props["circle"]) if "circle" in props else None
         name = tags.get("name")
         fprops = {

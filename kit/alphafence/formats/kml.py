@@ -12,6 +12,16 @@ volumes. Altitudes come from the coordinates when ``altitudeMode`` is ``absolute
 * a zone drawn as separate placemarks (floor, ceiling and each wall its own placemark, all
   named after the zone, in one Folder) is one volume (:mod:`alphafence.formats.kml_volumes`).
 
+Google Earth draws a polygon's edges (and a tessellated LinearRing's) along geodesics (great
+circles), where GeoJSON, ED-269 and the kit join vertices with straight lines in lon/lat;
+over a long edge the two part by about ``L**2 * tan(lat) / (8 * R)`` (145 m for a 60 km
+edge along the parallel at 64°N). A polygon with an edge whose readings lie more than 5 cm
+apart is held under both (:mod:`alphafence.formats.kml_geodesic`): a keep-out or warning
+zone is their union, a keep-in zone their intersection, each edge's geodesic followed to
+within 5 cm (the kit then reads the result with lon/lat edges, as everywhere). Polygons
+whose edges are all shorter (along a parallel: under 1.1 km at 64°N, 1.4 km at 52°N, 1.9 km
+at 36°N) come back as written. Points with a radius and lines are read as they are.
+
 Pseudo-tags for the rules: ``airspace:format`` (``kml``), ``name``, ``kml:style`` (the
 styleUrl without ``#``), ``kml:folder`` (the innermost Folder's name), ``airspace:class`` (an
 ExtendedData ``class``), and every ExtendedData field by its name (``alphafence:kind =
@@ -32,6 +42,7 @@ from shapely.errors import ShapelyError
 from alphafence.errors import InputError, need
 from alphafence.formats.airspace import features_from_volumes, fences_from_volumes
 from alphafence.formats.jsonfile import max_json_bytes, read_limited
+from alphafence.formats.kml_geodesic import both_readings, geodesic_reading
 from alphafence.formats.kml_volumes import Placemark, volumes
 
 SUFFIXES = (".kml", ".kmz")
@@ -272,7 +283,8 @@ def _placemark(path, index, pm, folder, skipped):
 
 
 def read_volumes(path, skipped=None):
-    """The placemarks of a KML or KMZ file as volumes (see :mod:`alphafence.formats.airspace`).
+    """The placemarks of a KML or KMZ file as volumes (see :mod:`alphafence.formats.airspace`),
+    their polygons' edges straight in lon/lat, and how each is held read both ways.
 
     Parameters
     ----------
@@ -282,7 +294,10 @@ def read_volumes(path, skipped=None):
 
     Returns
     -------
-    list of tuple
+    volumes : list of tuple
+    readings : list
+        One per volume: None when its edges read alike both ways, else the ``(keep_out,
+        keep_in)`` areas (:func:`alphafence.formats.kml_geodesic.both_readings`).
 
     Raises
     ------
@@ -293,7 +308,15 @@ def read_volumes(path, skipped=None):
     marks = [
         _placemark(path, k, pm, folder, skipped) for k, (pm, folder) in enumerate(placemarks(root))
     ]
-    return volumes(path, [m for m in marks if m is not None])
+    marks = [m for m in marks if m is not None]
+    straight = volumes(path, marks)
+    areas = [p[1] for pm in marks for p in pm.prims if p[0] == "area"]
+    geodesic = {id(g): geodesic_reading(g) for g in areas}
+    if all(geodesic[id(g)] is g for g in areas):
+        return straight, [None] * len(straight)
+    read = volumes(path, marks, lambda g: geodesic[id(g)])
+    readings = [None if a[0] is b[0] else both_readings(a[0], b[0]) for a, b in zip(straight, read)]
+    return straight, readings
 
 
 def read_kml(path, rules, repaired, skipped):
@@ -311,16 +334,18 @@ def read_kml(path, rules, repaired, skipped):
     MissingDependency
         lxml is not installed.
     """
-    volumes = read_volumes(path, skipped)
-    return features_from_volumes(path, volumes, rules, repaired, skipped, "KML placemark")
+    volumes, readings = read_volumes(path, skipped)
+    what = "KML placemark"
+    return features_from_volumes(path, volumes, rules, repaired, skipped, what, readings)
 
 
 def read_kml_fences(path):
     """The placemarks of a KML or KMZ file as fences: keep-out unless ExtendedData
-    ``alphafence:kind`` says ``keep_in`` or ``warning``; bands as above.
+    ``alphafence:kind`` says ``keep_in`` or ``warning``; bands and long edges as above.
 
     Returns
     -------
     list of FenceRecord
     """
-    return fences_from_volumes(path, read_volumes(path), "kml")
+    volumes, readings = read_volumes(path)
+    return fences_from_volumes(path, volumes, "kml", readings)

@@ -14,6 +14,11 @@ Some airspace exports draw each volume as separate placemarks, all named after t
 Folder: a floor polygon, a ceiling polygon and one placemark per wall. A placemark holding only
 walls has no area of its own: the placemarks of its Folder with its name that hold only
 (not extruded) polygons are read as one zone, in the place of the first of them.
+
+Each function that makes areas takes an optional *reading*: the 2-D polygon a placemark's
+polygon is read as (e.g. with its edges along geodesics,
+:func:`alphafence.formats.kml_geodesic.geodesic_reading`), used for the area while what the
+polygon is (a floor, a wall) is judged on it as written.
 """
 
 from __future__ import annotations
@@ -119,7 +124,11 @@ def is_wall(prim) -> bool:
     return zs.size > 0 and float(zs.max()) > float(zs.min())
 
 
-def footprint(path, label, prims):
+def _as_written(geom):
+    return geom
+
+
+def footprint(path, label, prims, reading=None):
     """The area under polygons of one volume: floors and ceilings united (an identical floor
     and ceiling are one), or, with only polygons without area (vertical walls), the outline
     their horizontal lines close.
@@ -131,6 +140,8 @@ def footprint(path, label, prims):
         The placemark messages name.
     prims : list of tuple
         Polygons, as :attr:`Placemark.prims`.
+    reading : callable, optional
+        The polygon each is read as (by default as written).
 
     Returns
     -------
@@ -141,7 +152,8 @@ def footprint(path, label, prims):
     InputError
         A polygon without area that is no wall, or walls alone that close no ring.
     """
-    floors = [p[1] for p in prims if not _no_area(p[1])]
+    read = reading or _as_written
+    floors = [read(p[1]) for p in prims if not _no_area(p[1])]
     unique = list({shapely.normalize(f).wkb: f for f in floors}.values())
     if len(unique) == 1:
         return unique[0]
@@ -152,7 +164,7 @@ def footprint(path, label, prims):
             geom = shapely.union_all(shapely.make_valid(np.array(unique, dtype=object)))
     else:  # the horizontal lines of polygons without area, noded, as rings
         try:
-            lines = shapely.union_all([shapely.boundary(p[1]) for p in prims])
+            lines = shapely.union_all([shapely.boundary(read(p[1])) for p in prims])
             lines = [g for g in shapely.get_parts(lines) if g.geom_type == "LineString"]
             geom = shapely.union_all(shapely.get_parts(shapely.polygonize(lines)))
         except ShapelyError:
@@ -165,12 +177,12 @@ def footprint(path, label, prims):
     return geom
 
 
-def _placemark_volumes(path, pm):
+def _placemark_volumes(path, pm, reading):
     parts = []  # (geometry, lower, upper, lower reference, upper reference, extra properties)
     for p in pm.prims:
         if p[4] or p[0] != "area":  # extruded, points and lines: each its own volume
             lower, upper, ref = band([p], p[4])
-            geom, extra = p[1], {}
+            geom, extra = (reading(p[1]) if p[0] == "area" else p[1]), {}
             if p[0] == "point" and pm.radius is not None:
                 lon, lat = p[1].x, p[1].y
                 geom = circle_polygon(lon, lat, pm.radius)
@@ -179,7 +191,7 @@ def _placemark_volumes(path, pm):
     rest = [p for p in pm.prims if not p[4] and p[0] == "area"]
     if rest:
         lower, upper, ref = band(rest)
-        parts.append((footprint(path, pm.label, rest), lower, upper, ref, ref, {}))
+        parts.append((footprint(path, pm.label, rest, reading), lower, upper, ref, ref, {}))
     volumes = []
     for k, (geom, lower, upper, lref, uref, extra) in enumerate(parts):
         props = {"lower_reference": lref, "upper_reference": uref, **extra} if uref else extra
@@ -188,12 +200,12 @@ def _placemark_volumes(path, pm):
     return volumes
 
 
-def _zone_volume(path, members):
+def _zone_volume(path, members, reading):
     """One volume of a zone drawn as several placemarks (floor, ceiling, walls)."""
     prims = [p for pm in members for p in pm.prims]
     walls = next(pm for pm in members if pm.prims and all(is_wall(p) for p in pm.prims))
     lower, upper, ref = band(prims)
-    geom = footprint(path, walls.label, prims)
+    geom = footprint(path, walls.label, prims, reading)
     tags = {}
     for pm in reversed(members):  # the first placemark's values win
         tags.update(pm.tags)
@@ -201,13 +213,16 @@ def _zone_volume(path, members):
     return geom, tags, members[0].ident, lower, upper, props
 
 
-def volumes(path, marks):
+def volumes(path, marks, reading=None):
     """The volumes of a document's placemarks, in document order.
 
     Parameters
     ----------
     path : str or Path
     marks : list of Placemark
+    reading : callable, optional
+        The 2-D polygon each polygon is read as (by default as written): with or without it
+        the same volumes come back, in the same order.
 
     Returns
     -------
@@ -227,6 +242,7 @@ def volumes(path, marks):
     def areas(pm):
         return bool(pm.prims) and all(p[0] == "area" and not p[4] for p in pm.prims)
 
+    reading = reading or _as_written
     zones = {key(pm): [] for pm in marks if pm.prims and all(is_wall(p) for p in pm.prims)}
     for pm in marks:
         if key(pm) in zones and areas(pm):
@@ -235,7 +251,7 @@ def volumes(path, marks):
     for pm in marks:
         members = zones.get(key(pm)) if areas(pm) else None
         if not members:
-            out.extend(_placemark_volumes(path, pm))
+            out.extend(_placemark_volumes(path, pm, reading))
         elif members[0] is pm:
-            out.append(_zone_volume(path, members))
+            out.append(_zone_volume(path, members, reading))
     return out
