@@ -108,7 +108,7 @@ def _xyz(lon, lat):
     return np.column_stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)])
 
 
-def clearance(zone, rings, spacing_m=None, margin_m=0.0):
+def clearance(zone, rings, spacing_m=None, margin_m=0.0, reach_m=None):
     """How a zone sits in a fence made of lon/lat ``rings``, as ArduPilot reads them.
 
     Parameters
@@ -122,6 +122,9 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0):
         Sample spacing along the zone's boundary (default: a tenth of the margin, at most
         50 m, at least 0.5 m).
     margin_m : float
+    reach_m : float, optional
+        Distances beyond this are not measured (inf); default twice the margin plus a
+        kilometre.
 
     Returns
     -------
@@ -131,10 +134,18 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0):
         The least geodesic distance (metres) from a zone sample to a part's boundary (inf
         when none is within twice the margin plus a kilometre); the parts' shared edges
         along the antimeridian are not boundary.
+    each : ndarray
+        That distance for every sample.
+    inside : ndarray of bool
+        Whether ArduPilot calls each sample inside.
     """
     if spacing_m is None:
         spacing_m = min(max(margin_m / 10.0, 0.5), 50.0)
     lon, lat = boundary_samples(zone, spacing_m)
+    # a zone split at the antimeridian: its cut is no boundary (and on it, every reader's
+    # inside test is a tie)
+    keep = np.abs(lon) < 180.0 - 2e-7
+    lon, lat = lon[keep], lat[keep]
     inside = np.zeros(lon.shape, bool)
     for ring in rings:
         inside |= ~polygon_outside(lat, lon, ring[:, 1], ring[:, 0])
@@ -147,7 +158,7 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0):
                 continue  # a cut along the antimeridian between two parts
             segs.append((a, b))
     if not segs:
-        return int((~inside).sum()), math.inf
+        return int((~inside).sum()), math.inf, np.full(lon.shape, np.inf), inside
     a = np.array([s[0] for s in segs])
     b = np.array([s[1] for s in segs])
     b[:, 0] = a[:, 0] + (b[:, 0] - a[:, 0] + 180.0) % 360.0 - 180.0
@@ -161,7 +172,9 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0):
     slon = a[seg_of, 0] + (b[seg_of, 0] - a[seg_of, 0]) * t
     slat = a[seg_of, 1] + (b[seg_of, 1] - a[seg_of, 1]) * t
     tree = cKDTree(_xyz(slon, slat))
-    reach = (2.0 * margin_m + 2.0 * fine + 1000.0) / 6_371_000.0  # farther: clear enough
+    if reach_m is None:
+        reach_m = 2.0 * margin_m + 2.0 * fine + 1000.0  # farther: clear enough
+    reach = reach_m / 6_371_000.0
     _, near = tree.query(_xyz(lon, lat), k=min(4, len(slon)), distance_upper_bound=reach)
     near = near.reshape(len(lon), -1)
     best = np.full(len(lon), np.inf)
@@ -181,14 +194,41 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0):
         qlat = a[s, 1] + (b[s, 1] - a[s, 1]) * u
         _, _, dist = GEOD.inv(lon, lat, (qlon + 180.0) % 360.0 - 180.0, qlat)
         best = np.minimum(best, np.where(found, dist, np.inf))
-    return int((~inside).sum()), float(best.min()) if len(best) else math.inf
+    return int((~inside).sum()), float(best.min()) if len(best) else math.inf, best, inside
 
 
-def excursion_m(zone, rings, margin_m, spacing_m=None):
+def excursion_m(zone, rings, margin_m, spacing_m=None, reach_m=None):
     """How far the zone plus ``margin_m`` reaches beyond the fence as ArduPilot reads it
     (0 when it holds): the margin less the least clearance, or the margin plus the least
     clearance when zone samples lie outside."""
-    outside, dist = clearance(zone, rings, spacing_m, margin_m)
+    outside, dist, each, inside = clearance(zone, rings, spacing_m, margin_m, reach_m)
     if outside:
-        return margin_m + dist
+        return margin_m + float(each[~inside].max())
     return max(0.0, margin_m - dist)
+
+
+def circle_rim(lon, lat, radius_m, n=720):
+    """Positions ArduPilot measures ``radius_m`` from a circle's centre (lon, lat arrays):
+    its flat-earth distance inverted (latitude steps of LATLON_TO_M, longitude steps scaled
+    by the centre's cosine)."""
+    az = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    clat = float(e7(lat)) * 1e-7
+    scale = max(math.cos(math.radians(clat)), 0.01)
+    step = radius_m / (LATLON_TO_M * 1e7)  # degrees
+    return lon + step * np.sin(az) / scale, lat + step * np.cos(az)
+
+
+def circle_inradius_m(lon, lat, radius_m):
+    """The largest geodesic (WGS84) radius whose circle lies inside ArduPilot's circle of
+    ``radius_m``: what an exclusion circle item surely holds."""
+    rlon, rlat = circle_rim(lon, lat, radius_m)
+    n = len(rlon)
+    return float(GEOD.inv(np.full(n, lon), np.full(n, lat), rlon, rlat)[2].min())
+
+
+def circle_outradius_m(lon, lat, radius_m):
+    """The smallest geodesic radius whose circle holds ArduPilot's circle of ``radius_m``:
+    what an inclusion circle item may reach."""
+    rlon, rlat = circle_rim(lon, lat, radius_m)
+    n = len(rlon)
+    return float(GEOD.inv(np.full(n, lon), np.full(n, lat), rlon, rlat)[2].max())

@@ -24,6 +24,7 @@ from alphafence.mavlink.items import (
 from alphafence.mavlink.storage import PROFILES, Profile, storage_bytes
 from alphafence.onboard.compile import compile_fences
 
+from .ardupilot_model import circle_inradius_m
 from .helpers import VerifyFrame
 
 
@@ -60,14 +61,15 @@ def onboard_geometry(items, verify):
     out = []
     for cmd, pts in polys:
         if cmd == POLYGON_EXCLUSION:
-            x, y = verify.xy(np.asarray(pts)[:, 0], np.asarray(pts)[:, 1])
-            poly = shapely.Polygon(np.column_stack([x, y]))
+            # read as ArduPilot reads it: straight lon/lat edges (densified before projecting)
+            poly = verify.local(shapely.Polygon(np.asarray(pts)))
             assert poly.is_valid, "ArduPilot needs simple polygons"
             out.append(poly)
     disc = []
     for c in circles:
         cx, cy = verify.xy(c.lon, c.lat)
-        disc.append((cx, cy, c.param1))
+        # the geodesic circle that ArduPilot's own distance surely holds
+        disc.append((cx, cy, circle_inradius_m(c.lon, c.lat, c.param1)))
     return out, disc
 
 

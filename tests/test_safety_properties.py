@@ -30,6 +30,7 @@ from alphafence.mavlink.storage import PROFILES, storage_bytes
 from alphafence.onboard.compile import compile_fences
 from alphafence.onboard.corridor import flight_path
 
+from .ardupilot_model import circle_inradius_m
 from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
 from .test_compile import contained, fence_sets, onboard_geometry, validate_like_ardupilot
 
@@ -119,9 +120,16 @@ def read_features(doc, margin):
 
 
 def polygon_in(verify, lonlat):
-    """A fence polygon from output coordinates (lon, lat) in the verifying frame."""
-    x, y = verify.xy(np.asarray(lonlat)[:, 0], np.asarray(lonlat)[:, 1])
-    return shapely.Polygon(np.column_stack([x, y]))
+    """A fence polygon from output coordinates (lon, lat) in the verifying frame, its edges
+    straight lon/lat lines as ArduPilot reads them."""
+    return verify.local(shapely.Polygon(np.asarray(lonlat)))
+
+
+def seamless(geom):
+    """Parts of a fence split at the antimeridian, joined again in the verifying frame: their
+    shared edges along the meridian project a few nanometres apart (1 micrometre closes
+    them), and are no boundary of the fence."""
+    return shapely.buffer(geom, 1e-6, join_style="mitre")
 
 
 def assert_contains(fence_local, restricted, margin, what):
@@ -191,13 +199,18 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(
                 f"circle {fence.site_id}"
             )
         assert_contains(
-            verify.local(fence.geometry), restricted, fence.margin_m, f"{method} {fence.kind} fence"
+            seamless(verify.local(fence.geometry)),
+            restricted,
+            fence.margin_m,
+            f"{method} {fence.kind} fence",
         )
         if fence.kind == "keep_out" and method not in ("exact", "circle"):
             for part in shapely.get_parts(fence.local):
                 # beyond 85 degrees a fence may take more vertices to hold as it is read
-                assert len(part.exterior.coords) - 1 <= max_vertices or fence.repaired or (
-                    abs(lat) > 85.0
+                assert (
+                    len(part.exterior.coords) - 1 <= max_vertices
+                    or fence.repaired
+                    or (abs(lat) > 85.0)
                 )
 
     # 2. every output format
@@ -210,14 +223,21 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(
         for props, geom in geojson_fences(text):
             g, w = by_site[props["site_id"]]
             assert_contains(
-                verify.local(geom), restricted_in(verify, g, w), props["margin_m"], "GeoJSON"
+                seamless(verify.local(geom)),
+                restricted_in(verify, g, w),
+                props["margin_m"],
+                "GeoJSON",
             )
         keep_out = [f for f in result.fences if f.kind == "keep_out"]
         for items in (read_plan_fence(paths[1]), read_waypoints_fence(paths[2])):
             polygons, circles = group_polygons(items)
             onboard = [polygon_in(verify, np.asarray(p)) for _, p in polygons]
-            centres = [(*verify.xy(c.lon, c.lat), c.param1) for c in circles]
-            union = shapely.union_all(onboard) if onboard else shapely.Polygon()
+            # each circle item as ArduPilot measures it: the geodesic circle it surely holds
+            centres = [
+                (*verify.xy(c.lon, c.lat), circle_inradius_m(c.lon, c.lat, c.param1))
+                for c in circles
+            ]
+            union = seamless(shapely.union_all(onboard)) if onboard else shapely.Polygon()
             for fence in keep_out:
                 g, w = by_site[fence.site_id]
                 restricted = restricted_in(verify, g, w)
@@ -460,7 +480,9 @@ def test_a_circle_zone_is_one_circle_fence_holding_it_plus_margin_in_every_forma
             polygons, circles = group_polygons(items)
             assert not polygons and len(circles) == 1  # one circle item: 13 bytes onboard
             (c,) = circles
-            assert circle_holds((c.lon, c.lat, c.param1), zone, margin), "plan/waypoints"
+            # the item as ArduPilot measures it: the geodesic circle it surely holds
+            held = (c.lon, c.lat, circle_inradius_m(c.lon, c.lat, c.param1))
+            assert circle_holds(held, zone, margin), "plan/waypoints"
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -14,6 +14,7 @@ import math
 import numpy as np
 import shapely
 
+from alphafence.geo.alpha import fill_holes
 from alphafence.geo.hold import hold_as_read
 from alphafence.geo.lonlat import (
     READ_TOLERANCE_M,
@@ -59,9 +60,13 @@ def ground_margins(geoms, margins):
     return out
 
 
-def hold_fences(locals_, frames, outward=True):
+def hold_fences(locals_, frames, outward=True, regions=None):
     """Each fence held so that its lon/lat reading contains (``outward``) or stays inside
     what it contains in its frame; fences whose edges cannot bow come back as they are.
+
+    A fence whose lon/lat reading is no polygon at all (a vertex a simplification moved so
+    far that its edges would read across half the world) is replaced by its region
+    (``regions[i]``, its holes filled), held in turn.
 
     Parameters
     ----------
@@ -69,6 +74,8 @@ def hold_fences(locals_, frames, outward=True):
         Metres, each in its frame.
     frames : sequence of LocalFrame
     outward : bool
+    regions : sequence of shapely geometry, optional
+        What each fence must contain, metres (outward holds only).
 
     Returns
     -------
@@ -82,9 +89,34 @@ def hold_fences(locals_, frames, outward=True):
         if geom is None or bow_free([geom], frame)[0]:
             continue
         held = hold_as_read(geom, frame, outward)
+        if regions is not None and not readable(held, frame):
+            held = hold_as_read(fill_holes(regions[i]), frame, outward)
         if held is not geom:
             out[i], changed[i] = held, True
     return out, changed
+
+
+def readable(local, frame) -> bool:
+    """Whether a metric polygon's lon/lat vertices make a polygon when read as straight
+    lon/lat lines: no edge longer than 180° of longitude, and valid as read.
+
+    Examples
+    --------
+    >>> from alphafence.geo.frame import LocalFrame
+    >>> frame = LocalFrame(0.0, -44.0)
+    >>> readable(shapely.box(0, 0, 50_000, 50_000), frame)
+    True
+    >>> readable(shapely.Polygon([(-1.2e7, 0), (1.2e7, 0), (0, 1e5)]), frame)  # 12,000 km
+    False
+    """
+    for part in shapely.get_parts(local).tolist():
+        for ring in (part.exterior, *part.interiors):
+            c = np.asarray(ring.coords)
+            lon, lat = frame.to_wgs84(c[:, 0], c[:, 1])
+            lon = unwrap_lon(np.asarray(lon))
+            if np.ptp(lon) >= 180.0 or not shapely.LinearRing(np.column_stack([lon, lat])).is_valid:
+                return False
+    return True
 
 
 def reads_covering(local, frame, geometry, margin_m) -> bool:

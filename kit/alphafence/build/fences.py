@@ -227,7 +227,7 @@ def _fence_sites(sites, opts):
     made = [next(fenced) if z is None else (circle_polygon(*z), z, None) for z in zones]
     locals_, circles, alphas = (list(col) for col in zip(*made)) if made else ([], [], [])
     frames = [sites[k].frame for k in todo]
-    locals_, held = hold_fences(locals_, frames)  # as their lon/lat vertices will be read
+    locals_, held = hold_fences(locals_, frames, regions=regions)  # as lon/lat will read them
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, ground)]
     for i in (i for i, bad in enumerate(repaired) if bad):
         locals_[i], circles[i] = _repair(locals_[i], regions[i], frames[i])
@@ -314,7 +314,7 @@ def _warning_layers(mains, geoms, opts, ground):
         simplified = iter(simplify_parts(grown[polygonal], opts))
     locals_ = [circle_polygon(*c) if c is not None else next(simplified) for c in circles]
     frames = [m.frame for m in mains]
-    locals_, held = hold_fences(locals_, frames)
+    locals_, held = hold_fences(locals_, frames, regions=list(grown))
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
     for i, (bad, h) in enumerate(zip(repaired, held)):
         if bad or (h and not reads_covering(locals_[i], frames[i], geoms[i], margins[i])):
