@@ -13,7 +13,7 @@ import time
 
 import pytest
 import shapely
-from hypothesis import given, settings
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -123,51 +123,106 @@ def test_the_plan_says_uncovered_when_the_vehicle_outruns_its_fence():
     assert plan.covers(coverage, 0.0, edge + 1)  # beyond the disk, but no fence is missing
 
 
-fence_centres = st.lists(
-    st.tuples(st.floats(-1500, 1500), st.floats(-1500, 1500)), min_size=1, max_size=25
-)
 headings = st.lists(st.floats(0, 2 * math.pi), min_size=1, max_size=40)
+anywhere = st.tuples(st.floats(-1500, 1500), st.floats(-1500, 1500))
+STEPS = 200  # seconds flown in the hysteresis property
+
+
+def offset(x, y, distance, angle):
+    return (x + distance * math.cos(angle), y + distance * math.sin(angle))
+
+
+def track(turns, speed):
+    """The vehicle's position at each second: from (0, 0) at ``speed`` m/s, heading
+    ``turns[k]`` for the k-th equal share of the flight."""
+    x = y = 0.0
+    out = []
+    for step in range(STEPS):
+        out.append((x, y))
+        heading = turns[step * len(turns) // STEPS]
+        x, y = offset(x, y, speed, heading)
+    return out
+
+
+@st.composite
+def flights(draw):
+    """A flight within the speed limit, turning at will, and fences beside its track: each
+    within 1.5 reaches of a position it passes (so the fence in force must hold some of them
+    after the vehicle has moved, and leave others out), and a few anywhere."""
+    turns = draw(headings)
+    speed_fraction = 1.0 - draw(st.floats(0.0, 0.95))  # 0.05 to 1, small draws favoured: fast
+    positions = track(turns, OPTIONS.speed_mps * speed_fraction)
+    beside = st.tuples(
+        st.integers(0, STEPS - 1), st.floats(0, 1.5 * REACH), st.floats(0, 2 * math.pi)
+    )
+    centres = [  # counted from the end (small integers are favoured): where it has moved
+        offset(*positions[-1 - k], distance, angle)
+        for k, distance, angle in draw(st.lists(beside, min_size=1, max_size=20))
+    ]
+    return turns, speed_fraction, centres + draw(st.lists(anywhere, max_size=5))
 
 
 @settings(max_examples=60, deadline=None)
-@given(
-    fence_centres,
-    headings,
-    st.floats(0.2, 1.0),
-    st.integers(0, 5),
-    st.floats(0.05, 1.0),
-)
-def test_the_fence_in_force_holds_every_fence_within_reach(
-    centres, turns, hysteresis, latency_steps, speed_fraction
-):
+@given(flights(), st.floats(0.2, 1.0), st.integers(0, 5))
+def test_the_fence_in_force_holds_every_fence_within_reach(flight, hysteresis, latency_steps):
     """A vehicle within its speed limit, turning at will; each re-upload written
     ``latency_steps`` seconds after it is due (at most the upload budget): at every second the
     fence in force (the one written last) holds every fence within reach of the vehicle."""
+    turns, speed_fraction, centres = flight
     options = RollingOptions(hysteresis=hysteresis, upload_budget_s=5.0)
     plan = plan_for(squares(centres), options)
-    speed = options.speed_mps * speed_fraction
-    x = y = 0.0
     in_force, pending = None, None  # (coverage, written at step)
-    for step in range(200):
-        heading = turns[step * len(turns) // 200]
+    writes, held = 0, 0  # fences written; held: 1 a fence within reach under the first, 2 under
+    # a re-uploaded one (what the property is about: the vehicle has moved)
+    for step, (x, y) in enumerate(track(turns, options.speed_mps * speed_fraction)):
         if pending is not None and step >= pending[1]:
             in_force, pending = pending[0], None
+            writes += 1
         if in_force is not None:
-            assert set(plan.within(x, y, plan.reach_m)) <= in_force.sites
+            within = set(plan.within(x, y, plan.reach_m))
+            assert within <= in_force.sites
             assert plan.covers(in_force, x, y)
+            held = max(held, (1 + (writes > 1)) if within else 0)
         if pending is None and plan.due(in_force, x, y) is not None:
             pending = (plan.coverage(x, y, 0.0, 0.0), step + latency_steps)
             if in_force is None:  # the start: nothing to hold until the first is written
                 in_force, pending = pending[0], None
-        x += speed * math.cos(heading)
-        y += speed * math.sin(heading)
+                writes += 1
+    event(
+        (
+            "vacuous: no fence ever within reach",
+            "asserted: fences within reach held by the first fence only",
+            "asserted: fences within reach held by a re-uploaded fence",
+        )[held]
+    )
+
+
+RADIUS = OPTIONS.radius_m(BRAKING)
+
+
+@st.composite
+def rolling_scenes(draw):
+    """Fences and a position the fence compiled at (0, 0) is for (within its radius less the
+    reach: the vehicle anywhere else calls for a new one): fences within reach of the
+    position, often so many more within the radius that the compile must merge to fit a
+    copter's 560 bytes (merging starts at about 20 squares), and a few anywhere."""
+    px, py = offset(0.0, 0.0, draw(st.floats(0, RADIUS - REACH)), draw(st.floats(0, 2 * math.pi)))
+    polar = st.tuples(st.floats(0, 1), st.floats(0, 2 * math.pi))
+    near = [offset(px, py, REACH * r, a) for r, a in draw(st.lists(polar, min_size=1, max_size=8))]
+    count = draw(st.integers(4, 50))  # a count of its own: hypothesis favours short lists
+    around = [
+        offset(0, 0, RADIUS * r, a)
+        for r, a in draw(st.lists(polar, min_size=count, max_size=count))
+    ]
+    return near + around + draw(st.lists(anywhere, max_size=5)), px, py
 
 
 @settings(max_examples=25, deadline=None)
-@given(fence_centres, st.floats(-800, 800), st.floats(-800, 800))
-def test_the_compiled_rolling_fence_contains_every_fence_within_reach(centres, px, py):
+@given(rolling_scenes())
+def test_the_compiled_rolling_fence_contains_every_fence_within_reach(scene):
     """What is uploaded (the copter's 560 bytes) contains every fence within reach of any
     position the fence in force is for."""
+    centres, px, py = scene
     records = squares(centres, size=60.0)
     plan = plan_for(records)
     centre = plan.coverage(0.0, 0.0, FRAME.lon0, FRAME.lat0)
@@ -179,14 +234,18 @@ def test_the_compiled_rolling_fence_contains_every_fence_within_reach(centres, p
             centre.radius_m + 1.0,
         )
     except InputError:  # too many to fit even merged: an event, nothing uploaded (tested below)
+        event("early: too many to fit")
         return
     assert len(compiled.items) <= 70 and compiled.bytes_used <= 560
     onboard = shapely.union_all(
         [compiled.frame.geom_to_wgs84(p.chosen.local) for p in compiled.pieces]
     )
     if plan.due(centre, px, py) == "uncovered":
+        event("early: uncovered")
         return
-    for i in plan.indices(px, py, REACH):
+    near = plan.indices(px, py, REACH)
+    event(f"asserted: {'merged' if compiled.merges else 'not merged'}" if near else "vacuous")
+    for i in near:
         fence = plan.fences.records[i].geometry
         assert shapely.covers(shapely.buffer(onboard, 1e-8), fence), plan.fences.records[i].site_id
 
