@@ -12,7 +12,6 @@ The peer is the same build with its fences written as they were made in the metr
 
 from __future__ import annotations
 
-import collections
 import time
 from contextlib import ExitStack
 from unittest import mock
@@ -23,7 +22,6 @@ from pyproj import Geod
 
 from alphafence.build import as_read, sites
 from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.geojson import read_geojson_doc
 from alphafence.formats.rules import parse_rules
 
 GEOD = Geod(ellps="WGS84")
@@ -63,18 +61,9 @@ def zones(seed=SEED):
 
 
 def _features(named, rules):
-    doc = {
-        "type": "FeatureCollection",
-        "features": [
-            {
-                "type": "Feature",
-                "properties": {"restricted": "yes", "osm_id": str(k)},
-                "geometry": shapely.geometry.mapping(z),
-            }
-            for k, (_, z) in enumerate(named)
-        ],
-    }
-    return read_geojson_doc("national.geojson", doc, rules, [], collections.Counter())
+    from tests.ardupilot_model import zone_features
+
+    return zone_features([z for _, z in named], rules, "national.geojson")
 
 
 def _measure(result, named, margin):
@@ -129,7 +118,7 @@ def run(Row):
         stack.enter_context(
             mock.patch(
                 "alphafence.build.fences.hold_fences",
-                lambda locs, frames, outward=True: (list(locs), [False] * len(locs)),
+                lambda locs, frames, outward=True, regions=None: (list(locs), [False] * len(locs)),
             )
         )
         stack.enter_context(mock.patch.object(as_read, "split_lonlat", lambda g: None))

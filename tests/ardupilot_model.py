@@ -232,3 +232,24 @@ def circle_outradius_m(lon, lat, radius_m):
     rlon, rlat = circle_rim(lon, lat, radius_m)
     n = len(rlon)
     return float(GEOD.inv(np.full(n, lon), np.full(n, lat), rlon, rlat)[2].max())
+
+
+def zone_features(zones, rules, name="zones.geojson"):
+    """Lon/lat polygons as the restricted features of a GeoJSON FeatureCollection, the ``k``th
+    with ``osm_id`` ``k`` (its source ends ``/k``), read with ``rules``."""
+    import collections
+
+    from alphafence.formats.geojson import read_geojson_doc
+
+    doc = {
+        "type": "FeatureCollection",
+        "features": [
+            {
+                "type": "Feature",
+                "properties": {"restricted": "yes", "osm_id": str(k)},
+                "geometry": shapely.geometry.mapping(z),
+            }
+            for k, z in enumerate(zones)
+        ],
+    }
+    return read_geojson_doc(name, doc, rules, [], collections.Counter())

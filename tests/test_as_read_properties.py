@@ -12,7 +12,6 @@ statistics' events count them by shape)."""
 
 from __future__ import annotations
 
-import collections
 import json
 import tempfile
 from pathlib import Path
@@ -29,7 +28,6 @@ from alphafence.formats.atomic import write_all
 from alphafence.formats.fence_geojson import fences_geojson
 from alphafence.formats.fence_read import read_fence_file
 from alphafence.formats.fence_stream import open_writers
-from alphafence.formats.geojson import read_geojson_doc
 from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
 from alphafence.formats.qgc_wpl import read_waypoints_fence
 from alphafence.formats.rules import parse_rules
@@ -37,7 +35,7 @@ from alphafence.mavlink.items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, POLYGO
 from alphafence.mavlink.storage import PROFILES
 from alphafence.onboard.compile import compile_fences
 
-from .ardupilot_model import GEOD, clearance, excursion_m, location_distance_m
+from .ardupilot_model import GEOD, clearance, excursion_m, location_distance_m, zone_features
 
 KM = 1000.0
 
@@ -130,18 +128,7 @@ def long_zones(draw):
 
 
 def _features(zones, rules):
-    doc = {
-        "type": "FeatureCollection",
-        "features": [
-            {
-                "type": "Feature",
-                "properties": {"restricted": "yes", "osm_id": str(k)},
-                "geometry": shapely.geometry.mapping(z),
-            }
-            for k, z in enumerate(zones)
-        ],
-    }
-    return read_geojson_doc("long.geojson", doc, rules, [], collections.Counter())
+    return zone_features(zones, rules, "long.geojson")
 
 
 def _rings(geom):
@@ -168,11 +155,11 @@ def _holds(zone, rings, circles, margin, what):
             d = location_distance_m(plat, plon, lat, lon)
             assert d.max() < r, f"{what}: the zone reaches {d.max() - r:.2f} m out of the circle"
         return
-    out = excursion_m(zone, rings, margin, spacing_m=max(margin / 10, 20.0))
+    out = excursion_m(zone, rings, margin, spacing_m=max(margin / 4, 50.0))
     assert out <= 0.01, f"{what}: the zone plus {margin} m reaches {out:.2f} m out of the fence"
 
 
-@settings(max_examples=24, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     zone=long_zones(),
     method=st.sampled_from(METHODS),
@@ -238,7 +225,7 @@ def _parquet_fences(fences, path):
     return {(r.site_id, r.kind): r.geometry for r in read_fence_file(str(path))}
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(zone=long_zones(), margin=st.sampled_from([0.0, 100.0]))
 def test_keep_in_fences_lie_inside_their_zone_less_margin_as_read(zone, margin):
     shape, zones = zone
@@ -255,13 +242,13 @@ def test_keep_in_fences_lie_inside_their_zone_less_margin_as_read(zone, margin):
         # the fence's boundary, read in lon/lat, lies inside the zone (ArduPilot's reading of
         # the zone's vertices) and at least the margin from its boundary
         outside, dist, _, _ = clearance(
-            fence.geometry, _rings(zones[0]), spacing_m=max(margin / 10, 20.0), margin_m=margin
+            fence.geometry, _rings(zones[0]), spacing_m=max(margin / 4, 50.0), margin_m=margin
         )
         assert outside == 0, f"{outside} samples of the keep-in fence lie outside its zone"
         assert dist >= margin - 0.01, f"the keep-in fence comes {dist:.2f} m from its zone"
 
 
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(zone=long_zones(), profile=st.sampled_from(["copter", "sd-fence"]))
 def test_onboard_fences_contain_the_fences_they_stand_for_as_read(zone, profile):
     shape, zones = zone

@@ -260,7 +260,7 @@ def test_fence_rows_numbers_are_each_fences_own(built):
     assert areas == [f.area_m2 for f in fences]
     rows = fence_rows(fences)
     assert [r[2:4] + r[7:] for r in rows] == [
-        (f.vertices, f.area_m2, item_count(f)) for f in fences
+        (f.vertices, f.area_m2, item_count(f), f.growth) for f in fences
     ]
 
 
