@@ -22,14 +22,18 @@ class VerifyFrame:
         """``geom`` (lon/lat) in this frame, its edges read as straight lon/lat lines (as
         GeoJSON, QGroundControl and ArduPilot read them): each edge is cut into pieces of at
         most 2e-4 degrees (22 m) before projecting, short enough that no piece bows a
-        millimetre from its chord below 87 degrees of latitude."""
+        millimetre from its chord below 87 degrees of latitude (a geometry over 1° across:
+        a 5,000th of it)."""
 
         def f(c):
             x, y = self.t.transform(c[:, 0], c[:, 1])
             return np.column_stack([x, y])
 
-        try:
-            geom = shapely.segmentize(_unwrapped(geom), 2e-4)
+        geom = _unwrapped(geom)
+        b = shapely.bounds(geom)
+        span = float(np.hypot(b[2] - b[0], b[3] - b[1])) if np.isfinite(b).all() else 0.0
+        try:  # 2e-4 degrees, or a 5,000th of the geometry across (a few km: the same)
+            geom = shapely.segmentize(geom, max(2e-4, span / 5000.0))
         except shapely.errors.GEOSException:  # a degenerate line (repeated points) as it is
             pass
         return shapely.transform(geom, f)

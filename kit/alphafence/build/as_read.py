@@ -88,10 +88,12 @@ def hold_fences(locals_, frames, outward=True, regions=None):
     for i, (geom, frame) in enumerate(zip(out, frames)):
         if geom is None or bow_free([geom], frame)[0]:
             continue
+        if regions is not None and not readable(geom, frame):  # before holding: it cannot
+            geom = fill_holes(regions[i])
         held = hold_as_read(geom, frame, outward)
         if regions is not None and not readable(held, frame):
             held = hold_as_read(fill_holes(regions[i]), frame, outward)
-        if held is not geom:
+        if held is not out[i]:
             out[i], changed[i] = held, True
     return out, changed
 

@@ -11,6 +11,8 @@ from shapely.geometry.polygon import orient
 from alphafence.geo.lonlat import READ_TOLERANCE_M, left_bows
 from alphafence.geo.rings import ring_coords
 
+MAX_PIECES = 256  # an edge is cut in at most this many: what still bows is checked as read
+
 
 def _meeting_points(pts, n, push):
     """Where each vertex's two neighbouring edge lines meet once moved right by ``push``,
@@ -71,8 +73,8 @@ def _shifted_ring(pts, push):
 def _densified_on_chords(frame, pts, bows, tolerance_m):
     """``pts`` with vertices added along the metric edges whose lon/lat reading bows more
     than ``tolerance_m``: the same polygon, its edges short enough to read as they are."""
-    pieces = np.ceil(np.sqrt(np.maximum(bows, 0.0) / tolerance_m)).astype(int)
-    pieces = np.maximum(pieces, 1)
+    pieces = np.ceil(np.sqrt(np.maximum(bows, 0.0) / tolerance_m))
+    pieces = np.clip(np.nan_to_num(pieces, nan=1.0), 1, MAX_PIECES).astype(int)
     nxt = np.roll(pts, -1, axis=0)
     out = []
     for a, b, k in zip(pts, nxt, pieces.tolist()):
