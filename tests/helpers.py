@@ -59,8 +59,10 @@ def _unwrapped(geom):
 
 
 def _valid_local(frame, g):
-    """``g`` in ``frame``, made valid; a sliver that its densified edges make empty is made
-    valid first (a line, as the kit reads it)."""
+    """``g`` in ``frame``, made valid; a polygon without area (collinear vertices, a sliver)
+    is the line it is, made valid first, as the kit reads it."""
+    if g.geom_type in ("Polygon", "MultiPolygon") and not g.area > 0:
+        g = shapely.make_valid(g)
     out = shapely.make_valid(frame.local(g))
     if out.is_empty and not g.is_empty:
         out = shapely.make_valid(frame.local(shapely.make_valid(g)))

@@ -98,6 +98,39 @@ def hold_fences(locals_, frames, outward=True, regions=None):
     return out, changed
 
 
+def readable_fences(locals_, frames, regions, simplify, budget):
+    """Fences whose lon/lat reading is no polygon (a simplification moved a vertex so far
+    that the edges read across each other) simplified again from their regions with twice
+    the vertices, until they read as polygons (else their regions as they are).
+
+    Parameters
+    ----------
+    locals_, frames, regions : sequences
+        The fences (metres), their frames and the regions they were simplified from.
+    simplify : callable
+        ``simplify(region, max_vertices)`` -> the fence.
+    budget : int
+        The vertices they were simplified to.
+
+    Returns
+    -------
+    list of shapely geometry
+    """
+    out = list(locals_)
+    for i, (geom, frame) in enumerate(zip(out, frames)):
+        if geom is None or bow_free([geom], frame)[0] or readable(geom, frame):
+            continue
+        n, geom = budget, fill_holes(regions[i])
+        for _ in range(8):
+            n *= 2
+            again = simplify(regions[i], n)
+            if readable(again, frame):
+                geom = again
+                break
+        out[i] = geom
+    return out
+
+
 def readable(local, frame) -> bool:
     """Whether a metric polygon's lon/lat vertices make a polygon when read as straight
     lon/lat lines: no edge longer than 180° of longitude, and valid as read.

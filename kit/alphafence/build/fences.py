@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import gc
 import math
+from dataclasses import replace
 
 import numpy as np
 import shapely
@@ -19,6 +20,7 @@ from alphafence.build import METHODS
 from alphafence.build.as_read import (
     ground_margins,
     hold_fences,
+    readable_fences,
     reads_covering,
     split_at_antimeridian,
 )
@@ -227,6 +229,8 @@ def _fence_sites(sites, opts):
     made = [next(fenced) if z is None else (circle_polygon(*z), z, None) for z in zones]
     locals_, circles, alphas = (list(col) for col in zip(*made)) if made else ([], [], [])
     frames = [sites[k].frame for k in todo]
+    if opts.method in ("alpha", "polygon"):
+        locals_ = readable_fences(locals_, frames, regions, _resimplify(opts), opts.max_vertices)
     locals_, held = hold_fences(locals_, frames, regions=regions)  # as lon/lat will read them
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, ground)]
     for i in (i for i, bad in enumerate(repaired) if bad):
@@ -252,6 +256,11 @@ def _fence_sites(sites, opts):
         for i, fence in zip(warn, layers):
             out[todo[i]].append(fence)
     return [f for fences in out for f in fences]
+
+
+def _resimplify(opts):
+    """``simplify(region, n)``: ``region``'s fence by ``opts`` at ``n`` vertices."""
+    return lambda region, n: outer_fences([region], replace(opts, max_vertices=n))[0][0]
 
 
 def _repair(local, region, frame):

@@ -105,6 +105,8 @@ def _pushed(frame, pts, bows, tolerance_m, rounds):
 def _valid(ring, pts):
     """``ring`` if it is a simple ring; where moved edges cross (a narrow inlet closing), the
     outline of what it encloses, if that still covers ``pts``' polygon; else None."""
+    if not np.isfinite(ring).all():  # lines that met nearly parallel, beyond any number
+        return None
     poly = shapely.Polygon(ring)
     if poly.is_valid:
         return ring
@@ -159,12 +161,16 @@ def hold_ring(frame, pts, tolerance_m=READ_TOLERANCE_M, rounds=40):
     bows = left_bows(frame, pts)
     if not (bows > tolerance_m).any():
         return pts
-    for _ in range(4):
-        ring = _pushed(frame, pts, bows, tolerance_m, rounds)
-        if ring is not None:
-            return ring
-        pts = _split(pts, bows, tolerance_m)
-        bows = left_bows(frame, pts)
+    first, first_bows = pts, bows
+    with np.errstate(all="ignore"):
+        for _ in range(4):
+            ring = _pushed(frame, pts, bows, tolerance_m, rounds)
+            if ring is not None:
+                return ring
+            pts = _split(pts, bows, tolerance_m)
+            bows = left_bows(frame, pts)
+        if not (np.isfinite(pts).all() and np.isfinite(bows).all()):
+            pts, bows = first, first_bows
     return _densified_on_chords(frame, pts, bows, tolerance_m)
 
 
