@@ -44,7 +44,7 @@ sitl-test: $(STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
 	$(BIN)/pytest -q -m sitl
 
-# a Navio2's OS (Debian armhf) under qemu-user, as root: the README's install, the companion's
+# a Navio2's OS (Debian armhf) under qemu-user, as root: the install in docs/onboard.md, the companion's
 # unit tests and a flight against x86 SITL; not part of `make test` (see tests/navio2/run.sh)
 navio2-test: $(STAMP)
 	bash tests/navio2/run.sh

@@ -155,7 +155,7 @@ def test_every_public_class_and_function_has_a_docstring():
 
 
 def test_the_readme_layout_is_the_real_tree():
-    readme = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    readme = (PACKAGE.parents[1] / "docs" / "architecture.md").read_text(encoding="utf-8")
     block = readme.split("## Layout", 1)[1].split("```", 2)[1]
     listed, folder = set(), None
     for line in block.splitlines()[1:]:
