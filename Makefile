@@ -10,6 +10,7 @@ MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
+	@echo "installing AlphaFence and its dependencies into $(VENV) (first run only, about a minute)..."
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[dev]'

@@ -340,7 +340,8 @@ def test_missing_pyarrow_is_one_line_and_leaves_no_temp(tmp_path, monkeypatch):
         open_writers([tmp_path / "a.geojson", tmp_path / "fences.parquet"], {})
     msg = str(err.value)
     assert (
-        msg == "writing GeoParquet needs pyarrow 17.0 or later: pip install 'alphafence[parquet]'"
+        msg == "writing GeoParquet needs pyarrow 17.0 or later: in the AlphaFence checkout: "
+        "pip install '.[parquet]' (or everything: pip install -e '.[all]')"
     )
     assert _listing(tmp_path) == []
     (tmp_path / "in.parquet").write_bytes(b"PAR1")

@@ -412,5 +412,7 @@ def test_kml_without_lxml_is_one_line(tmp_path, monkeypatch, rules):
     monkeypatch.setitem(sys.modules, "lxml.etree", None)
     with pytest.raises(MissingDependency) as err:
         read_database([EARTH], rules)
-    assert str(err.value).startswith(f"reading {EARTH} needs lxml: pip install 'alphafence[kml]'")
+    assert str(err.value).startswith(
+        f"reading {EARTH} needs lxml: in the AlphaFence checkout: pip install '.[kml]'"
+    )
     assert kml.looks_like_kml(EARTH.read_bytes()[:200])

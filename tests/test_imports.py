@@ -129,7 +129,8 @@ def test_build_of_osm_without_pyosmium_says_what_to_install(tmp_path):
     line = _one_line(err)
     assert line.startswith(f"alphafence build: error: reading {pbf} needs pyosmium 4.0 or later")
     assert "building fences needs scipy" in line
-    assert "pip install 'alphafence[build]'" in line
+    assert "in the AlphaFence checkout: pip install '.[build]'" in line
+    assert "pip install -e '.[all]'" in line and "alphafence[" not in line
     assert "apt install python3-pyosmium python3-scipy" in line
 
 
@@ -163,7 +164,7 @@ def test_what_needs_an_extra_says_so_in_one_line(fences, tmp_path, argv, said):
     code, modules, err = _run(argv, NO_EXTRAS)
     assert code == 2
     line = _one_line(err)
-    assert said in line and "pip install 'alphafence[build]'" in line, line
+    assert said in line and "pip install '.[build]'" in line, line
     assert not (tmp_path / "o.plan").exists()  # nothing half-written
 
 
@@ -171,7 +172,11 @@ def test_signing_setup_without_pymavlink_names_the_companion_extra(tmp_path):
     argv = ["signing", "setup", "--connect", "udpin://127.0.0.1:9", "--key", str(tmp_path / "k")]
     code, _, err = _run(argv, NO_EXTRAS + ",pymavlink")
     assert code == 2
-    assert "signing setup needs pymavlink: pip install 'alphafence[companion]'" in _one_line(err)
+    line = _one_line(err)
+    assert (
+        "signing setup needs pymavlink: in the AlphaFence checkout: pip install '.[companion]'"
+        in line
+    )
 
 
 def _free_udp_port():

@@ -141,7 +141,8 @@ OPTIONAL = {
 
 class MissingDependency(AlphaFenceError, ImportError):
     """A package that the work asked for needs is not installed, does not import, or is too
-    old: ``str(err)`` is one line naming it, the extra and the Debian package that bring it.
+    old: ``str(err)`` is one line naming it, the extra and the Debian package that bring it
+    (:func:`install_hint`).
 
     It is an ``ImportError`` too, so ``except ImportError`` still catches it.
 
@@ -156,7 +157,7 @@ class MissingDependency(AlphaFenceError, ImportError):
     Examples
     --------
     >>> print(MissingDependency([("osmium", "reading malta.osm.pbf", None)]))
-    reading malta.osm.pbf needs pyosmium: pip install 'alphafence[build]' (Debian: apt install python3-pyosmium)
+    reading malta.osm.pbf needs pyosmium 4.0 or later: in the AlphaFence checkout: pip install '.[build]' (or everything: pip install -e '.[all]'; Debian: apt install python3-pyosmium)
     """
 
     exit_code = 2
@@ -170,12 +171,24 @@ class MissingDependency(AlphaFenceError, ImportError):
             what = _display(package) + (f" ({fault})" if fault else "")
             needs.setdefault(purpose, []).append(what)
         said = "; ".join(f"{purpose} needs {' and '.join(w)}" for purpose, w in needs.items())
-        extras = sorted({OPTIONAL[p][1] for p in self.packages})
-        debian = [OPTIONAL[p][2] for p in self.packages if OPTIONAL[p][2]]
-        how = f"pip install 'alphafence[{','.join(extras)}]'"
-        if debian:
-            how += f" (Debian: apt install {' '.join(debian)})"
-        super().__init__(" ".join(f"{said}: {how}".split()))
+        super().__init__(" ".join(f"{said}: {install_hint(self.packages)}".split()))
+
+
+def install_hint(packages):
+    """How to install the optional ``packages`` (import names, keys of :data:`OPTIONAL`):
+    the extras that bring them, installed from the AlphaFence checkout (the kit is not on
+    PyPI), and Debian's packages where there are.
+
+    Examples
+    --------
+    >>> install_hint(["scipy"])
+    "in the AlphaFence checkout: pip install '.[build]' (or everything: pip install -e '.[all]'; Debian: apt install python3-scipy)"
+    """
+    extras = sorted({OPTIONAL[p][1] for p in packages})
+    debian = [OPTIONAL[p][2] for p in packages if OPTIONAL[p][2]]
+    how = f"in the AlphaFence checkout: pip install '.[{','.join(extras)}]'"
+    how += " (or everything: pip install -e '.[all]'"
+    return how + (f"; Debian: apt install {' '.join(debian)})" if debian else ")")
 
 
 def _display(package):

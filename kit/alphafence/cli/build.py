@@ -65,7 +65,8 @@ def register(sub):
         "--dask",
         metavar="ADDRESS",
         help="fence the tiles on a dask.distributed cluster (e.g. tcp://10.0.0.5:8786); "
-        "needs alphafence[dask] here and on the workers",
+        "needs the dask extra here and on the workers (pip install '.[dask]' in the "
+        "AlphaFence checkout)",
     )
     p.add_argument(
         "--tile-size",
