@@ -73,6 +73,17 @@ def _load(path, private):
     return key
 
 
+def check_private_key(path) -> None:
+    """Refuse a signing key that :func:`sign` could not use, before anything is written.
+
+    Raises
+    ------
+    InputError
+        The key cannot be read or is not an Ed25519 private key (PEM).
+    """
+    _load(path, private=True)
+
+
 def _raw(pub: Ed25519PublicKey) -> str:
     return pub.public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw).hex()
 

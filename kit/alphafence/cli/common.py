@@ -120,7 +120,9 @@ def check_trust(args, path):
             return None
         raise InputError(
             exc.path,
-            exc.message + "; sign them (alphafence bundle sign) or pass --allow-unsigned",
+            exc.message
+            + "; sign them (alphafence bundle sign; a compiled plan: compile --sign-key) or "
+            "pass --allow-unsigned",
             exc.feature,
         ) from None
 

@@ -39,6 +39,13 @@ def register(sub):
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
     )
     p.add_argument(
+        "--sign-key",
+        metavar="KEY.pem",
+        help="sign what is written with this Ed25519 private key (from 'alphafence bundle "
+        "keygen'): ONBOARD.plan.sig.json beside it, as 'bundle sign' does, for 'upload "
+        "--trusted-key KEY.pub.pem'",
+    )
+    p.add_argument(
         "--figure",
         metavar="PNG",
         help="draw the onboard fences over the full-resolution ones, the path and the corridor",
@@ -55,6 +62,10 @@ def run(args) -> int:
     from alphafence.formats.fence_read import read_fence_file as read_fences
 
     need(*figure_wants(args.figure))
+    if args.sign_key:
+        from alphafence.build.bundle import check_private_key
+
+        check_private_key(args.sign_key)
     records = read_fences(args.fences)
     result = compile_from_args(args, records)
     out = {
@@ -63,6 +74,10 @@ def run(args) -> int:
     if args.waypoints:
         out[args.waypoints] = waypoints.waypoints_text(result.items)
     write_all(out)
+    if args.sign_key:
+        from alphafence.build.bundle import sign
+
+        out.update({sign(path, args.sign_key): None for path in list(out)})
     compile_report(result)
     if args.figure:
         from alphafence.plots.fences import onboard_figure
