@@ -278,10 +278,12 @@ class FakeVehicle:
         armed: bool = False,
         reboot_seconds: float = 0.5,
         uptime: float = 60.0,
+        mav_type: int = mav.MAV_TYPE_QUADROTOR,
     ):
         self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
         self.params: dict[str, float] = dict(params or {})
         self.armed = armed
+        self.mav_type = mav_type  # HEARTBEAT's type: a copter unless told
         self.reboot_seconds = reboot_seconds
         self.reboots = 0  # boots after the first
         self._boot_t0 = time.monotonic() - uptime  # SYSTEM_TIME's clock
@@ -469,7 +471,7 @@ class FakeVehicle:
             armed = mav.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0
             self._send(
                 mav.MAVLink_heartbeat_message(
-                    mav.MAV_TYPE_QUADROTOR,
+                    self.mav_type,
                     mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
                     mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
                     | mav.MAV_MODE_FLAG_STABILIZE_ENABLED

@@ -12,6 +12,7 @@ with ``--reboot`` (disarmed only) it is set and the vehicle rebooted before the 
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 
 from rich.table import Table
@@ -75,8 +76,11 @@ def register(sub):
     add_compile_options(p)
     p.add_argument(
         "--params",
-        choices=sorted(PARAM_PROFILES),
-        help="also set and verify these fence parameters",
+        action=_Presets,
+        choices=[*PARAM_PROFILES, "list"],
+        metavar="PRESET",
+        help="also set and verify the fence parameters of this preset, for the vehicle's type "
+        f"({', '.join(PARAM_PROFILES)}); 'list' prints each preset's parameters",
     )
     p.add_argument(
         "--reboot",
@@ -98,6 +102,24 @@ def register(sub):
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
     p.set_defaults(func=run)
+
+
+class _Presets(argparse.Action):
+    """``--params``: a preset's name, or ``list`` (print every preset's parameters, exit 0)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values != "list":
+            setattr(namespace, self.dest, values)
+            return
+        from alphafence.vehicle.params import VEHICLE, describe
+
+        t = Table(title="--params presets (ArduPilot's AC_Fence parameters)")
+        for col in ("preset", "vehicle", "parameters set"):
+            t.add_column(col)
+        for name, vehicle in VEHICLE.items():
+            t.add_row(name, vehicle, describe(name))
+        out_console.print(t)
+        parser.exit(0)
 
 
 def load_items(args):
@@ -273,10 +295,12 @@ def run(args) -> int:
 async def _upload(args, items, profile) -> int:
     from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
     from alphafence.vehicle.link import open_vehicle
-    from alphafence.vehicle.params import apply_params
+    from alphafence.vehicle.params import apply_params, check_preset
 
     with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
+            if args.params:
+                await check_preset(vehicle, args.params)
             if profile.file_backed:
                 await _storage(args, vehicle, items, profile)
             try:

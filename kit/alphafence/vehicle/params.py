@@ -6,38 +6,64 @@ from dataclasses import dataclass
 
 from alphafence.errors import VehicleError
 
-# FENCE_TYPE bits: 1 max altitude, 2 circle around home, 4 polygons and circles, 8 min altitude.
-# FENCE_ACTION (Copter): 0 report, 1 RTL or land, 2 land, 3 SmartRTL/RTL/land, 4 brake or land.
-PROFILES = {
-    "copter-rtl": {
-        "FENCE_ENABLE": 1,
-        "FENCE_TYPE": 5,
-        "FENCE_ACTION": 1,
-        "FENCE_MARGIN": 2.0,
-        "FENCE_ALT_MAX": 120.0,
+# The presets, per vehicle, as ArduPilot's AC_Fence documents its parameters
+# (libraries/AC_Fence/AC_Fence.cpp): FENCE_ENABLE 1 enabled; FENCE_TYPE bits 0 max altitude
+# (Copter, Plane), 1 circle around home, 2 inclusion/exclusion polygons and circles, 3 min
+# altitude; FENCE_ACTION per vehicle (:data:`ACTIONS`). Rover has no altitude fence (no
+# FENCE_ALT_MAX, FENCE_TYPE bit 0 is not one of its bits).
+ACTIONS = {
+    "copter": {
+        0: "Report Only",
+        1: "RTL or Land",
+        2: "Always Land",
+        3: "SmartRTL or RTL or Land",
+        4: "Brake or Land",
+        5: "SmartRTL or Land",
     },
-    "copter-brake": {
-        "FENCE_ENABLE": 1,
-        "FENCE_TYPE": 5,
-        "FENCE_ACTION": 4,
-        "FENCE_MARGIN": 2.0,
-        "FENCE_ALT_MAX": 120.0,
+    "plane": {
+        0: "Report Only",
+        1: "RTL",
+        6: "Guided",
+        7: "GuidedThrottlePass",
+        8: "AUTOLAND if possible else RTL",
     },
-    "copter-land": {
-        "FENCE_ENABLE": 1,
-        "FENCE_TYPE": 5,
-        "FENCE_ACTION": 2,
-        "FENCE_MARGIN": 2.0,
-        "FENCE_ALT_MAX": 120.0,
-    },
-    "report-only": {
-        "FENCE_ENABLE": 1,
-        "FENCE_TYPE": 5,
-        "FENCE_ACTION": 0,
-        "FENCE_MARGIN": 2.0,
-        "FENCE_ALT_MAX": 120.0,
+    "rover": {
+        0: "Report Only",
+        1: "RTL or Hold",
+        2: "Hold",
+        3: "SmartRTL or RTL or Hold",
+        4: "SmartRTL or Hold",
+        5: "Terminate",
+        6: "Loiter or Hold",
     },
 }
+"""FENCE_ACTION's values by vehicle, as AC_Fence.cpp's ``@Values{Copter}`` (``{Plane}``,
+``{Rover}``) name them."""
+_ACTION_OF = {
+    "copter": {"rtl": 1, "land": 2, "smartrtl": 3, "brake": 4, "report": 0},
+    "plane": {"rtl": 1, "guided": 6, "report": 0},
+    "rover": {"rtl": 1, "hold": 2, "smartrtl": 3, "report": 0},
+}
+VEHICLE = {
+    f"{vehicle}-{what}": vehicle for vehicle, actions in _ACTION_OF.items() for what in actions
+}
+"""The vehicle each preset is for (``copter``, ``plane``, ``rover``)."""
+
+
+def _preset(vehicle: str, action: int) -> dict:
+    values = {"FENCE_ENABLE": 1, "FENCE_TYPE": 4 if vehicle == "rover" else 5}
+    values.update(FENCE_ACTION=action, FENCE_MARGIN=2.0)
+    if vehicle != "rover":
+        values["FENCE_ALT_MAX"] = 120.0
+    return values
+
+
+PROFILES = {
+    f"{vehicle}-{what}": _preset(vehicle, action)
+    for vehicle, actions in _ACTION_OF.items()
+    for what, action in actions.items()
+}
+"""The presets: name -> the parameters each sets, in the order set (``upload --params``)."""
 INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "BRD_SD_FENCE"}
 
 # How far a Copter goes past the fence it holds when ArduPilot alone acts on the breach
@@ -58,6 +84,93 @@ MARGIN_FOR_SPEED_M = {5.0: 15.0, 10.0: 25.0}
 
 class ParamError(VehicleError):
     """A fence parameter could not be set or read, or reads back differently."""
+
+
+def describe(name: str) -> str:
+    """A preset's parameters and what its FENCE_ACTION does, on one line.
+
+    Examples
+    --------
+    >>> describe("rover-hold")
+    'FENCE_ENABLE=1 FENCE_TYPE=4 FENCE_ACTION=2 (Hold) FENCE_MARGIN=2'
+    """
+    values, actions = PROFILES[name], ACTIONS[VEHICLE[name]]
+    return " ".join(
+        f"{k}={v:g}" + (f" ({actions[v]})" if k == "FENCE_ACTION" else "")
+        for k, v in values.items()
+    )
+
+
+def vehicle_kind(mav_type: int) -> str | None:
+    """``"copter"``, ``"plane"`` or ``"rover"`` for a HEARTBEAT ``type``, as pymavlink's
+    mode maps class it (a boat is a rover, a VTOL a plane); None for another vehicle.
+
+    Examples
+    --------
+    >>> vehicle_kind(2), vehicle_kind(1), vehicle_kind(11), vehicle_kind(12)
+    ('copter', 'plane', 'rover', None)
+    """
+    from pymavlink import mavutil
+
+    mapping = mavutil.mode_mapping_bynumber(mav_type)
+    for kind, modes in (
+        ("copter", mavutil.mode_mapping_acm),
+        ("plane", mavutil.mode_mapping_apm),
+        ("rover", mavutil.mode_mapping_rover),
+    ):
+        if mapping is modes:
+            return kind
+    return None
+
+
+async def heartbeat_type(vehicle, timeout: float = 5.0) -> int:
+    """The autopilot's HEARTBEAT ``type``: the pymavlink link's own record of it, else the
+    first HEARTBEAT of the vehicle's system (either link).
+
+    Raises
+    ------
+    ParamError
+        No HEARTBEAT from the autopilot within ``timeout`` seconds.
+    """
+    import asyncio
+
+    from alphafence.mavlink import ids
+
+    if getattr(vehicle, "mav_type", None) is not None:
+        return int(vehicle.mav_type)
+    sysid = await vehicle.system_id()
+
+    async def first():
+        async for m in vehicle.messages("HEARTBEAT"):
+            if m.system_id == sysid and m.fields.get("autopilot") != ids.MAV_AUTOPILOT_INVALID:
+                return int(m.fields["type"])
+
+    try:
+        return await asyncio.wait_for(first(), timeout)
+    except asyncio.TimeoutError:
+        raise ParamError(
+            f"no HEARTBEAT from the vehicle in {timeout:g} s: its type is unknown"
+        ) from None
+
+
+async def check_preset(vehicle, name: str) -> None:
+    """Refuse the preset ``name`` for a vehicle of another type, before anything is set.
+
+    Raises
+    ------
+    ParamError
+        ``--params NAME is for a copter; the vehicle is a plane (HEARTBEAT type 1): ...``.
+    """
+    mav_type = await heartbeat_type(vehicle)
+    kind = vehicle_kind(mav_type)
+    if kind != VEHICLE[name]:
+        fits = sorted(n for n, v in VEHICLE.items() if v == kind)
+        raise ParamError(
+            f"--params {name} is for a {VEHICLE[name]}; the vehicle is "
+            f"{'a ' + kind if kind else 'no copter, plane or rover'} (HEARTBEAT type {mav_type})"
+            + (f": use one of {', '.join(fits)}" if fits else "")
+            + "; nothing was sent"
+        )
 
 
 @dataclass
