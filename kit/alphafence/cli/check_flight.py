@@ -147,8 +147,8 @@ def run(args) -> int:
     from alphafence.monitor.postflight import check_flight, load_fences
 
     need(("pymavlink", f"reading {args.log}"), *figure_wants(args.figure))
+    fences = load_fences(args.fences)  # first: a map database given for fences is said at once
     log = FlightLog(args.log, sysid=args.sysid)
-    fences = load_fences(args.fences)
     rep = check_flight(log, fences, near_m=args.near)
     if args.figure:
         from alphafence.plots.flight_check import flight_check_figure

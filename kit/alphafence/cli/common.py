@@ -103,9 +103,13 @@ def check_trust(args, path):
     Raises
     ------
     InputError
-        The fences do not verify and ``--allow-unsigned`` was not given.
+        ``path`` is a map database (an OSM extract: fences are built of it first), or the
+        fences do not verify and ``--allow-unsigned`` was not given.
     """
     from alphafence.build.bundle import verify
+    from alphafence.formats.mistakes import refuse_map_database
+
+    refuse_map_database(path)  # said before its signature is looked for
 
     keys = list(args.trusted_key) + [
         k for k in os.environ.get("ALPHAFENCE_TRUSTED_KEYS", "").split(os.pathsep) if k

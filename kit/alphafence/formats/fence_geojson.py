@@ -25,6 +25,7 @@ from alphafence.formats.fence_text import (
     wgs84_coordinates,
 )
 from alphafence.formats.jsonfile import read_json
+from alphafence.formats.mistakes import database_message
 from alphafence.mavlink.items import exterior_vertices
 
 KINDS = ("keep_out", "keep_in", "warning")
@@ -125,6 +126,14 @@ def _kind_of(path, props, label):
     return kind
 
 
+def _refuse_zone_list(path, doc):
+    """An ED-269 or ED-318 geozone list where fences belong: say to build fences of it."""
+    from alphafence.formats.ed269 import looks_like_ed269, looks_like_ed318
+
+    if looks_like_ed269(doc) or looks_like_ed318(doc):
+        raise InputError(path, database_message(path, "an ED-269/ED-318 geozone list", ".json"))
+
+
 def read_fences(path) -> list:
     """The fences of a fence GeoJSON file written by ``alphafence build``.
 
@@ -148,12 +157,17 @@ def read_fences(path) -> list:
         or doc.get("type") != "FeatureCollection"
         or not isinstance(doc.get("features"), list)
     ):
+        _refuse_zone_list(path, doc)
         raise InputError(path, "not a fence GeoJSON FeatureCollection")
     out = []
     for i, feat in enumerate(doc["features"]):
         props = feat.get("properties") if isinstance(feat, dict) else None
         if not isinstance(props, dict):
             raise InputError(path, "feature without properties", f"feature {i}")
+        if i == 0 and "kind" not in props and "site_id" not in props:
+            # map features (OSM tags, ED-318 zones): what build reads, not what it writes
+            _refuse_zone_list(path, doc)
+            raise InputError(path, database_message(path, "GeoJSON map features", ".geojson"))
         label = f"feature {i} ({props.get('site_id', '?')})"
         _kind_of(path, props, label)  # before the geometry
         try:

@@ -22,6 +22,7 @@ from alphafence.formats import fence_geojson, fence_parquet
 from alphafence.formats.features import check_coordinates
 from alphafence.formats.fence_geojson import _kind_of, fence_record
 from alphafence.formats.jsonfile import max_json_bytes
+from alphafence.formats.mistakes import refuse_map_database
 
 SEQ_SUFFIXES = (".geojsonl", ".geojsons", ".geojsonseq")
 GEOJSON_SUFFIXES = (".geojson", ".json")
@@ -57,10 +58,12 @@ def read_fence_file(path) -> list:
     Raises
     ------
     InputError
-        One line naming the file and the feature (or record, or row) that is malformed.
+        One line naming the file and the feature (or record, or row) that is malformed, or
+        saying that the file is a map database to build fences of (an OSM extract).
     MissingDependency
         A ``.parquet`` file without pyarrow installed, or a KML file without lxml.
     """
+    refuse_map_database(path)  # an OSM extract where fences belong: say to build them
     kind = _kind(path)
     if kind == "seq":
         return read_sequence(path)
