@@ -284,6 +284,7 @@ class FakeVehicle:
         self.params: dict[str, float] = dict(params or {})
         self.armed = armed
         self.mav_type = mav_type  # HEARTBEAT's type: a copter unless told
+        self.custom_mode = 0  # HEARTBEAT's custom_mode (ArduPilot's mode number)
         self.reboot_seconds = reboot_seconds
         self.reboots = 0  # boots after the first
         self._boot_t0 = time.monotonic() - uptime  # SYSTEM_TIME's clock
@@ -476,7 +477,7 @@ class FakeVehicle:
                     mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
                     | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
                     | armed,
-                    0,
+                    self.custom_mode,
                     mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY,
                     3,
                 )

@@ -14,6 +14,7 @@ import shapely
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink import ids
 from alphafence.monitor.replay import speedup_options  # noqa: F401 (the flights' options)
+from alphafence.vehicle.values import ardupilot_mode
 
 # The exclusion square every fenced flight uses, metres east (x) / north (y) of home, and the
 # altitude they fly at.
@@ -35,8 +36,8 @@ class FlightLog:
     texts: object = ()  # the Vehicle's STATUSTEXT deque, once connected
     positions: list = field(default_factory=list)  # (t, x east, y north, relative alt)
     speeds: list = field(default_factory=list)  # (t, horizontal speed m/s)
-    modes: list = field(default_factory=list)  # (t, mode name), on change only: MAVSDK's
-    # names on either link ("OFFBOARD" = GUIDED, "MISSION" = AUTO, "HOLD" = BRAKE or LOITER)
+    modes: list = field(default_factory=list)  # (t, mode name), on change only: ArduPilot's
+    # names on either link (MAVSDK's own read as ardupilot_mode reads them: HOLD = BRAKE)
     custom_modes: list = field(default_factory=list)  # (t, ArduCopter mode number), on change
     armed: list = field(default_factory=list)  # (t, bool), on change only
     fence: list = field(default_factory=list)  # (t, FENCE_STATUS fields)
@@ -102,10 +103,10 @@ def watch(log: FlightLog, vehicle, *streams: str) -> list[asyncio.Task]:
 
     async def modes():
         async for mode in vehicle.telemetry.subscribe_flight_mode():
-            if mode.name != log.mode():
-                log.modes.append((time.monotonic(), mode.name))
+            if ardupilot_mode(mode.name) != log.mode():
+                log.modes.append((time.monotonic(), ardupilot_mode(mode.name)))
 
-    async def custom_modes():  # ArduPilot's own mode number (both links show GUIDED as OFFBOARD)
+    async def custom_modes():  # ArduPilot's own mode number
         sysid = await vehicle.system_id()
         async for message in vehicle.messages("HEARTBEAT"):
             f = message.fields
@@ -244,7 +245,7 @@ async def take_off(action, log, altitude=ALTITUDE, poll=0.05):
         log,
         poll,
     )
-    assert log.mode() == "OFFBOARD", f"not in GUIDED: {log.mode()}"  # GUIDED, in MAVSDK's name
+    assert log.mode() == "GUIDED", f"not in GUIDED: {log.mode()}"
     return t_takeoff, t_up
 
 

@@ -17,6 +17,7 @@ from alphafence.formats.fence_geojson import read_fences
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.demo_flight import CLEAR_M, plan_leg
 from alphafence.monitor.engine import Sample
+from alphafence.monitor.events import utc_seconds
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import OnboardLayer
 from alphafence.monitor.replay import Trace, replay, speedup_options
@@ -98,9 +99,16 @@ def test_the_replay_is_the_engine_on_the_trace(replayed):
     trace = Trace.read(trace_path())
     fences = FenceSet.from_geojson(out / "fences.geojson")
     options = speedup_options(trace.speedup, enforce=True)
-    events = replay(trace, fences, options)
     written = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
-    assert [{**e, "replay": True} for e in events] == written
+    header, written = written[0], written[1:]
+    assert header["event"] == "clock" and header["utc_source"] == "wall clock"
+    events = replay(trace, fences, options)
+    assert [{**e, "utc": None, "replay": True} for e in events] == [
+        {**e, "utc": None} for e in written
+    ]
+    # every event's UTC is its monotonic time on the clock the header names (to the ms)
+    offset = utc_seconds(header["utc"]) - header["time"]
+    assert all(abs(utc_seconds(e["utc"]) - e["time"] - offset) < 0.0015 for e in written)
     # without the onboard layer the vehicle's fence is not loaded, the fences still warn
     off = replay(trace, fences, speedup_options(trace.speedup, onboard="off"))
     assert not [e for e in off if e["event"].startswith("onboard")]

@@ -44,7 +44,7 @@ def flight(legs, alt0, y0=-1800.0, x0=0.0):
             t += 0.1
             x, y, alt = x + vx * 0.1, y + vy * 0.1, max(0.0, alt + math.sin(t) * 0.5)
             lon, lat = FRAME.to_wgs84(x, y)
-            yield Sample(t, float(lat), float(lon), alt, vn=vy, ve=vx, mode="OFFBOARD", armed=True)
+            yield Sample(t, float(lat), float(lon), alt, vn=vy, ve=vx, mode="GUIDED", armed=True)
 
 
 def both(specs, legs, alt0, enforce, start):

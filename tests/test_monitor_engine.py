@@ -67,7 +67,7 @@ def test_pilot_mode_change_backs_off(fences):
     eng = Engine(fences, MonitorOptions(enforce=True, backoff_s=30))
     samples = list(north_run())
     for s in samples[150:]:
-        s.mode = "POSCTL"  # the pilot takes over (LOITER) at t = 15 s, then still flies on
+        s.mode = "POSHOLD"  # the pilot takes over (POSHOLD) at t = 15 s, then still flies on
     events = run(eng, samples)
     assert any(e["event"] == "pilot_mode_change" for e in events)
     assert not [e for e in events if e["event"] == "action" and e["time"] > 15]
@@ -81,7 +81,7 @@ def test_the_first_mode_known_is_not_the_pilot_taking_over(fences):
     samples = list(north_run(seconds=1))
     samples[0].mode = None
     for s in samples[1:]:
-        s.mode = "STABILIZED"  # a pilot mode: a change into it would start the back-off
+        s.mode = "STABILIZE"  # a pilot mode: a change into it would start the back-off
     events = run(eng, samples)
     assert not [e for e in events if e["event"] == "pilot_mode_change"]
     assert eng.backoff_until < 0
@@ -116,9 +116,9 @@ def test_hovering_next_to_a_fence_does_not_flap(fences):
 
 def test_switching_into_guided_or_auto_is_not_the_pilot_taking_over(fences):
     eng = Engine(fences, MonitorOptions(enforce=True))
-    samples = list(north_run(mode="HOLD"))
+    samples = list(north_run(mode="BRAKE"))
     for s in samples[10:]:
-        s.mode = "OFFBOARD"  # GUIDED, as MAVSDK names it: an autonomous mode, no back-off
+        s.mode = "GUIDED"  # an autonomous mode, no back-off
     events = run(eng, samples)
     assert not [e for e in events if e["event"] in ("pilot_mode_change", "action_withheld")]
     assert [e["action"] for e in events if e["event"] == "action"] == ["brake", "rtl"]
@@ -130,7 +130,7 @@ def test_undoing_the_monitors_brake_backs_off(fences):
     for s in north_run():
         if eng.action_t > -1 and s.t > eng.action_t + 0.5:
             s.mode = (
-                "HOLD" if s.t < eng.action_t + 1.5 else "OFFBOARD"
+                "BRAKE" if s.t < eng.action_t + 1.5 else "GUIDED"
             )  # our brake, then the pilot resumes
         events += eng.step(s)
     assert [e for e in events if e["event"] == "pilot_mode_change"]

@@ -195,7 +195,7 @@ class _Flight:
 def _ardupilot_breach_time(log: FlightLog, since: float):
     breach = log.first_breach()
     times = [breach[0] if breach else None]
-    times.append(next((t for t, m in log.modes if m == "RETURN_TO_LAUNCH" and t >= since), None))
+    times.append(next((t for t, m in log.modes if m == "RTL" and t >= since), None))
     times.append(
         next((t for t, s in log.texts if t >= since and "fence breached" in s.lower()), None)
     )
@@ -227,7 +227,7 @@ async def test_monitor_warns_well_before_the_onboard_fence_breach(sitl):
         # square), before the earliest is taken
         since = flight.t_goto
         await _until("FENCE_STATUS breach", log.first_breach, 10, log)
-        await _until("RTL", lambda: "RETURN_TO_LAUNCH" in [m for _, m in log.modes], 10, log)
+        await _until("RTL", lambda: "RTL" in [m for _, m in log.modes], 10, log)
         await _until(
             "the breach STATUSTEXT",
             lambda: any(t >= since and "fence breached" in s.lower() for t, s in log.texts),
@@ -292,7 +292,7 @@ async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(link, sitl):
         )
         await _until(
             "a mode change after the brake",
-            lambda: log.modes[-1][0] >= t_action - 0.5 and log.mode() != "OFFBOARD",
+            lambda: log.modes[-1][0] >= t_action - 0.5 and log.mode() != "GUIDED",
             5,
             log,
         )
@@ -321,7 +321,7 @@ async def test_enforcing_monitor_stops_the_vehicle_before_the_fence(link, sitl):
     # ArduPilot: no breach from takeoff to the end of the watch (30 s of its time), no RTL
     assert log.first_breach() is None, [f for _, f in log.fence if f["breach_status"]]
     assert all(f["breach_status"] == 0 for t, f in log.fence), log.summary()
-    assert "RETURN_TO_LAUNCH" not in [m for _, m in log.modes], log.summary()
+    assert "RTL" not in [m for _, m in log.modes], log.summary()
     assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
 
     after = [m for t, m in log.modes if t >= results["t_action"] - 0.5]

@@ -239,7 +239,7 @@ async def test_the_enforcing_monitor_stops_before_the_fence_the_vehicle_enforces
 
     # ArduPilot: no breach from takeoff to the end, no RTL, no breach text
     assert log.fence and all(f["breach_status"] == 0 for _, f in log.fence), log.summary()
-    assert "RETURN_TO_LAUNCH" not in [m for _, m in log.modes], log.summary()
+    assert "RTL" not in [m for _, m in log.modes], log.summary()
     assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
 
     # every position outside every onboard and every full-resolution fence

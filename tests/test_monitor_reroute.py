@@ -68,14 +68,14 @@ def reroute_options(**kw):
     )
 
 
-def at(t, x, y, vx=0.0, vy=0.0, mode="OFFBOARD"):
+def at(t, x, y, vx=0.0, vy=0.0, mode="GUIDED"):
     lon, lat = FRAME.to_wgs84(x, y)
     return Sample(
         t, float(lat), float(lon), 20.0, vn=vy, ve=vx, mode=mode, armed=True, alt_amsl_m=ALT_AMSL
     )
 
 
-def fly(t0, a, b, speed=10.0, dt=0.1, mode="OFFBOARD"):
+def fly(t0, a, b, speed=10.0, dt=0.1, mode="GUIDED"):
     """Samples from a to b (metres) at ``speed``, starting at time t0 (b itself left out)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     d = float(np.hypot(*(b - a)))
@@ -163,7 +163,7 @@ def test_pilot_mode_change_cancels_the_reroute_and_backs_off(fences):
     events = [e for s in fly(0.0, (0, 0), (0, 150)) for e in eng.step(s)]
     t = events[-1]["time"]
     eng.reroute_started(t + 0.05)  # in GUIDED already: no mode change expected
-    s = at(t + 0.2, *xy_of(events[-1]), mode="HOLD")  # the pilot switches to LOITER
+    s = at(t + 0.2, *xy_of(events[-1]), mode="LOITER")  # the pilot switches to LOITER
     out = eng.step(s)
     assert [e["event"] for e in out][:2] == ["pilot_mode_change", "reroute_cancelled"], out
     assert not eng.rerouting and eng.backoff_until > s.t
@@ -175,14 +175,14 @@ def test_pilot_mode_change_cancels_the_reroute_and_backs_off(fences):
 def test_the_monitors_own_mode_changes_are_not_the_pilot(fences):
     """AUTO -> GUIDED (the first goto) and GUIDED -> AUTO (the resume) are the monitor's."""
     eng = Engine(fences, reroute_options())
-    events = [e for s in fly(0.0, (0, 0), (0, 150), mode="MISSION") for e in eng.step(s)]
+    events = [e for s in fly(0.0, (0, 0), (0, 150), mode="AUTO") for e in eng.step(s)]
     t = events[-1]["time"]
     assert actions(events) == ["reroute"]
     eng.reroute_started(t, mode_change=True)
-    out = eng.step(at(t + 0.3, -5, 150, mode="OFFBOARD"))
-    out += eng.step(at(t + 5.0, -60, 170, mode="OFFBOARD"))
+    out = eng.step(at(t + 0.3, -5, 150, mode="GUIDED"))
+    out += eng.step(at(t + 5.0, -60, 170, mode="GUIDED"))
     eng.reroute_done(t + 9.0, resume=True)
-    out += eng.step(at(t + 9.3, 0, 350, mode="MISSION"))
+    out += eng.step(at(t + 9.3, 0, 350, mode="AUTO"))
     assert not [e for e in out if e["event"] in ("pilot_mode_change", "reroute_cancelled")], out
     assert not eng.in_commanded_mode  # back in the pilot's mission: a LOITER now is theirs
     assert eng.backoff_until < 0

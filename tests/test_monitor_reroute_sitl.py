@@ -198,7 +198,7 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
                 await retry("arming", action.arm, ARM_TIMEOUT)
                 results["t_goto"] = time.monotonic()
                 await vehicle.mission_raw.start_mission()
-                await until("AUTO", lambda: log.mode() == "MISSION", 5, log)
+                await until("AUTO", lambda: log.mode() == "AUTO", 5, log)
             else:
                 await take_off(action, log)
                 lon, lat = frame.to_wgs84(0.0, TARGET_NORTH)
@@ -221,7 +221,7 @@ async def _fly(sitl, log: FlightLog, results, auto: bool):
             )
             results["t_done"] = time.monotonic()
             if auto:
-                await until("AUTO again", lambda: log.mode() == "MISSION", 10, log)
+                await until("AUTO again", lambda: log.mode() == "AUTO", 10, log)
                 await until(
                     "the next mission item",
                     lambda: (
@@ -269,7 +269,7 @@ def _check(sitl, log: FlightLog, results, auto: bool):
         (done,) = [e for e in events if e["event"] == "reroute_done"]
         assert done["resume_at"] == 3, done
         after = [m for t, m in log.modes if t >= reroute["time"]]
-        assert after == ["OFFBOARD", "MISSION"], after
+        assert after == ["GUIDED", "AUTO"], after
     else:
         assert reroute["goal_source"] == "guided target", reroute
     assert reroute["clearance_m"] >= CLEARANCE, reroute
@@ -279,7 +279,7 @@ def _check(sitl, log: FlightLog, results, auto: bool):
     # ArduPilot: no breach from takeoff to the end, no RTL, FENCE_STATUS kept coming
     assert log.first_breach() is None, [f for _, f in log.fence if f["breach_status"]]
     assert log.fence[-1][0] > results["t_end"] - 2.0, "FENCE_STATUS stopped arriving"
-    assert "RETURN_TO_LAUNCH" not in [m for _, m in log.modes], log.summary()
+    assert "RTL" not in [m for _, m in log.modes], log.summary()
     assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
 
     flown = [p for p in log.positions if p[0] >= results["t_goto"]]

@@ -197,7 +197,7 @@ async def test_the_rolling_fence_holds_every_fence_within_reach_along_a_malta_le
 
     # ArduPilot enforced the rolling fence and was never in breach; no RTL
     assert log.fence and all(f["breach_status"] == 0 for _, f in log.fence), log.summary()
-    assert "RETURN_TO_LAUNCH" not in [m for _, m in log.modes], log.summary()
+    assert "RTL" not in [m for _, m in log.modes], log.summary()
     assert not [t for t, s in log.texts if "fence breached" in s.lower()], log.summary()
 
     seconds = [u["seconds"] for u in uploads[1:]] or [uploads[0]["seconds"]]

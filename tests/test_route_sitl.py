@@ -192,7 +192,7 @@ async def _fly_the_route(sitl, log: FlightLog):
             await retry("arming", action.arm, ARM_TIMEOUT)
             t_start = time.monotonic()
             await vehicle.mission_raw.start_mission()
-            await until("AUTO", lambda: log.mode() == "MISSION", 5, log)
+            await until("AUTO", lambda: log.mode() == "AUTO", 5, log)
             t_up = await until(
                 "climb to 90% of the mission altitude",
                 lambda: log.positions[-1][3] >= 0.9 * ALTITUDE,
@@ -234,7 +234,7 @@ async def _fly_the_route(sitl, log: FlightLog):
     assert fence_in_flight and all(f["breach_status"] == 0 for f in fence_in_flight), [
         f for f in fence_in_flight if f["breach_status"]
     ]
-    assert "RETURN_TO_LAUNCH" not in modes_in_flight, modes_in_flight
+    assert "RTL" not in modes_in_flight, modes_in_flight
     assert not any("fence" in text.lower() and "breach" in text.lower() for text in said), said
     assert not any(shapely.intersects(shapely.points(xy), square))
     assert distances[worst] >= CLEARANCE - TRACKING, (distances[worst], xy[worst])

@@ -170,8 +170,11 @@ def _fly(out, fences_path, records, items, binary, speedup) -> int:
     if flight is None:
         out_console.print("stopped (SIGTERM): SITL stopped, no flight written")
         return 143
+    from alphafence.monitor.events import UtcClock
+
     trace = flight.trace
-    _write_flight(out, records, trace, flight.events, trace.recorded, "SITL flight")
+    clock = UtcClock.wall()  # the monitor's events were timed on this computer's clock
+    _write_flight(out, records, trace, flight.events, trace.recorded, "SITL flight", clock)
     return 0
 
 
@@ -199,14 +202,17 @@ def _replay(out, fences_path, records) -> int:
     trace = Trace.read(trace_path())
     options = speedup_options(trace.speedup, enforce=True)
     out_console.print(f"replay of {trace.recorded}", soft_wrap=True)
-    events = replay(trace, FenceSet.from_geojson(fences_path), options, replay=True)
+    clock = trace.utc_clock()
+    out_console.print(f"replay: UTC from the {clock.source}", soft_wrap=True)
+    events = replay(trace, FenceSet.from_geojson(fences_path), options, clock, replay=True)
     for e in events:
         _echo(e, prefix="replay ")
-    _write_flight(out, records, trace, events, f"REPLAY of {trace.recorded}", "replay")
+    title = f"REPLAY of {trace.recorded}"
+    _write_flight(out, records, trace, events, title, "replay", clock, replay=True)
     return 0
 
 
-def _write_flight(out, records, trace, events, title, what):
+def _write_flight(out, records, trace, events, title, what, clock, **fields):
     import json
 
     from alphafence.formats.atomic import write_all
@@ -225,7 +231,9 @@ def _write_flight(out, records, trace, events, title, what):
     )
     write_all(
         {
-            out / "events.jsonl": "".join(json.dumps(e) + "\n" for e in events),
+            out / "events.jsonl": "".join(
+                json.dumps(e) + "\n" for e in [_clock_event(trace, clock, fields), *events]
+            ),
             out / "flight.trace.jsonl": trace.to_text(),
         }
     )
@@ -235,6 +243,12 @@ def _write_flight(out, records, trace, events, title, what):
         f"wrote {out / 'flight.png'}, {out / 'events.jsonl'}, {out / 'flight.trace.jsonl'}",
         soft_wrap=True,
     )
+
+
+def _clock_event(trace, clock, fields):
+    """The events file's first line: where its UTC comes from, at the first sample."""
+    t0 = trace.samples[0].t if trace.samples else None
+    return clock.event(t0, **fields)
 
 
 def _wrap(title, width=80):
@@ -248,6 +262,7 @@ def _wrap(title, width=80):
 
 def _echo(event, prefix=""):
     kind = event["event"]
+    prefix = f"{event['utc'][11:23]} {prefix}" if event.get("utc") else prefix
     if kind == "level":
         where = event.get("fence") or ""
         if event.get("onboard_only"):

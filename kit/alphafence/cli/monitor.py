@@ -14,7 +14,13 @@ from alphafence.cli.common import (
     out_console,
     signing_key,
 )
-from alphafence.cli.options import non_negative, positive, sd_fence_kb, storage_profile
+from alphafence.cli.options import (
+    add_connect_option,
+    non_negative,
+    positive,
+    sd_fence_kb,
+    storage_profile,
+)
 from alphafence.errors import InputError, need
 from alphafence.monitor.options import (
     ACTIONS,
@@ -35,12 +41,7 @@ def register(sub):
         description="Check every position against the full-resolution fences, predict breaches, "
         "alert the ground station and, with --enforce, brake/RTL/land.",
     )
-    p.add_argument(
-        "--connect",
-        required=True,
-        metavar="URL",
-        help="vehicle connection URL (udpin://HOST:PORT, udpout://, tcpout://)",
-    )
+    add_connect_option(p)
     p.add_argument("--fences", required=True, metavar="FENCES.geojson")
     p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
     p.add_argument(
@@ -237,7 +238,10 @@ async def _run(args, fences, options) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     mode = "enforcing" if options.enforce else "alerting only"
-    out_console.print(f"monitoring {len(fences.records)} fences ({mode}); Ctrl-C to stop")
+    out_console.print(
+        f"monitoring {len(fences.records)} fences ({mode}); event times in UTC from this "
+        "computer's clock, then monotonic seconds; Ctrl-C to stop"
+    )
     try:
         monitor = await run_monitor(
             args.connect,
@@ -258,28 +262,29 @@ async def _run(args, fences, options) -> int:
 
 
 def _echo(event):
+    when = f"{event.get('utc') or ''} {event['time']:.1f}".strip()
     if event["event"] == "level":
         out_console.print(
-            f"{event['time']:.1f} {event['previous']} -> {event['level']} {event.get('fence') or ''} "
+            f"{when} {event['previous']} -> {event['level']} {event.get('fence') or ''} "
             f"({event['reason']}, {event.get('distance_m')} m)"
         )
     elif event["event"] == "onboard_fence":
         kinds = ", ".join(f"{n} {what}" for what, n in event["fences"].items())
         out_console.print(
-            f"{event['time']:.1f} onboard fence: {event['items']} items ({kinds}), "
+            f"{when} onboard fence: {event['items']} items ({kinds}), "
             f"{event['forbidden_beyond_m2']} m² forbidden beyond the full-resolution fences",
             soft_wrap=True,
         )
     elif event["event"] == "onboard_upload":
         out_console.print(
-            f"{event['time']:.1f} onboard fence uploaded ({event['reason']}): {event['items']} "
+            f"{when} onboard fence uploaded ({event['reason']}): {event['items']} "
             f"items, {event['bytes']} B, {event['fences']} fences within {event['radius_m']} m, "
             f"verified in {event['seconds']} s",
             soft_wrap=True,
         )
     elif event["event"] != "telemetry_resumed":
         out_console.print(
-            f"{event['time']:.1f} {event['event']} "
+            f"{when} {event['event']} "
             f"{event.get('action') or event.get('reason') or event.get('error') or ''}",
             soft_wrap=True,
         )

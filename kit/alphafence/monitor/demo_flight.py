@@ -23,6 +23,7 @@ import shapely
 from alphafence.errors import SitlError
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.eventlog import EventLog
+from alphafence.monitor.events import WALL, UtcClock
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.observe import Observer
 from alphafence.monitor.onboard import OnboardLayer
@@ -208,6 +209,9 @@ async def fly_at_fence(fences_path, items, home, speedup=5.0, say=print, echo=No
         "enforcing monitor"
     )
     trace = Trace(recorded, float(speedup), list(items), list(recorder.samples))
+    if trace.samples:  # the samples' monotonic times on this computer's clock
+        t0 = trace.samples[0].t
+        trace.clock = {"t": t0, "utc": UtcClock.wall().utc(t0), "source": WALL}
     return Flight(trace, list(log.events), leg, upload_s)
 
 

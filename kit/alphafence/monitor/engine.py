@@ -21,9 +21,13 @@ from alphafence.monitor.state import Level, StateMachine, assess
 from alphafence.monitor.traffic import Traffic
 
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
-# modes in which the pilot flies the vehicle (MAVSDK's names): switching into one of them, or
-# out of a mode the monitor commanded, is the pilot taking over
-PILOT_MODES = {"MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO", "RATTITUDE"}
+# modes in which the pilot flies the vehicle (ArduPilot's names: Copter, Plane, Rover):
+# switching into one of them, or out of a mode the monitor commanded, is the pilot taking over
+PILOT_MODES = {
+    *("STABILIZE", "ACRO", "ALT_HOLD", "POSHOLD", "SPORT", "DRIFT", "FLOWHOLD"),
+    *("MANUAL", "TRAINING", "FBWA", "FBWB", "CRUISE", "QSTABILIZE", "QHOVER", "QACRO"),
+    "STEERING",
+}
 GLITCH_SLACK_M = 25.0  # telemetry arrival jitter must not look like a jump
 
 

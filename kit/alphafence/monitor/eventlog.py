@@ -28,6 +28,11 @@ class EventLog:
         Called with every event as it is put (the CLI prints them); the first listener.
     keep : int
         How many of the latest events ``events`` keeps in memory (for tests and the summary).
+    clock : UtcClock, optional
+        Where the events' UTC comes from: the file's first line written is then a ``clock``
+        event saying so (``utc_source``, with ``fields``); it is not kept nor passed on.
+    **fields
+        Added to the ``clock`` event (e.g. ``replay=True``).
 
     Attributes
     ----------
@@ -39,11 +44,13 @@ class EventLog:
         The last write failure, until a write succeeds again.
     """
 
-    def __init__(self, path=None, echo=None, keep: int = 10_000):
+    def __init__(self, path=None, echo=None, keep: int = 10_000, clock=None, **fields):
         self.path = path
         self.listeners = [echo] if echo else []
         self.queue: asyncio.Queue = asyncio.Queue()
         self.task = asyncio.create_task(self._write()) if path else None
+        if self.task and clock is not None:
+            self.queue.put_nowait(json.dumps(clock.event(**fields), separators=(",", ":")))
         self.events: deque = deque(maxlen=keep)
         self.lost = 0
         self.write_error: str | None = None

@@ -1,15 +1,95 @@
 """The monitor's events, built one way, and what each one says to the ground station.
 
 An event is a plain dict (it is written to the event log as one JSON line, echoed by the CLI
-and kept in memory): ``time`` (monotonic seconds, rounded to the millisecond), ``event`` (its
-kind), then, when it happened at a position, ``lat``, ``lon`` and ``alt_m``, then its own
-fields. :func:`new_event` builds every one of them, the engine's and the runner's alike.
+and kept in memory): ``time`` (monotonic seconds, rounded to the millisecond), ``utc`` (the
+same moment in UTC, ISO 8601 to the millisecond, e.g. ``2026-12-02T07:30:01.234Z``, to line
+up with flight logs), ``event`` (its kind), then, when it happened at a position, ``lat``,
+``lon`` and ``alt_m``, then its own fields. :func:`new_event` builds every one of them, the
+engine's and the runner's alike, with UTC from this computer's clock; a replay stamps them
+again with the :class:`UtcClock` of the flight it replays, and the event log's first line
+(a ``clock`` event) says where its UTC comes from.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+WALL = "wall clock"
+"""A :class:`UtcClock` source: this computer's clock (NTP-set on most)."""
+
+
+def utc_text(epoch_s: float) -> str:
+    """UNIX seconds as ISO 8601 UTC to the millisecond, ``Z`` for UTC.
+
+    Examples
+    --------
+    >>> utc_text(1796196601.2345)
+    '2026-12-02T07:30:01.234Z'
+    """
+    when = datetime.fromtimestamp(epoch_s, timezone.utc)
+    return when.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def utc_seconds(text: str) -> float:
+    """ISO 8601 UTC text (as :func:`utc_text` writes it) as UNIX seconds.
+
+    Examples
+    --------
+    >>> utc_seconds("2026-12-02T07:30:01.234Z")
+    1796196601.234
+    """
+    return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()
+
+
+@dataclass(frozen=True)
+class UtcClock:
+    """Monotonic seconds (events' ``time``) to UTC: ``utc = t + offset_s``.
+
+    Attributes
+    ----------
+    offset_s : float
+        UNIX seconds at monotonic time 0.
+    source : str
+        Where UTC comes from: :data:`WALL`, ``"trace"`` (the clock a replayed flight
+        recorded), ``"vehicle SYSTEM_TIME"``.
+
+    Examples
+    --------
+    >>> clock = UtcClock.at(100.0, "2026-12-02T07:30:00Z", "trace")
+    >>> clock.utc(101.234), clock.source
+    ('2026-12-02T07:30:01.234Z', 'trace')
+    """
+
+    offset_s: float
+    source: str = WALL
+
+    @classmethod
+    def wall(cls) -> UtcClock:
+        """This computer's clock, for events timed by its ``time.monotonic()``."""
+        return cls(time.time() - time.monotonic(), WALL)
+
+    @classmethod
+    def at(cls, t: float, utc, source: str) -> UtcClock:
+        """The clock on which monotonic ``t`` is ``utc`` (ISO text or UNIX seconds)."""
+        epoch = utc_seconds(utc) if isinstance(utc, str) else float(utc)
+        return cls(epoch - t, source)
+
+    def utc(self, t: float) -> str:
+        """Monotonic ``t`` in UTC (:func:`utc_text`)."""
+        return utc_text(t + self.offset_s)
+
+    def stamp(self, event: dict) -> dict:
+        """``event`` with its ``utc`` from this clock (placed after ``time``)."""
+        head = {"time": event["time"], "utc": self.utc(event["time"])}
+        return {**head, **{k: v for k, v in event.items() if k not in head}}
+
+    def event(self, t: float | None = None, **fields) -> dict:
+        """The ``clock`` event an event log starts with: where its UTC comes from
+        (``utc_source``), with ``fields``."""
+        return self.stamp(new_event("clock", t, None, utc_source=self.source, **fields))
 
 
 def rounded(value, digits: int = 2):
@@ -44,14 +124,18 @@ def new_event(kind: str, t: float | None = None, at=None, /, **fields) -> dict:
     Returns
     -------
     dict
-        ``{"time", "event", ["lat", "lon", "alt_m",] **fields}``.
+        ``{"time", "utc", "event", ["lat", "lon", "alt_m",] **fields}``; ``utc`` is ``t``
+        on this computer's clock (a replay stamps its own, :meth:`UtcClock.stamp`).
 
     Examples
     --------
-    >>> new_event("action_done", 12.34567, action="brake")
-    {'time': 12.346, 'event': 'action_done', 'action': 'brake'}
+    >>> e = new_event("action_done", 12.34567, action="brake")
+    >>> list(e), e["time"], e["utc"].endswith("Z")
+    (['time', 'utc', 'event', 'action'], 12.346, True)
     """
-    event = {"time": round(time.monotonic() if t is None else t, 3), "event": kind}
+    t = time.monotonic() if t is None else t
+    offset = time.time() - time.monotonic()
+    event = {"time": round(t, 3), "utc": utc_text(t + offset), "event": kind}
     if at is not None:
         event.update(lat=rounded(at.lat, 7), lon=rounded(at.lon, 7), alt_m=rounded(at.alt_m))
     event.update(fields)

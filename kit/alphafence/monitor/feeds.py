@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from alphafence.geo.coords import from_e7_float
 from alphafence.mavlink import ids
 from alphafence.monitor.engine import Sample
-from alphafence.vehicle.values import fields_of
+from alphafence.vehicle.values import ardupilot_mode, fields_of
 
 TELEMETRY = {
     "position": "subscribe_position",
@@ -136,7 +136,8 @@ def latest_sample(latest: dict) -> Sample | None:
     -------
     Sample or None
         At the position's arrival time; a missing velocity counts as zero, a missing mode,
-        armed state or GPS fix as unknown.
+        armed state or GPS fix as unknown; the mode by ArduPilot's name (MAVSDK's link names
+        them its own way: read as a copter's, :func:`~alphafence.vehicle.values.ardupilot_mode`).
     """
     pos = latest["position"]
     if pos is None:
@@ -153,7 +154,7 @@ def latest_sample(latest: dict) -> Sample | None:
         p.relative_altitude_m,
         vn,
         ve,
-        mode[1].name if mode else None,
+        ardupilot_mode(mode[1].name) if mode else None,
         armed[1] if armed else None,
         alt_amsl_m=p.absolute_altitude_m,
         gps_fix=int(latest["gps"][1].fix_type) if latest["gps"] else None,

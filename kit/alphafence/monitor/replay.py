@@ -1,8 +1,9 @@
 """Recorded flights: a trace of what the monitor was fed, written, read back and replayed.
 
 A trace is JSON lines: a header (``{"trace": ...}``: where it was recorded, at what SITL
-speedup, and the fence the vehicle held, as its items) and then one :class:`Sample` per line,
-as the monitor's engine stepped on it. :func:`replay` feeds a trace to an :class:`Engine` of
+speedup, the fence the vehicle held, as its items, and, when recorded, the clock: the UTC of
+one monotonic time) and then one :class:`Sample` per line, as the monitor's engine stepped on
+it. :func:`replay` feeds a trace to an :class:`Engine` of
 its own, the vehicle's fence loaded as its onboard layer first, as the runner does at start.
 A trace whose samples carry no ``alt_amsl_m`` (written before it was recorded) replays as it
 did for fences without AMSL limits; AMSL limits then hold at every altitude, and an
@@ -13,15 +14,18 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import time
 from dataclasses import dataclass, field
 
 from alphafence.errors import InputError
 from alphafence.formats.jsonfile import read_limited
 from alphafence.mavlink.items import FenceItem
 from alphafence.monitor.engine import Engine, Sample
+from alphafence.monitor.events import WALL, UtcClock
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.observe import Observer, Step
 from alphafence.monitor.options import MonitorOptions
+from alphafence.vehicle.values import ardupilot_mode
 
 TRACE_FORMAT = "alphafence-trace-1"
 MAX_TRACE_BYTES = 20_000_000
@@ -42,12 +46,25 @@ class Trace:
         The fence the vehicle held (as downloaded by the monitor at start).
     samples : list of Sample
         What the engine stepped on, in order.
+    clock : dict, optional
+        ``{"t": monotonic seconds, "utc": ISO 8601, "source": where UTC came from}``: the
+        samples' times in UTC (None: the trace does not say).
     """
 
     recorded: str
     speedup: float = 1.0
     onboard_items: list = field(default_factory=list)
     samples: list = field(default_factory=list)
+    clock: dict | None = None
+
+    def utc_clock(self) -> UtcClock:
+        """The :class:`UtcClock` of the samples' times: the trace's own (source ``trace``)
+        or, without one, the wall clock from now on (the replay's first sample is now)."""
+        if self.clock:
+            source = f"trace ({self.clock.get('source') or 'recorded'})"
+            return UtcClock.at(self.clock["t"], self.clock["utc"], source)
+        t0 = self.samples[0].t if self.samples else 0.0
+        return UtcClock.at(t0, time.time(), WALL)
 
     def to_text(self) -> str:
         """The trace as JSON lines (the header first)."""
@@ -57,6 +74,8 @@ class Trace:
             "speedup": self.speedup,
             "onboard_items": [dataclasses.astuple(i) for i in self.onboard_items],
         }
+        if self.clock:
+            header["clock"] = self.clock
         lines = [json.dumps(header)]
         lines += [json.dumps(_rounded(dataclasses.asdict(s))) for s in self.samples]
         return "\n".join(lines) + "\n"
@@ -76,10 +95,18 @@ class Trace:
                 for c, p, x, y in header.get("onboard_items", [])
             ]
             samples = [Sample(**_line(line, source, n)) for n, line in enumerate(lines[1:], 2)]
+            for s in samples:  # a trace recorded through MAVSDK's link names modes its way
+                s.mode = ardupilot_mode(s.mode)
         except (TypeError, ValueError) as exc:
             raise InputError(source, f"malformed sample or item: {exc}") from None
+        try:
+            clock = header.get("clock")
+            if clock is not None:
+                UtcClock.at(float(clock["t"]), str(clock["utc"]), "trace")  # readable
+        except (TypeError, ValueError, KeyError) as exc:
+            raise InputError(source, f"line 1: malformed clock ({exc})") from None
         recorded = str(header.get("recorded", ""))
-        return cls(recorded, float(header.get("speedup", 1.0)), items, samples)
+        return cls(recorded, float(header.get("speedup", 1.0)), items, samples, clock)
 
     @classmethod
     def read(cls, path) -> Trace:
@@ -117,7 +144,13 @@ class Recorder(Observer):
         self.samples.append(step.sample)
 
 
-def replay(trace: Trace, fences: FenceSet, options: MonitorOptions | None = None, **fields):
+def replay(
+    trace: Trace,
+    fences: FenceSet,
+    options: MonitorOptions | None = None,
+    clock: UtcClock | None = None,
+    **fields,
+):
     """Feed a recorded flight to a fresh engine: the vehicle's fence first (as the onboard
     layer, when the options watch it and the trace holds one), then every sample.
 
@@ -129,14 +162,17 @@ def replay(trace: Trace, fences: FenceSet, options: MonitorOptions | None = None
     options : MonitorOptions, optional
         Durations are wall seconds (scale them for the trace's speedup, see
         :func:`speedup_options`).
+    clock : UtcClock, optional
+        The events' UTC (default :meth:`Trace.utc_clock`).
     **fields
         Added to every event (e.g. ``replay=True``).
 
     Returns
     -------
     list of dict
-        Every event the engine decided, in order.
+        Every event the engine decided, in order, its ``utc`` on ``clock``.
     """
+    clock = clock or trace.utc_clock()
     engine = Engine(fences, options)
     events = []
     t0 = trace.samples[0].t if trace.samples else None
@@ -144,7 +180,7 @@ def replay(trace: Trace, fences: FenceSet, options: MonitorOptions | None = None
         events += engine.load_onboard(trace.onboard_items, t=t0, cause="start")
     for s in trace.samples:
         events += engine.step(s)
-    return [{**e, **fields} for e in events]
+    return [{**clock.stamp(e), **fields} for e in events]
 
 
 def speedup_options(speedup: float, **kw) -> MonitorOptions:

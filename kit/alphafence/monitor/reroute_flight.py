@@ -179,10 +179,10 @@ class RerouteFlight:
             plan = await asyncio.to_thread(self.rerouter.plan, s.lon, s.lat, s.ve, s.vn, goal, lead)
         except NoRoute as exc:
             raise RerouteFailed(str(exc)) from None
-        was_auto = s.mode == "MISSION"
+        was_auto = s.mode == "AUTO"
         for e in self.engine.reroute_started(
             time.monotonic(),
-            mode_change=s.mode != "OFFBOARD",
+            mode_change=s.mode != "GUIDED",
             goal=[round(goal[1], 7), round(goal[0], 7)],
             goal_source=source,
             waypoints=[list(w) for w in plan.waypoints],
@@ -216,12 +216,12 @@ class RerouteFlight:
 
     async def _goal(self, s):
         """(goal (lon, lat), where it came from, mission item to resume at) or Nones."""
-        if s.mode == "OFFBOARD" and self.target is not None:  # ArduPilot's GUIDED
+        if s.mode == "GUIDED" and self.target is not None:
             t, lon, lat = self.target
             if time.monotonic() - t <= self.TARGET_FRESH_S:
                 return (lon, lat), "guided target", None
         resume_at = None
-        if s.mode == "MISSION":  # AUTO
+        if s.mode == "AUTO":
             goal, resume_at = await self._mission_goal()
             if goal is not None:
                 return goal, f"mission item {resume_at - 1}", resume_at

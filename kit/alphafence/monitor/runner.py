@@ -24,7 +24,7 @@ from datetime import datetime, timezone
 from alphafence.monitor.commands import Commands
 from alphafence.monitor.engine import Engine
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.events import alert_text, new_event
+from alphafence.monitor.events import UtcClock, alert_text, new_event
 from alphafence.monitor.feeds import (
     TELEMETRY,
     Feed,
@@ -385,7 +385,7 @@ async def run_monitor(
     from alphafence.vehicle.link import open_vehicle
 
     stop = stop or asyncio.Event()
-    log = EventLog(log_path, echo)
+    log = EventLog(log_path, echo, clock=UtcClock.wall())
     try:
         async with open_vehicle(url, timeout, signing_key, link) as vehicle:
             monitor = Monitor(vehicle, fences, options, log)

@@ -4,8 +4,10 @@ MAVLink messages, flight-mode names, and the one error a transfer raises.
 The monitor, the fence transfer and the parameter code read these attributes and nothing
 else, so the native MAVSDK link (whose own values have the same attribute names) and the
 pymavlink link (:mod:`alphafence.vehicle.pymavlink_link`, which builds these) run the same code.
-Flight modes are named as MAVSDK names them (``OFFBOARD`` for ArduPilot's GUIDED, ``MISSION``
-for AUTO, ``HOLD`` for BRAKE and LOITER), so the engine's rules need no second table.
+Flight modes are named as ArduPilot names them (``GUIDED``, ``AUTO``, ``BRAKE``, ``LOITER``,
+``RTL``, ...), from the HEARTBEAT's ``custom_mode`` by pymavlink's mode maps for the vehicle's
+type; MAVSDK's own names (``OFFBOARD``, ``MISSION``, ``HOLD``, from MAVSDK's link and traces
+recorded through it) are read as the ArduPilot mode they stand for (:func:`ardupilot_mode`).
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ class VelocityNed:
 
 @dataclass(frozen=True, slots=True)
 class FlightMode:
-    """A flight mode by MAVSDK's name (``name``) and ArduPilot's number (``custom_mode``)."""
+    """A flight mode by ArduPilot's name (``name``, e.g. ``GUIDED``) and number
+    (``custom_mode``)."""
 
     name: str
     custom_mode: int
@@ -152,35 +155,19 @@ def mission_result_name(result: int) -> str:
     return MISSION_RESULTS.get(result, "PROTOCOL_ERROR")
 
 
-# ArduPilot's modes by vehicle class: custom_mode -> MAVSDK's FlightMode name
-COPTER_MODES = {
-    ids.COPTER_MODE_STABILIZE: "STABILIZED",
-    ids.COPTER_MODE_ACRO: "ACRO",
-    ids.COPTER_MODE_ALT_HOLD: "ALTCTL",
-    ids.COPTER_MODE_AUTO: "MISSION",
-    ids.COPTER_MODE_GUIDED: "OFFBOARD",
-    ids.COPTER_MODE_LOITER: "HOLD",
-    ids.COPTER_MODE_RTL: "RETURN_TO_LAUNCH",
-    ids.COPTER_MODE_LAND: "LAND",
-    ids.COPTER_MODE_POSHOLD: "POSCTL",
-    ids.COPTER_MODE_BRAKE: "HOLD",
-    ids.COPTER_MODE_SMART_RTL: "RETURN_TO_LAUNCH",
-}
-PLANE_MODES = {
-    ids.PLANE_MODE_MANUAL: "MANUAL",
-    ids.PLANE_MODE_AUTO: "MISSION",
-    ids.PLANE_MODE_RTL: "RETURN_TO_LAUNCH",
-    ids.PLANE_MODE_LOITER: "HOLD",
-    ids.PLANE_MODE_GUIDED: "OFFBOARD",
-    ids.PLANE_MODE_QLAND: "LAND",
-}
-ROVER_MODES = {
-    ids.ROVER_MODE_MANUAL: "MANUAL",
-    ids.ROVER_MODE_HOLD: "HOLD",
-    ids.ROVER_MODE_AUTO: "MISSION",
-    ids.ROVER_MODE_RTL: "RETURN_TO_LAUNCH",
-    ids.ROVER_MODE_SMART_RTL: "RETURN_TO_LAUNCH",
-    ids.ROVER_MODE_GUIDED: "OFFBOARD",
+# MAVSDK's FlightMode names (its link, traces recorded through it) -> the ArduPilot mode each
+# stands for on a copter, plane and rover; HOLD is the mode the kit's hold commands (BRAKE on
+# a copter, LOITER on a plane, HOLD on a rover). ArduPilot's own names are read as they are.
+MAVSDK_NAMES = {
+    "OFFBOARD": ("GUIDED", "GUIDED", "GUIDED"),
+    "MISSION": ("AUTO", "AUTO", "AUTO"),
+    "HOLD": ("BRAKE", "LOITER", "HOLD"),
+    "RETURN_TO_LAUNCH": ("RTL", "RTL", "RTL"),
+    "LAND": ("LAND", "QLAND", "HOLD"),
+    "ALTCTL": ("ALT_HOLD", "FBWB", "MANUAL"),
+    "POSCTL": ("POSHOLD", "CRUISE", "MANUAL"),
+    "STABILIZED": ("STABILIZE", "STABILIZE", "MANUAL"),
+    "TAKEOFF": ("GUIDED", "TAKEOFF", "GUIDED"),
 }
 
 
@@ -188,16 +175,27 @@ ROVER_MODES = {
 class ModeSet:
     """One vehicle class's modes: names by number, and the numbers the kit commands."""
 
-    names: dict
+    kind: str  # "copter", "plane", "rover": the column of MAVSDK_NAMES
     hold: int
     rtl: int
     land: int | None
     guided: int
     auto: int
 
+    @property
+    def names(self) -> dict:
+        """ArduPilot's mode names by ``custom_mode``: pymavlink's mode map of the class."""
+        from pymavlink import mavutil
+
+        return {
+            "copter": mavutil.mode_mapping_acm,
+            "plane": mavutil.mode_mapping_apm,
+            "rover": mavutil.mode_mapping_rover,
+        }[self.kind]
+
 
 COPTER = ModeSet(
-    COPTER_MODES,
+    "copter",
     ids.COPTER_MODE_BRAKE,
     ids.COPTER_MODE_RTL,
     ids.COPTER_MODE_LAND,
@@ -205,7 +203,7 @@ COPTER = ModeSet(
     ids.COPTER_MODE_AUTO,
 )
 PLANE = ModeSet(
-    PLANE_MODES,
+    "plane",
     ids.PLANE_MODE_LOITER,
     ids.PLANE_MODE_RTL,
     ids.PLANE_MODE_QLAND,
@@ -213,13 +211,40 @@ PLANE = ModeSet(
     ids.PLANE_MODE_AUTO,
 )
 ROVER = ModeSet(
-    ROVER_MODES,
+    "rover",
     ids.ROVER_MODE_HOLD,
     ids.ROVER_MODE_RTL,
     None,
     ids.ROVER_MODE_GUIDED,
     ids.ROVER_MODE_AUTO,
 )
+
+
+def ardupilot_mode(name: str | None, mav_type: int = ids.MAV_TYPE_QUADROTOR) -> str | None:
+    """A flight mode's ArduPilot name: MAVSDK's names (:data:`MAVSDK_NAMES`) as the mode they
+    stand for on a vehicle of HEARTBEAT ``type`` ``mav_type``, any other name as it is.
+
+    Examples
+    --------
+    >>> ardupilot_mode("OFFBOARD"), ardupilot_mode("HOLD", 1), ardupilot_mode("LOITER")
+    ('GUIDED', 'LOITER', 'LOITER')
+    """
+    if name not in MAVSDK_NAMES:
+        return name
+    column = ("copter", "plane", "rover").index(mode_set(mav_type).kind)
+    return MAVSDK_NAMES[name][column]
+
+
+def custom_mode_of(name: str | None, mav_type: int = ids.MAV_TYPE_QUADROTOR) -> int | None:
+    """ArduPilot's ``custom_mode`` number of a mode name (either naming), or None.
+
+    Examples
+    --------
+    >>> custom_mode_of("GUIDED"), custom_mode_of("HOLD"), custom_mode_of("RTL", 10)
+    (4, 17, 11)
+    """
+    names = {v: k for k, v in mode_set(mav_type).names.items()}
+    return names.get(ardupilot_mode(name, mav_type))
 
 
 def mode_set(mav_type: int) -> ModeSet:
@@ -238,6 +263,6 @@ def flight_mode(mav_type: int, custom_mode: int) -> FlightMode:
     Examples
     --------
     >>> flight_mode(2, 4).name, flight_mode(2, 17).name, flight_mode(2, 99).name
-    ('OFFBOARD', 'HOLD', 'UNKNOWN')
+    ('GUIDED', 'BRAKE', 'UNKNOWN')
     """
     return FlightMode(mode_set(mav_type).names.get(custom_mode, "UNKNOWN"), int(custom_mode))
