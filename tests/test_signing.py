@@ -15,13 +15,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from alphafence.cli import main
 from alphafence.errors import InputError
-from alphafence.vehicle.bridge import (
-    BridgeError,
-    VehicleLink,
-    is_signed,
-    parse_url,
-    signature_matches,
-)
+from alphafence.vehicle.bridge import VehicleLink, is_signed, signature_matches
+from alphafence.vehicle.endpoints import EndpointError
 from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
 from alphafence.vehicle.keys import load_key, signing_timestamp, write_new_key
 from alphafence.vehicle.link import LinkError, open_vehicle
@@ -90,18 +85,23 @@ def test_timestamp_counts_10us_since_2015():
     assert signing_timestamp(1420070400.0 + 1.5) == 150_000
 
 
-def test_urls():
-    assert parse_url("udpin://0.0.0.0:14550") == ("udpin", "0.0.0.0", 14550)
-    assert parse_url("udpin://:14550") == ("udpin", "0.0.0.0", 14550)
-    assert parse_url("tcpout://navio.local:5760") == ("tcpout", "navio.local", 5760)
-    for bad, says in [
-        ("serial:///dev/ttyAMA0:57600", "mavlink-router"),
-        ("udpout://:14550", "vehicle's address"),
-        ("udp://1.2.3.4:1", "not a udpin"),
-        ("udpin://0.0.0.0:70000", "out of range"),
+def test_the_signed_link_takes_every_connection_form():
+    for url, kind in [
+        ("udpin://:14550", "udpin"),
+        ("udpin:0.0.0.0:14550", "udpin"),
+        ("tcpout://navio.local:5760", "tcpout"),
+        ("tcp:navio.local:5760", "tcpout"),
+        ("tcpin:0.0.0.0:5760", "tcpin"),
+        ("serial:///dev/ttyAMA0:57600", "serial"),  # was refused: "a signed link runs over udpin"
+        ("/dev/ttyACM0", "serial"),
     ]:
-        with pytest.raises(BridgeError, match=says):
-            parse_url(bad)
+        assert VehicleLink(url, KEY).endpoint.kind == kind
+    for bad, says in [
+        ("udpout://:14550", "vehicle's address"),
+        ("udpin://0.0.0.0:70000", "outside 1..65535"),
+    ]:
+        with pytest.raises(EndpointError, match=says):
+            VehicleLink(bad, KEY)
 
 
 # -- signatures on the wire --------------------------------------------------------------

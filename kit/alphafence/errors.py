@@ -133,6 +133,7 @@ OPTIONAL = {
     "ijson": ("ijson", "build", "python3-ijson", None),
     "distributed": ("distributed", "dask", "python3-distributed", None),
     "pymavlink": ("pymavlink", "companion", None, None),
+    "serial": ("pyserial", "companion", "python3-serial", None),
     "mavsdk": ("mavsdk", "vehicle", None, None),
     "pyarrow": ("pyarrow", "parquet", None, "17.0"),
     "lxml": ("lxml", "kml", "python3-lxml", None),
@@ -192,7 +193,7 @@ def install_hint(packages):
 
 
 def _display(package):
-    name = "pyosmium" if package == "osmium" else package
+    name = {"osmium": "pyosmium", "serial": "pyserial"}.get(package, package)
     oldest = OPTIONAL[package][3]
     return f"{name} {oldest} or later" if oldest else name
 

@@ -11,6 +11,7 @@ from alphafence.cli.common import (
     signing_key,
     unsigned_hint,
 )
+from alphafence.cli.options import add_connect_option
 
 
 def register(sub):
@@ -20,12 +21,7 @@ def register(sub):
         help="read the fence a vehicle holds",
         description="Download the vehicle's fence items into a QGroundControl plan.",
     )
-    p.add_argument(
-        "--connect",
-        required=True,
-        metavar="URL",
-        help="vehicle connection URL (udpin://HOST:PORT, udpout://, tcpout://)",
-    )
+    add_connect_option(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT.plan")
     p.add_argument(
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"

@@ -156,6 +156,27 @@ def at_least(flag: str, minimum: int):
     return _number(flag, int, lambda v: v >= minimum, f"at least {minimum}")
 
 
+def connection(text: str) -> str:
+    """argparse type of ``--connect``: the connection as given, once
+    :func:`~alphafence.vehicle.endpoints.parse_endpoint` reads it (else an InputError naming
+    it and the accepted forms)."""
+    from alphafence.vehicle.endpoints import EndpointError, parse_endpoint
+
+    try:
+        parse_endpoint(text)
+    except EndpointError as exc:
+        raise InputError(f"--connect {text.strip()!r}", exc.message) from None
+    return text.strip()
+
+
+def add_connect_option(p: argparse.ArgumentParser, required: bool = True) -> None:
+    """Add ``--connect`` (every connection form, checked as it is parsed) to ``p``."""
+    from alphafence.vehicle.endpoints import HELP
+
+    help = f"{HELP}. Example: --connect /dev/ttyACM0"
+    p.add_argument("--connect", required=required, type=connection, metavar="CONN", help=help)
+
+
 # ---------------------------------------------------------------------------------------------
 # option groups
 
@@ -338,17 +359,29 @@ def compile_from_args(args, records):
     Returns
     -------
     alphafence.onboard.compile.CompileResult
+
+    Raises
+    ------
+    InputError
+        ``--return-point`` or ``--bbox`` typed the wrong way round (lon,lat for a position,
+        lat,lon for a box: the swap is suggested), or no fence near the area (the plan would
+        leave the vehicle without a fence).
     """
     import shapely
 
-    from alphafence.onboard.compile import compile_fences
+    from alphafence.formats.mistakes import check_box, check_point
+    from alphafence.onboard.compile import compile_fences, require_fence
     from alphafence.onboard.corridor import flight_path_from_plan
 
     if getattr(args, "area", None):
-        area = flight_path_from_plan(args.area)
+        area, where = flight_path_from_plan(args.area), f"the flight path of {args.area}"
     else:
         area = shapely.box(*args.bbox)
-    return compile_fences(
+        where = "the box " + ",".join(f"{v:g}" for v in args.bbox)
+    geoms = [r.geometry for r in records if r.kind in ("keep_out", "keep_in")]
+    if args.return_point is not None:  # LAT,LON typed the wrong way round
+        check_point("--return-point", args.return_point, [area, *geoms], args.fences)
+    result = compile_fences(
         records,
         area,
         storage_profile(args),
@@ -357,3 +390,7 @@ def compile_from_args(args, records):
         args.return_point,
         args.items,
     )
+    if not getattr(args, "area", None):  # a box that selects nothing, typed lat,lon
+        check_box("--bbox", args.bbox, geoms, args.fences, reach_m=args.distance)
+    require_fence(result, args.fences, where)  # no empty plan, for compile as for upload
+    return result

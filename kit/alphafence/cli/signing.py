@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 
 from alphafence.cli.common import add_signing_option, err_console, out_console, signing_key
+from alphafence.cli.options import add_connect_option
 from alphafence.errors import InputError, need
 
 
@@ -27,12 +28,12 @@ def register(sub):
         "a radio) and confirms that the vehicle then signs with it. ArduPilot refuses while "
         "armed.",
     )
-    s.add_argument("--connect", required=True, metavar="URL")
+    add_connect_option(s)
     s.add_argument("--key", required=True, metavar="KEY_FILE", help="the key to install")
     add_signing_option(s)
     s.add_argument("--timeout", type=float, default=10.0, metavar="S")
     r = verbs.add_parser("remove", help="switch signing off on the vehicle (needs its current key)")
-    r.add_argument("--connect", required=True, metavar="URL")
+    add_connect_option(r)
     add_signing_option(r)
     r.add_argument("--timeout", type=float, default=10.0, metavar="S")
     p.set_defaults(func=run)
@@ -72,15 +73,21 @@ async def _install(args, new, current) -> int:
 
 
 def _warn_if_remote(url: str) -> None:
-    from alphafence.vehicle.bridge import BridgeError, parse_url
+    from alphafence.vehicle.endpoints import USB_BAUD, EndpointError, default_baud, parse_endpoint
 
     try:
-        _, host, _ = parse_url(url)
-    except BridgeError:
+        ep = parse_endpoint(url)
+    except EndpointError:
         return  # install_key reports it
-    if host not in ("127.0.0.1", "localhost", "::1", "0.0.0.0"):
+    if ep.kind == "serial":
+        where = None if default_baud(ep.device) == USB_BAUD else ep.device
+        what = "if it is a telemetry radio, anyone listening"
+    else:
+        where = None if ep.host in ("127.0.0.1", "localhost", "::1", "0.0.0.0") else ep.host
+        what = "anyone listening on that link"
+    if where is not None:
         err_console.print(
-            f"[yellow]warning:[/] SETUP_SIGNING carries the key in clear to {host}: anyone "
-            "listening on that link learns it (use USB or loopback)",
+            f"[yellow]warning:[/] SETUP_SIGNING carries the key in clear to {where}: {what} "
+            "learns it (use USB or loopback)",
             soft_wrap=True,
         )

@@ -28,6 +28,7 @@ from alphafence.cli.common import (
 )
 from alphafence.cli.options import (
     add_compile_options,
+    add_connect_option,
     bbox,
     compile_from_args,
     figure_wants,
@@ -59,12 +60,7 @@ def register(sub):
         help="fences to compile (.geojson, KML, OpenAir...), or onboard .plan / .waypoints / "
         "ArduPilot legacy fence file (lat lon lines, often .txt)",
     )
-    p.add_argument(
-        "--connect",
-        required=False,
-        metavar="URL",
-        help="vehicle connection URL, e.g. udpin://127.0.0.1:14550 or tcpout://navio.local:5760",
-    )
+    add_connect_option(p, required=False)
     where = p.add_mutually_exclusive_group()
     where.add_argument("--area", metavar="MISSION.plan", help="operating area (for a .geojson)")
     where.add_argument(

@@ -69,15 +69,21 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         self._closed = asyncio.Event()
 
     # -- life cycle -----------------------------------------------------------------
-    async def open(self, *, local_addr=None, remote_addr=None) -> MavlinkDatagrams:
-        """Open the endpoint: bound to ``local_addr``, or connected to ``remote_addr``.
+    async def open(
+        self, *, local_addr=None, remote_addr=None, allow_broadcast=False
+    ) -> MavlinkDatagrams:
+        """Open the endpoint: bound to ``local_addr``, or connected to ``remote_addr``
+        (``allow_broadcast``: may send to a broadcast address).
 
         Raises OSError when the address cannot be bound or resolved.
         """
         self._closed.clear()
         loop = asyncio.get_running_loop()
         await loop.create_datagram_endpoint(
-            lambda: self, local_addr=local_addr, remote_addr=remote_addr
+            lambda: self,
+            local_addr=local_addr,
+            remote_addr=remote_addr,
+            allow_broadcast=allow_broadcast or None,
         )
         return self
 

@@ -11,16 +11,14 @@ pymavlink's replay rule). Unsigned and wrongly signed messages from the vehicle 
 counted, so a failure can say which it was. RADIO_STATUS/RADIO, which a telemetry radio injects
 unsigned, pass as ArduPilot lets them pass.
 
-Everything runs on the asyncio loop (datagram endpoints, a stream for TCP): no thread, no
-blocking call. URLs as MAVSDK writes them: ``udpin://HOST:PORT`` (we listen; the vehicle
-sends to us), ``udpout://HOST:PORT`` (we send to the vehicle), ``tcpout://HOST:PORT``.
+Everything runs on the asyncio loop (datagram endpoints for UDP, byte streams of
+:mod:`alphafence.vehicle.transports` for serial ports and TCP): no blocking call. The link
+takes every connection :func:`~alphafence.vehicle.endpoints.parse_endpoint` reads (serial
+ports, ``udpin``, ``udpout``, ``udpbcast``, ``tcpout``, ``tcpin``), signed or not alike.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -28,37 +26,18 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from alphafence.errors import VehicleError
 from alphafence.mavlink.udp import MavlinkDatagrams
+from alphafence.vehicle.endpoints import Endpoint, parse_endpoint
 from alphafence.vehicle.keys import signing_timestamp
+from alphafence.vehicle.transports import TransportError, stream_transport
 
 LOOPBACK = "127.0.0.1"
-_URL = re.compile(r"(udpin|udpout|tcpout)://(\[[^\]]+\]|[^:/]*):(\d{1,5})/?")
+UDP_KINDS = ("udpin", "udpout", "udpbcast")
 UNSIGNED_OK = frozenset({mavlink.MAVLINK_MSG_ID_RADIO_STATUS, mavlink.MAVLINK_MSG_ID_RADIO})
 SIGNED_FLAG = mavlink.MAVLINK_IFLAG_SIGNED
-MAX_DATAGRAM = 65536
 
 
 class BridgeError(VehicleError):
     """The vehicle side of a signed link could not be opened or went away."""
-
-
-def parse_url(url: str) -> tuple[str, str, int]:
-    """(kind, host, port) of a MAVSDK-style URL the signed link supports."""
-    m = _URL.fullmatch(url.strip())
-    if m is None:
-        if url.startswith(("serial://", "tcpin://")):
-            raise BridgeError(
-                f"{url}: a signed link runs over udpin://, udpout:// or tcpout:// (for a serial "
-                "port, let mavlink-router or MAVProxy expose it on UDP)"
-            )
-        raise BridgeError(f"{url}: not a udpin://HOST:PORT, udpout://HOST:PORT or tcpout:// URL")
-    kind, host, port = m.group(1), m.group(2).strip("[]"), int(m.group(3))
-    if not 0 < port < 65536:
-        raise BridgeError(f"{url}: port {port} is out of range")
-    if kind == "udpin" and not host:
-        host = "0.0.0.0"
-    if kind != "udpin" and host in ("", "0.0.0.0"):
-        raise BridgeError(f"{url}: {kind} needs the vehicle's address")
-    return kind, host, port
 
 
 def is_signed(msgbuf: bytes) -> bool:
@@ -109,11 +88,13 @@ class VehicleLink:
 
     With ``key``, outgoing messages are signed and incoming ones must be (``verify=False``:
     signed, not checked); without it, nothing is signed and nothing is checked.
-    ``on_message(msg)`` gets each accepted message."""
+    ``on_message(msg)`` gets each accepted message. ``url`` is any connection
+    :func:`~alphafence.vehicle.endpoints.parse_endpoint` reads (or an Endpoint); a malformed
+    one raises its EndpointError here."""
 
     def __init__(
         self,
-        url: str,
+        url: str | Endpoint,
         key: bytes | None = None,
         on_message: Callable | None = None,
         *,
@@ -121,8 +102,9 @@ class VehicleLink:
         link_id: int = 0,
         source: tuple[int, int] = (245, 190),  # a ground station, MAV_COMP_ID_MISSIONPLANNER
     ):
-        self.url = url
-        self.kind, self.host, self.port = parse_url(url)
+        self.endpoint = parse_endpoint(url)
+        self.url = str(url).strip()
+        self.kind = self.endpoint.kind
         self.key = key
         self.on_message = on_message or (lambda msg: None)
         self.stats = LinkStats()
@@ -141,42 +123,48 @@ class VehicleLink:
                     msg_id in UNSIGNED_OK
                 )
         self.remote: tuple | None = None  # where the vehicle is (UDP)
-        self.closed: str | None = None  # why the link ended
-        # the socket (UDP), and the parser of a TCP stream too
+        self._closed: str | None = None  # why the link ended
+        # the socket (UDP), and the parser of a stream (serial, TCP) too
         self._wire = MavlinkDatagrams(self.reader, self._accept, self._reject)
-        self._writer = None
-        self._reader_task = None
+        self._stream = None
+        if self.kind not in UDP_KINDS:
+            self._stream = stream_transport(self.endpoint, lambda data: self._received(data, None))
+
+    @property
+    def closed(self) -> str | None:
+        """Why the link ended (None while it lives)."""
+        return self._closed or (self._stream.closed if self._stream is not None else None)
+
+    @closed.setter
+    def closed(self, why: str | None) -> None:
+        self._closed = why
 
     # -- life cycle -----------------------------------------------------------------
     async def open(self) -> VehicleLink:
-        """Open the connection the URL names. Raises BridgeError when it cannot."""
+        """Open the connection. Raises BridgeError (one line) when it cannot."""
+        ep = self.endpoint
         try:
-            if self.kind == "udpin":
-                await self._wire.open(local_addr=(self.host, self.port))
-            elif self.kind == "udpout":
-                self.remote = (self.host, self.port)
+            if self._stream is not None:
+                await self._stream.open()
+            elif ep.kind == "udpin":
+                await self._wire.open(local_addr=ep.address)
+            elif ep.kind == "udpout":
+                self.remote = ep.address
                 await self._wire.open(remote_addr=self.remote)
-            else:
-                reader, self._writer = await asyncio.wait_for(
-                    asyncio.open_connection(self.host, self.port), 10.0
-                )
-                self._reader_task = asyncio.create_task(self._read_stream(reader))
-        except (OSError, asyncio.TimeoutError) as exc:
+            else:  # udpbcast: to the broadcast address until the vehicle answers
+                self.remote = ep.address
+                await self._wire.open(local_addr=("0.0.0.0", 0), allow_broadcast=True)
+        except TransportError as exc:
+            raise BridgeError(str(exc)) from None
+        except OSError as exc:
             raise BridgeError(f"{self.url}: cannot open the connection ({exc})") from None
         return self
 
     async def close(self) -> None:
-        """Close the connection (and wait until its socket is closed)."""
-        if self._reader_task is not None:
-            self._reader_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self._reader_task
-        if self._writer is not None:
-            self._writer.close()
-            with contextlib.suppress(Exception):
-                await self._writer.wait_closed()
+        """Close the connection (and wait until its socket or port is closed)."""
+        if self._stream is not None:
+            await self._stream.close()
         await self._wire.close()
-        self._writer = self._reader_task = None
 
     async def __aenter__(self):
         return await self.open()
@@ -202,26 +190,16 @@ class VehicleLink:
         self._write(buf)
 
     def _write(self, buf: bytes) -> None:
-        if self._writer is not None:
-            self._writer.write(buf)
+        if self._stream is not None:
+            if not self._stream.write(buf):
+                return  # tcpin before the vehicle connected, or a port gone
         elif self.remote is None or not self._wire.send(buf, self.remote):
             return  # udpin before the vehicle has been heard: nowhere to send yet
         self.stats.sent += 1
 
     # -- receiving ------------------------------------------------------------------
-    async def _read_stream(self, reader):
-        try:
-            while True:
-                data = await reader.read(MAX_DATAGRAM)
-                if not data:
-                    self.closed = "the vehicle closed the connection"
-                    return
-                self._received(data, None)
-        except OSError as exc:
-            self.closed = f"the connection failed ({exc})"
-
     def _received(self, data: bytes, addr) -> None:
-        """Bytes from the vehicle (a datagram, or a chunk of the TCP stream)."""
+        """Bytes from the vehicle (a datagram, or a chunk of a serial or TCP stream)."""
         self._wire.feed(data, addr)
 
     def _accept(self, msg, addr) -> None:
@@ -232,7 +210,7 @@ class VehicleLink:
             return
         if self.key is not None:
             self._follow_timestamp(msg)
-        if self.kind == "udpin" and addr is not None:
+        if self.kind in ("udpin", "udpbcast") and addr is not None:
             self.remote = addr  # learnt from accepted (verified, when signing) messages only
         self.stats.received += 1
         self.on_message(msg)
@@ -264,9 +242,12 @@ class VehicleLink:
 
 class SigningBridge:
     """``async with SigningBridge(url, key) as bridge:`` then point MAVSDK at
-    ``bridge.local_url``. ``bridge.link.stats`` counts what was accepted and dropped."""
+    ``bridge.local_url``. ``bridge.link.stats`` counts what was accepted and dropped.
 
-    def __init__(self, url: str, key: bytes, *, link_id: int = 0):
+    ``url`` is any connection :class:`VehicleLink` takes (a serial port included); with
+    ``key=None`` the bridge only carries messages (for a connection MAVSDK cannot open)."""
+
+    def __init__(self, url: str | Endpoint, key: bytes | None, *, link_id: int = 0):
         self.key = key
         self.link = VehicleLink(url, key, self._from_vehicle, link_id=link_id)
         self.local = mavlink.MAVLink(None)
@@ -308,7 +289,7 @@ class SigningBridge:
 
     def diagnosis(self) -> str:
         """Why the vehicle may have stayed silent ('' when nothing points to a reason)."""
-        return self.link.closed or self.link.stats.diagnosis(key_given=True)
+        return self.link.closed or self.link.stats.diagnosis(key_given=self.key is not None)
 
     def _from_vehicle(self, msg) -> None:
         self._local.send(bytes(msg.get_msgbuf()))  # to MAVSDK, once it has been heard

@@ -18,7 +18,9 @@ import asyncio
 import contextlib
 import importlib.util
 import json
+import logging
 import os
+import re
 
 from alphafence.vehicle.base import LinkError, NoLinkError, Vehicle
 
@@ -63,17 +65,41 @@ def choose_link(link: str | None = None) -> str:
 
 
 _QUIET = False
+MAVSDK_LOG = logging.getLogger("alphafence.mavsdk")
+_ANSI = re.compile(r"\x1b\[[0-9;?]*[ -/]*[@-~]")
+# MAVSDK's levels (DEBUG 0, INFO 1, WARN 2, ERROR 3) as Python logging's
+_LEVELS = (logging.DEBUG, logging.INFO, logging.WARNING, logging.ERROR)
+
+
+def mavsdk_log(level: int, message: str, file=None, line=0) -> bool:
+    """MAVSDK's log callback: each line goes to the ``alphafence.mavsdk`` logger, without
+    terminal colour codes, at Python logging's level for MAVSDK's.
+
+    Nothing is printed by MAVSDK itself (the callback returns True). With logging not set
+    up, Python shows warnings and errors on stderr as ``mavsdk: ...`` lines.
+
+    Examples
+    --------
+    >>> mavsdk_log(3, "\x1b[31mCall open failed: No such file or directory\x1b[0m")
+    True
+    """
+    text = " ".join(_ANSI.sub("", str(message)).split())
+    level = _LEVELS[min(max(int(level), 0), len(_LEVELS) - 1)]
+    where = {"mavsdk_file": file, "mavsdk_line": line}
+    MAVSDK_LOG.log(level, "mavsdk: %s", text, extra=where)
+    return True
 
 
 def quiet_mavsdk():
-    """Keep MAVSDK's own debug and info lines off the operator's terminal (warnings and
-    errors still show; the vehicle's STATUSTEXTs are collected and reported by the kit)."""
+    """Route MAVSDK's own log lines into Python logging (:func:`mavsdk_log`), so none reaches
+    the operator's terminal as raw colour codes and its debug and info lines stay off it (the
+    vehicle's STATUSTEXTs are collected and reported by the kit)."""
     global _QUIET
     if _QUIET:
         return
-    from mavsdk.logging import LogLevel, log_subscribe
+    from mavsdk.logging import log_subscribe
 
-    log_subscribe(lambda level, message, file, line: level < LogLevel.WARN)
+    log_subscribe(mavsdk_log)
     _QUIET = True
 
 
@@ -86,8 +112,9 @@ async def open_vehicle(
     Parameters
     ----------
     url : str
-        ``udpin://HOST:PORT``, ``udpout://HOST:PORT``, ``tcpout://HOST:PORT`` (MAVSDK's
-        forms; the MAVSDK link also takes ``serial://``).
+        Any form :func:`~alphafence.vehicle.endpoints.parse_endpoint` reads: a serial port
+        (``/dev/ttyACM0``, ``/dev/ttyUSB0,57600``, ``COM3``), ``udpin:HOST:PORT``,
+        ``udpout:HOST:PORT``, ``tcp:HOST:PORT``, ``tcpin:HOST:PORT``..., on either link.
     timeout : float
         Seconds to wait for the autopilot's heartbeat.
     signing_key : bytes, optional
@@ -95,6 +122,9 @@ async def open_vehicle(
     link : str, optional
         ``auto``, ``pymavlink`` or ``mavsdk`` (see :func:`choose_link`).
     """
+    from alphafence.vehicle.endpoints import parse_endpoint
+
+    endpoint = parse_endpoint(url)
     if choose_link(link) == "pymavlink":
         from alphafence.vehicle.pymavlink_link import PymavlinkVehicle
 
@@ -104,10 +134,13 @@ async def open_vehicle(
         finally:
             await vehicle.close()
         return
-    if signing_key is None:
-        async with _open_mavsdk(url, url, timeout) as vehicle:
+    if signing_key is None and endpoint.mavsdk_url is not None:
+        if endpoint.kind == "serial" and os.name == "posix":
+            _check_serial(endpoint)
+        async with _open_mavsdk(endpoint.mavsdk_url, url, timeout) as vehicle:
             yield vehicle
         return
+    # MAVSDK cannot sign (nor broadcast): the kit's bridge carries the link, serial included
     from alphafence.vehicle.bridge import BridgeError, SigningBridge
 
     try:
@@ -120,6 +153,18 @@ async def open_vehicle(
             yield vehicle
     finally:
         await bridge.close()
+
+
+def _check_serial(endpoint) -> None:
+    """The kit's one-line error for a serial port MAVSDK would fail to open, before it tries
+    (it says only CONNECTION_ERROR)."""
+    from alphafence.vehicle.transports import serial_error
+
+    try:
+        fd = os.open(endpoint.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise LinkError(str(serial_error(endpoint.device, endpoint.baud, exc))) from None
+    os.close(fd)
 
 
 @contextlib.asynccontextmanager

@@ -89,7 +89,8 @@ class PymavlinkVehicle(Vehicle):
     Parameters
     ----------
     url : str
-        ``udpin://HOST:PORT``, ``udpout://HOST:PORT`` or ``tcpout://HOST:PORT``.
+        A connection :func:`~alphafence.vehicle.endpoints.parse_endpoint` reads: a serial
+        port (``/dev/ttyACM0``, ``/dev/ttyUSB0,57600``, ``COM3``), UDP or TCP.
     signing_key : bytes, optional
         32 bytes: sign what is sent, accept only what is signed with it.
 
