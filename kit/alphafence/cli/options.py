@@ -359,17 +359,29 @@ def compile_from_args(args, records):
     Returns
     -------
     alphafence.onboard.compile.CompileResult
+
+    Raises
+    ------
+    InputError
+        ``--return-point`` or ``--bbox`` typed the wrong way round (lon,lat for a position,
+        lat,lon for a box: the swap is suggested), or no fence near the area (the plan would
+        leave the vehicle without a fence).
     """
     import shapely
 
-    from alphafence.onboard.compile import compile_fences
+    from alphafence.formats.mistakes import check_box, check_point
+    from alphafence.onboard.compile import compile_fences, require_fence
     from alphafence.onboard.corridor import flight_path_from_plan
 
     if getattr(args, "area", None):
-        area = flight_path_from_plan(args.area)
+        area, where = flight_path_from_plan(args.area), f"the flight path of {args.area}"
     else:
         area = shapely.box(*args.bbox)
-    return compile_fences(
+        where = "the box " + ",".join(f"{v:g}" for v in args.bbox)
+    geoms = [r.geometry for r in records if r.kind in ("keep_out", "keep_in")]
+    if args.return_point is not None:  # LAT,LON typed the wrong way round
+        check_point("--return-point", args.return_point, [area, *geoms], args.fences)
+    result = compile_fences(
         records,
         area,
         storage_profile(args),
@@ -378,3 +390,7 @@ def compile_from_args(args, records):
         args.return_point,
         args.items,
     )
+    if not getattr(args, "area", None):  # a box that selects nothing, typed lat,lon
+        check_box("--bbox", args.bbox, geoms, args.fences, reach_m=args.distance)
+    require_fence(result, args.fences, where)  # no empty plan, for compile as for upload
+    return result

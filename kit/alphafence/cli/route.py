@@ -72,6 +72,7 @@ def run(args) -> int:
 
     start, goal = args.start, args.goal
     records = read_fences(args.fences)
+    _check_ends(args, records)
     if not any(r.kind == "keep_out" for r in records):
         out_console.print("[yellow]note:[/] no keep-out fences: the route is a straight line")
     planner = CorridorPlanner(records, start, goal, clearance=args.clearance)
@@ -114,6 +115,22 @@ def run(args) -> int:
         "wrote " + ", ".join(str(p) for p in [*out, *([args.figure] if args.figure else [])])
     )
     return 0
+
+
+def _check_ends(args, records):
+    """Refuse an end typed LON,LAT (far from every fence, its swap among them); note one far
+    from every fence (a typing slip, or fences for another area)."""
+    from alphafence.formats.mistakes import FAR_M, check_point
+
+    geoms = [r.geometry for r in records]
+    for name, lonlat in (("--from", args.start), ("--to", args.goal)):
+        distance = check_point(name, lonlat, geoms, args.fences)
+        if geoms and distance > FAR_M:
+            out_console.print(
+                f"[yellow]note:[/] {name} {lonlat[1]:g},{lonlat[0]:g} is "
+                f"{distance / 1000:,.0f} km from the nearest fence of {args.fences}",
+                highlight=False,
+            )
 
 
 def _print_corridor(corridor):

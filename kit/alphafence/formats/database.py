@@ -17,6 +17,7 @@ from alphafence.formats.geojson_stream import (
     should_stream,
 )
 from alphafence.formats.jsonfile import read_json
+from alphafence.formats.mistakes import box_swap_hint, swapped_box
 
 OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
 
@@ -169,11 +170,20 @@ def read_database(
         features.extend(ahead[i] if i in ahead else read_file(path, rules, repaired, skipped))
     selected = select_bbox(features, bbox)
     if not selected:
-        where = ", ".join(str(p) for p in paths)
-        why = f" inside {bbox_name} {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
-        raise InputError(where, f"no restricted features{why} (rules: {rules.source})")
+        swapped = swapped_box(bbox) if bbox else None
+        hits = len(select_bbox(features, swapped)) if swapped else 0
+        raise _nothing_inside(paths, bbox, bbox_name, rules, hits)
     files = [str(p) for p in paths]
     return Database(selected, files, repaired, skipped, bbox, notes, invalid or [])
+
+
+def _nothing_inside(paths, bbox, bbox_name, rules, swap_hits):
+    """The error of a selection that holds nothing: the box, and the box meant when its swap
+    selects ``swap_hits`` features."""
+    where = ", ".join(str(p) for p in paths)
+    why = f" inside {bbox_name} {','.join(f'{v:g}' for v in bbox)}" if bbox else ""
+    hint = "; " + box_swap_hint(bbox_name, bbox, swap_hits, "features") if swap_hits else ""
+    return InputError(where, f"no restricted features{why} (rules: {rules.source}){hint}")
 
 
 class DatabaseStream:
@@ -217,6 +227,7 @@ class DatabaseStream:
         self.repaired, self.skipped, self.count = [], Counter(), 0
         self.skip_invalid = skip_invalid
         self.notes, self.invalid, self._ahead = [], [], None
+        self._swap = 0  # features inside the box read the other way round (lat,lon)
 
     def read_ahead(self) -> None:
         """Read the OpenAir files now, before the others (:meth:`batches` does it first): a
@@ -252,6 +263,7 @@ class DatabaseStream:
             As :func:`read_database`, including when no file holds a restricted feature.
         """
         self.read_ahead()
+        swapped = swapped_box(self.bbox) if self.bbox else None
         for i, path in enumerate(self.paths):
             parts, inside = None, False
             if i in self._ahead:
@@ -263,6 +275,8 @@ class DatabaseStream:
                 parts = self._parts(path)
             before = self.count
             for part in parts:
+                if not inside and swapped and not self.count:  # for a box typed lat,lon
+                    self._swap += len(select_bbox(part, swapped))
                 part = part if inside else select_bbox(part, self.bbox)
                 if len(part):
                     self.count += len(part)
@@ -273,11 +287,7 @@ class DatabaseStream:
                 )
                 self.skipped[note] += 0  # said, as read_file says it for files read whole
         if not self.count:
-            where = ", ".join(self.files)
-            why = ""
-            if self.bbox:
-                why = f" inside {self.bbox_name} {','.join(f'{v:g}' for v in self.bbox)}"
-            raise InputError(where, f"no restricted features{why} (rules: {self.rules.source})")
+            raise _nothing_inside(self.files, self.bbox, self.bbox_name, self.rules, self._swap)
 
     def _parts(self, path):
         """The file's features, as they come: batch by batch, or in one list."""

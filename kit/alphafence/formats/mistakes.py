@@ -1,17 +1,26 @@
-"""Map databases given where fences are expected: told by suffix and by first bytes, and
-refused in one line that says how to build fences from them.
+"""Easy mistakes in what is given, caught and said in one line with what was meant.
 
-``alphafence build`` reads map databases (an OpenStreetMap extract, a geozone list) and
-writes fences; every other verb reads fences. A database handed to one of them would
-otherwise fail deep in a reader ("not UTF-8 text", "malformed JSON"); :func:`refuse_map_database`
-says what the file is and what to run instead.
+* A map database given where fences are expected, told by suffix and by first bytes.
+  ``alphafence build`` reads map databases (an OpenStreetMap extract, a geozone list) and
+  writes fences; every other verb reads fences. A database handed to one of them would
+  otherwise fail deep in a reader ("not UTF-8 text", "malformed JSON");
+  :func:`refuse_map_database` says what the file is and what to run instead.
+* Coordinates typed the wrong way round: boxes are ``MINLON,MINLAT,MAXLON,MAXLAT`` (GIS
+  order) and positions ``LAT,LON`` (MAVLink's order). A box that selects no fence while its
+  swap selects some (:func:`check_box`), or a position far from every fence whose swap lies
+  among them (:func:`check_point`), is refused with the swapped value to give instead.
 """
 
 from __future__ import annotations
 
 import re
 
+import numpy as np
+import shapely
+
 from alphafence.errors import InputError
+from alphafence.geo.coords import valid_lonlat
+from alphafence.geo.frame import LocalFrame
 
 # suffixes ``alphafence build`` reads as OpenStreetMap (formats.database.OSM_SUFFIXES)
 OSM_SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz", ".o5m", ".opl")
@@ -133,3 +142,183 @@ def refuse_map_database(path, head=None) -> None:
     found = map_database_kind(path, head)
     if found is not None:
         raise InputError(path, database_message(path, *found))
+
+
+# -- coordinates in the wrong order ------------------------------------------------------------
+# a position this far from every fence, whose swap lies among them, was typed the wrong way round
+FAR_M = 50_000.0
+NEAR_M = 10_000.0  # "among them": inside their extent, or this close to one
+
+
+def _deg(value) -> str:
+    """A coordinate as typed: up to 7 decimals (MAVLink's resolution), no trailing zeros."""
+    return f"{float(value):.7f}".rstrip("0").rstrip(".")
+
+
+def _distances_m(where, geoms):
+    """Metres from ``where`` (a WGS84 geometry) to each of ``geoms``, in a frame centred on
+    it (an azimuthal equidistant one: exact from its centre); what does not project (the
+    antipode) is infinitely far."""
+    frame = LocalFrame.around(where)
+    d = shapely.distance(frame.geom_to_local(where), frame.geom_to_local(geoms))
+    return np.nan_to_num(np.asarray(d, float), nan=np.inf, posinf=np.inf)
+
+
+def point_swap(lonlat, geoms):
+    """How far the position ``lonlat`` is from the nearest of ``geoms``, and its swap when it
+    looks typed the wrong way round: more than :data:`FAR_M` from every geometry while its
+    swap (lat read as lon) lies inside their extent or within :data:`NEAR_M` of one.
+
+    Parameters
+    ----------
+    lonlat : tuple of float
+        ``(lon, lat)`` as read.
+    geoms : sequence of shapely geometries
+        WGS84 (lon, lat), e.g. the fences' geometries.
+
+    Returns
+    -------
+    distance_m : float
+        Metres to the nearest geometry (``inf`` when there is none).
+    swapped : tuple or None
+        ``(lon, lat)`` of the swapped position when it is the likelier one, else None.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> monaco = [shapely.box(7.41, 43.72, 7.44, 43.75)]
+    >>> d, swapped = point_swap((43.74, 7.43), monaco)  # "--to 7.43,43.74": lon,lat typed
+    >>> round(d / 1000), swapped
+    (5349, (7.43, 43.74))
+    >>> point_swap((7.5, 43.7), monaco)[1] is None  # 6 km away: taken as typed
+    True
+    """
+    geoms = np.asarray(list(geoms), dtype=object)
+    if not len(geoms):
+        return float("inf"), None
+    lon, lat = float(lonlat[0]), float(lonlat[1])
+    distance = float(_distances_m(shapely.Point(lon, lat), geoms).min())
+    if distance <= FAR_M or not valid_lonlat(lat, lon):
+        return distance, None
+    swap = shapely.Point(lat, lon)
+    extent = shapely.box(*shapely.total_bounds(geoms))
+    if extent.covers(swap) or float(_distances_m(swap, geoms).min()) <= NEAR_M:
+        return distance, (lat, lon)
+    return distance, None
+
+
+def check_point(name, lonlat, geoms, source) -> float:
+    """Refuse the position ``lonlat`` (``(lon, lat)``, typed ``LAT,LON``) when it looks typed
+    the wrong way round (:func:`point_swap`), suggesting the swap.
+
+    Parameters
+    ----------
+    name : str
+        What the position is, named in the message (the option: ``"--to"``).
+    lonlat : tuple of float
+    geoms : sequence of shapely geometries
+        The fences' geometries (WGS84).
+    source : str
+        Where they come from (the fence file), for the message.
+
+    Returns
+    -------
+    float
+        Metres from the position to the nearest geometry.
+
+    Raises
+    ------
+    InputError
+        ``--to: 7.43,43.74 (LAT,LON) is 5,349 km from every fence of f.geojson; swapped,
+        43.74,7.43 lies among them: did you mean --to 43.74,7.43?``
+    """
+    distance, swapped = point_swap(lonlat, geoms)
+    if swapped is not None:
+        typed = f"{_deg(lonlat[1])},{_deg(lonlat[0])}"
+        meant = f"{_deg(swapped[1])},{_deg(swapped[0])}"
+        raise InputError(
+            name,
+            f"{typed} (LAT,LON) is {distance / 1000:,.0f} km from every fence of {source}; "
+            f"swapped, {meant} lies among them: did you mean {name} {meant}?",
+        )
+    return distance
+
+
+def swapped_box(bbox):
+    """The box ``(minlon, minlat, maxlon, maxlat)`` read the other way round, as if typed
+    ``MINLAT,MINLON,MAXLAT,MAXLON``, or None when that is no box on Earth.
+
+    Examples
+    --------
+    >>> swapped_box((43.72, 7.41, 43.75, 7.44))
+    (7.41, 43.72, 7.44, 43.75)
+    >>> swapped_box((100.0, 10.0, 101.0, 11.0)) is None  # 100 is no latitude
+    True
+    """
+    swapped = (bbox[1], bbox[0], bbox[3], bbox[2])
+    ok = valid_lonlat(swapped[0], swapped[1]) and valid_lonlat(swapped[2], swapped[3])
+    return swapped if ok else None
+
+
+def box_count(bbox, geoms, reach_m=0.0) -> int:
+    """How many of ``geoms`` (WGS84) lie within ``reach_m`` metres of the box ``bbox``
+    (``(minlon, minlat, maxlon, maxlat)``; 0: that meet it)."""
+    geoms = np.asarray(list(geoms), dtype=object)
+    if not len(geoms):
+        return 0
+    box = shapely.box(*bbox)
+    if reach_m <= 0:
+        return int(shapely.intersects(geoms, box).sum())
+    return int((_distances_m(box, geoms) <= reach_m).sum())
+
+
+def box_swap_hint(name, bbox, count, what="fences"):
+    """The end of a message about the box ``bbox`` that selects nothing while its swap
+    selects ``count`` of ``what``: the box to give instead.
+
+    Examples
+    --------
+    >>> box_swap_hint("--bbox", (43.72, 7.41, 43.75, 7.44), 3)
+    '--bbox is MINLON,MINLAT,MAXLON,MAXLAT; swapped to lon,lat it selects 3 fences: did you mean --bbox 7.41,43.72,7.44,43.75?'
+    """
+    meant = ",".join(_deg(v) for v in swapped_box(bbox))
+    return (
+        f"{name} is MINLON,MINLAT,MAXLON,MAXLAT; swapped to lon,lat it selects {count:,} "
+        f"{what}: did you mean {name} {meant}?"
+    )
+
+
+def check_box(name, bbox, geoms, source, reach_m=0.0) -> None:
+    """Refuse the box ``bbox`` when no geometry lies within ``reach_m`` of it while its swap
+    (:func:`swapped_box`) selects some, suggesting the swap; else do nothing.
+
+    Parameters
+    ----------
+    name : str
+        What the box is, named in the message (the option: ``"--bbox"``).
+    bbox : tuple
+        ``(minlon, minlat, maxlon, maxlat)`` as read.
+    geoms : sequence of shapely geometries
+        The fences' geometries (WGS84).
+    source : str
+        Where they come from (the fence file), for the message.
+    reach_m : float
+        A geometry this close to the box is selected.
+
+    Raises
+    ------
+    InputError
+        ``--bbox: no fence of f.geojson within 2000 m of 43.72,7.41,43.75,7.44; --bbox is
+        MINLON,MINLAT,MAXLON,MAXLAT; swapped to lon,lat it selects 8 fences: did you mean
+        --bbox 7.41,43.72,7.44,43.75?``
+    """
+    swapped = swapped_box(bbox)
+    if swapped is None or box_count(bbox, geoms, reach_m):
+        return
+    count = box_count(swapped, geoms, reach_m)
+    if count:
+        near = f"within {reach_m:g} m of" if reach_m > 0 else "in"
+        typed = ",".join(_deg(v) for v in bbox)
+        raise InputError(
+            name, f"no fence of {source} {near} {typed}; " + box_swap_hint(name, bbox, count)
+        )

@@ -253,3 +253,33 @@ def compile_fences(
             "180°); narrow the operating area",
         )
     return result
+
+
+def require_fence(result: CompileResult, path, where) -> None:
+    """Refuse a compilation that holds no polygon or circle, as an onboard file without one
+    is refused: uploaded, it would leave the vehicle without a fence.
+
+    Parameters
+    ----------
+    result : CompileResult
+    path : str or Path
+        The fence file compiled, for the message.
+    where : str
+        The area compiled for (``"the box 7.41,43.72,7.44,43.75"``), for the message.
+
+    Raises
+    ------
+    InputError
+        ``f.geojson: no keep-out or keep-in fence within 2000 m of the box ...: the onboard
+        fence would hold no polygon or circle, leaving the vehicle without a fence``.
+    """
+    from alphafence.onboard.decode import decode_fence
+
+    if decode_fence(result.items, source=str(path)):
+        return
+    reach = result.corridor.distance_m if result.corridor is not None else 0.0
+    raise InputError(
+        path,
+        f"no keep-out or keep-in fence within {reach:g} m of {where}: the onboard fence would "
+        "hold no polygon or circle, leaving the vehicle without a fence",
+    )
