@@ -149,3 +149,39 @@ def test_the_leg_heads_for_the_nearest_keep_out_fence_to_a_clear_target(replayed
     # the straight line to the target crosses the nearest fence: the flight is at it
     line = shapely.LineString([(0, 0), target.coords[0]])
     assert any(line.intersects(g) for g in full)
+
+
+def test_check_flight_reads_the_demos_tlog_and_finds_its_alerts(replayed, capsys):
+    out, printed = replayed
+    tlog = out / "flight.tlog"
+    assert f"alphafence check-flight {tlog} --fences {out / 'fences.geojson'}" in printed
+    capsys.readouterr()
+    code = main(["check-flight", str(tlog), "--fences", str(out / "fences.geojson"), "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0 and not report["entered"]  # it braked before the keep-out fence
+    trace = Trace.read(trace_path())
+    assert report["log"]["positions"] == len(trace.samples) and report["log"]["clock"] == "utc"
+    events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
+    # the log's alerts are the replay's, at the same UTC (to the millisecond)
+    replayed_alerts = [
+        e for e in events if e["event"] == "level" and e["level"] in ("WARNING", "IMMINENT")
+    ][:2]
+    found = report["alerts"][:2]
+    assert [a["level"] for a in found] == [e["level"] for e in replayed_alerts]
+    assert [a["fence"] for a in found] == [e["fence"] for e in replayed_alerts]
+    for a, e in zip(found, replayed_alerts):
+        assert abs(utc_seconds(a["utc"]) - utc_seconds(e["utc"])) <= 0.002, (a, e)
+
+
+def test_the_demos_tlog_holds_heartbeats_with_the_flights_modes(replayed):
+    from pymavlink import mavutil
+
+    out, _ = replayed
+    log = mavutil.mavlogfile(str(out / "flight.tlog"))
+    modes = []
+    while (m := log.recv_match(type="HEARTBEAT")) is not None:
+        name = mavutil.mode_string_v10(m)
+        if not modes or modes[-1] != name:
+            modes.append(name)
+    log.close()
+    assert modes == ["GUIDED", "BRAKE"]  # flown in GUIDED, stopped by the monitor's brake

@@ -216,6 +216,7 @@ def _write_flight(out, records, trace, events, title, what, clock, **fields):
     import json
 
     from alphafence.formats.atomic import write_all
+    from alphafence.monitor.replay import trace_tlog
     from alphafence.onboard.decode import decode_fence
     from alphafence.plots.flight import flight_figure
 
@@ -235,12 +236,19 @@ def _write_flight(out, records, trace, events, title, what, clock, **fields):
                 json.dumps(e) + "\n" for e in [_clock_event(trace, clock, fields), *events]
             ),
             out / "flight.trace.jsonl": trace.to_text(),
+            out / "flight.tlog": trace_tlog(trace, clock),
         }
     )
     levels = [e["level"] for e in events if e["event"] == "level"]
     out_console.print(
         f"{what}: {len(trace.samples)} positions, alert levels {' -> '.join(levels) or 'none'}; "
-        f"wrote {out / 'flight.png'}, {out / 'events.jsonl'}, {out / 'flight.trace.jsonl'}",
+        f"wrote {out / 'flight.png'}, {out / 'events.jsonl'}, {out / 'flight.trace.jsonl'}, "
+        f"{out / 'flight.tlog'}",
+        soft_wrap=True,
+    )
+    out_console.print(
+        f"check the flight's log: alphafence check-flight {out / 'flight.tlog'} "
+        f"--fences {out / 'fences.geojson'}",
         soft_wrap=True,
     )
 

@@ -42,8 +42,9 @@ def write_all(outputs: dict):
     Parameters
     ----------
     outputs : dict
-        ``{path: text}``; parent folders are made as needed. Text is written as UTF-8 with
-        ``\\n`` line ends and synced to disk before any file is renamed into place.
+        ``{path: text or bytes}``; parent folders are made as needed. Text is written as
+        UTF-8 with ``\\n`` line ends, bytes as they are, each synced to disk before any file
+        is renamed into place.
     """
     temps = []
     try:
@@ -52,7 +53,9 @@ def write_all(outputs: dict):
             path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = temp_beside(path)
             temps.append((tmp, path))
-            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
+            binary = isinstance(text, (bytes, bytearray))
+            text_mode = {} if binary else {"encoding": "utf-8", "newline": "\n"}
+            with os.fdopen(fd, "wb" if binary else "w", **text_mode) as fh:
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())

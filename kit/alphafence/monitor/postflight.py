@@ -30,6 +30,7 @@ import numpy as np
 
 from alphafence.errors import InputError
 from alphafence.monitor.engine import Engine
+from alphafence.monitor.events import utc_text
 from alphafence.monitor.fenceset import FenceSet, reference
 from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.postflight_track import Walker
@@ -95,6 +96,11 @@ class FlightReport:
             return None
         return datetime.fromtimestamp(t, timezone.utc).isoformat(timespec="milliseconds")
 
+    def utc(self, t) -> str | None:
+        """``t`` (the log's UNIX seconds) as an event's ``utc``, or None for a log without a
+        wall clock."""
+        return None if t is None or self.info.clock != "utc" else utc_text(t)
+
     def fence_rows(self) -> list:
         """One dict per fence entered, left or within ``near_m``: incursions first, then by
         closest approach."""
@@ -144,7 +150,9 @@ class FlightReport:
             "entered": self.entered,
             "incursions": [_incursion_json(self, i) for i in self.incursions],
             "fences": self.fence_rows(),
-            "alerts": [{**e, "when": self.when(e["time"])} for e in self.alerts],
+            "alerts": [
+                {**e, "utc": self.utc(e["time"]), "when": self.when(e["time"])} for e in self.alerts
+            ],
             "near_m": self.near_m,
             "notes": list(info.notes) + self.notes,
         }
