@@ -57,10 +57,16 @@ def sitl_command(
     defaults: Iterable[str | Path] = (),
     model: str = MODEL,
     radio_port: int | None = None,
+    serial1: str | None = None,
 ) -> list[str]:
     """The SITL argument vector: MAVLink on SERIAL0 to ``udpin`` on loopback ``port``; SERIAL1
     and SERIAL2 (TCP listeners by default) switched off, or SERIAL1 to loopback ``radio_port``
-    (a second MAVLink link, like a telemetry radio: ArduPilot's channel 1)."""
+    (a second MAVLink link, like a telemetry radio: ArduPilot's channel 1), or to ``serial1``
+    as SITL writes a device (``uart:/dev/pts/3:57600``: a serial port)."""
+    if serial1 is not None and radio_port is not None:
+        raise SitlError("SERIAL1 is either the radio link or a serial device, not both")
+    if serial1 is None:
+        serial1 = "none" if radio_port is None else f"udpclient:{LOOPBACK}:{radio_port}"
     defaults = [str(p) for p in defaults]
     for path in defaults:
         if "," in path:
@@ -80,7 +86,7 @@ def sitl_command(
         argv += ["--defaults", ",".join(defaults)]
     argv += [
         "--serial0", f"udpclient:{LOOPBACK}:{port}",
-        "--serial1", "none" if radio_port is None else f"udpclient:{LOOPBACK}:{radio_port}",
+        "--serial1", serial1,
         "--serial2", "none",
     ]  # fmt: skip
     return argv

@@ -81,6 +81,9 @@ class SitlInstance:
     radio : bool
         Open a second MAVLink link on SERIAL1 (``radio_url``): ArduPilot trusts channel 0
         (SERIAL0, "USB") with unsigned messages once signing is on, channel 1 it does not.
+    serial1 : str, optional
+        SERIAL1 as SITL takes a device instead (``uart:PATH:BAUD``: MAVLink on a serial port,
+        channel 1, e.g. one end of a pseudo-terminal pair).
     """
 
     def __init__(
@@ -96,6 +99,7 @@ class SitlInstance:
         model: str = MODEL,
         keep_dir: bool = False,
         radio: bool = False,
+        serial1: str | None = None,
     ):
         self.home = resolve_home(home)
         self.speedup = speedup
@@ -107,6 +111,7 @@ class SitlInstance:
         self.model = model
         self.keep_dir = keep_dir
         self.radio = radio
+        self.serial1 = serial1
         self.radio_port: int | None = None
         self.instance: int | None = None
         self.port: int | None = None
@@ -203,6 +208,7 @@ class SitlInstance:
                 defaults=defaults_files(self.binary, extra),
                 model=self.model,
                 radio_port=self.radio_port,
+                serial1=self.serial1,
             )
             with open(self.workdir / LOG_NAME, "wb") as log:
                 log.write(("$ " + " ".join(self.argv) + "\n").encode())
