@@ -33,7 +33,8 @@ def register(sub):
         "--output",
         required=True,
         metavar="ONBOARD.plan",
-        help="QGroundControl plan (geoFence)",
+        help="the onboard fence, by its suffix: .plan (QGroundControl plan, geoFence) or "
+        ".waypoints (ArduPilot fence waypoint file)",
     )
     p.add_argument(
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
@@ -54,13 +55,16 @@ def register(sub):
 
 
 def run(args) -> int:
-    """Compile the fences for the flight path or box, write the onboard plan (and waypoint
-    file); exit 0."""
+    """Compile the fences for the flight path or box, write the onboard plan or waypoint file
+    (``-o``'s suffix says which; ``--waypoints`` also); exit 0, or 2 on bad input (an unknown
+    output suffix, a box typed lat,lon, no fence near the area)."""
     from alphafence.formats import qgc_plan as plan
     from alphafence.formats import qgc_wpl as waypoints
     from alphafence.formats.atomic import write_all
     from alphafence.formats.fence_read import read_fence_file as read_fences
+    from alphafence.formats.mistakes import output_format
 
+    fmt = output_format(args.output, what="onboard fence output")  # before any work
     need(*figure_wants(args.figure))
     if args.sign_key:
         from alphafence.build.bundle import check_private_key
@@ -68,9 +72,11 @@ def run(args) -> int:
         check_private_key(args.sign_key)
     records = read_fences(args.fences)
     result = compile_from_args(args, records)
-    out = {
-        args.output: plan.dumps(plan.plan_document(result.items, breach_return=result.return_point))
-    }
+    if fmt == "plan":
+        doc = plan.plan_document(result.items, breach_return=result.return_point)
+        out = {args.output: plan.dumps(doc)}
+    else:
+        out = {args.output: waypoints.waypoints_text(result.items)}
     if args.waypoints:
         out[args.waypoints] = waypoints.waypoints_text(result.items)
     write_all(out)

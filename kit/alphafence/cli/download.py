@@ -22,7 +22,14 @@ def register(sub):
         description="Download the vehicle's fence items into a QGroundControl plan.",
     )
     add_connect_option(p)
-    p.add_argument("-o", "--output", required=True, metavar="OUT.plan")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT.plan",
+        help="the fence, by its suffix: .plan (QGroundControl plan, geoFence) or .waypoints "
+        "(ArduPilot fence waypoint file)",
+    )
     p.add_argument(
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
     )
@@ -33,8 +40,12 @@ def register(sub):
 
 
 def run(args) -> int:
-    """Download the vehicle's fence and write it; exit 0, or 3 when the vehicle or the link
-    fails (a :class:`~alphafence.errors.VehicleError`)."""
+    """Download the vehicle's fence and write it (``-o``'s suffix says how); exit 0, 2 for an
+    unknown output suffix, or 3 when the vehicle or the link fails (a
+    :class:`~alphafence.errors.VehicleError`)."""
+    from alphafence.formats.mistakes import output_format
+
+    args.format = output_format(args.output, what="fence output")  # before connecting
     args.key = signing_key(args)
     return asyncio.run(_download(args))
 
@@ -49,7 +60,10 @@ async def _download(args) -> int:
     with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
             items = await download_fence(vehicle)
-    out = {args.output: plan.dumps(plan.plan_document(items))}
+    if args.format == "plan":
+        out = {args.output: plan.dumps(plan.plan_document(items))}
+    else:
+        out = {args.output: waypoints.waypoints_text(items)}
     if args.waypoints:
         out[args.waypoints] = waypoints.waypoints_text(items)
     write_all(out)

@@ -51,7 +51,14 @@ def register(sub):
         help="end with RTL at the goal (RTL flies straight home, across any fence); "
         "by default the mission flies the route back before RTL",
     )
-    p.add_argument("-o", "--output", required=True, metavar="MISSION.plan", help="QGC plan")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="MISSION.plan",
+        help="the mission, by its suffix: .plan (QGroundControl plan) or .waypoints "
+        "(QGC WPL 110 mission file)",
+    )
     p.add_argument("--waypoints", metavar="FILE", help="also write a QGC WPL 110 mission file")
     p.add_argument("--figure", metavar="PNG", help="draw fences, roadmap and route")
     p.set_defaults(func=run)
@@ -63,11 +70,13 @@ def run(args) -> int:
     from alphafence.formats import qgc_plan as plan
     from alphafence.formats.atomic import write_all
     from alphafence.formats.fence_read import read_fence_file as read_fences
+    from alphafence.formats.mistakes import output_format
     from alphafence.formats.qgc_plan import mission_items
     from alphafence.formats.qgc_wpl import mission_waypoints_text
     from alphafence.route import CorridorPlanner, NoRoute
     from alphafence.route.corridor import REACH_M
 
+    fmt = output_format(args.output, what="mission output")  # before the routing
     need(("scipy", "routing"), *figure_wants(args.figure))
 
     start, goal = args.start, args.goal
@@ -86,7 +95,10 @@ def run(args) -> int:
     except NoRoute as exc:
         raise RoutingError(f"{args.fences}: no route: {exc}") from None
     items = mission_items(lonlat, args.alt, fly_back=not args.one_way)
-    out = {args.output: plan.dumps(plan.plan_document([], start, items))}
+    if fmt == "plan":
+        out = {args.output: plan.dumps(plan.plan_document([], start, items))}
+    else:
+        out = {args.output: mission_waypoints_text(items, start)}
     if args.waypoints:
         out[args.waypoints] = mission_waypoints_text(items, start)
     if args.figure:  # drawn first: the slow part, before any file is written

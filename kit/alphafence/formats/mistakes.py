@@ -9,6 +9,8 @@
   order) and positions ``LAT,LON`` (MAVLink's order). A box that selects no fence while its
   swap selects some (:func:`check_box`), or a position far from every fence whose swap lies
   among them (:func:`check_point`), is refused with the swapped value to give instead.
+* An output named with a suffix of another format: refused by :func:`output_format`, which
+  tells the format by the suffix.
 """
 
 from __future__ import annotations
@@ -322,3 +324,43 @@ def check_box(name, bbox, geoms, source, reach_m=0.0) -> None:
         raise InputError(
             name, f"no fence of {source} {near} {typed}; " + box_swap_hint(name, bbox, count)
         )
+
+
+# -- an output's format, by its suffix ---------------------------------------------------------
+PLAN_OUTPUTS = {".plan": "plan", ".waypoints": "waypoints"}
+
+
+def output_format(path, formats=PLAN_OUTPUTS, what="output") -> str:
+    """The format an output is written in, by its suffix (case ignored), or a refusal naming
+    the suffixes that are written: a file is never written in a format its name belies.
+
+    Parameters
+    ----------
+    path : str or Path
+    formats : dict
+        Suffix -> format (default: ``.plan`` a QGroundControl plan, ``.waypoints`` a QGC WPL
+        file).
+    what : str
+        What the output is, for the message (``"mission output"``).
+
+    Raises
+    ------
+    InputError
+        ``r.geojson: unknown mission output format '.geojson' (use .plan or .waypoints)``.
+
+    Examples
+    --------
+    >>> output_format("mission.WAYPOINTS")
+    'waypoints'
+    >>> output_format("r.geojson", what="mission output")
+    Traceback (most recent call last):
+    ...
+    alphafence.errors.InputError: r.geojson: unknown mission output format '.geojson' (use .plan or .waypoints)
+    """
+    name = str(path).rsplit("/", 1)[-1].lower()
+    suffix = "." + name.rsplit(".", 1)[-1] if "." in name else ""
+    if suffix in formats:
+        return formats[suffix]
+    known = list(formats)
+    said = f"{', '.join(known[:-1])} or {known[-1]}" if len(known) > 1 else known[0]
+    raise InputError(path, f"unknown {what} format {suffix or '(none)'!r} (use {said})")
