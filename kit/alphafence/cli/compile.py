@@ -73,7 +73,8 @@ def run(args) -> int:
     records = read_fences(args.fences)
     result = compile_from_args(args, records)
     if fmt == "plan":
-        doc = plan.plan_document(result.items, breach_return=result.return_point)
+        sites = result.fence_sites()  # which site each polygon and circle stands for
+        doc = plan.plan_document(result.items, breach_return=result.return_point, sites=sites)
         out = {args.output: plan.dumps(doc)}
     else:
         out = {args.output: waypoints.waypoints_text(result.items)}

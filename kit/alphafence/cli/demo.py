@@ -81,7 +81,11 @@ def run(args) -> int:
     write_all(
         {
             plan_path: qgc_plan.dumps(
-                qgc_plan.plan_document(compiled.items, breach_return=compiled.return_point)
+                qgc_plan.plan_document(
+                    compiled.items,
+                    breach_return=compiled.return_point,
+                    sites=compiled.fence_sites(),
+                )
             )
         }
     )

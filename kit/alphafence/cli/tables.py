@@ -72,8 +72,8 @@ def corridor_line(result) -> str:
 
 
 def compile_report(result) -> None:
-    """Print what a compilation stored, piece by piece, its overshoot within the corridor, and
-    notes on what it left out or merged.
+    """Print what a compilation stored, piece by piece (each by its sites' ids and names),
+    its overshoot within the corridor, and notes on what it left out or merged.
 
     Parameters
     ----------
@@ -88,7 +88,7 @@ def compile_report(result) -> None:
     for p in result.pieces:
         o = p.chosen
         full = len(p.local.exterior.coords) - 1
-        label = ", ".join(p.sources[:3]) + (
+        label = ", ".join(result.label(site) for site in p.sources[:3]) + (
             f" (+{len(p.sources) - 3})" if len(p.sources) > 3 else ""
         )
         how = (
@@ -112,4 +112,5 @@ def compile_report(result) -> None:
             f"[yellow]note:[/] {len(result.dropped)} fence(s) farther than the selection distance were left out"
         )
     for m in result.merges:
-        err_console.print(f"[yellow]note:[/] merged {', '.join(m)} to fit the storage")
+        named = ", ".join(result.label(site) for site in m)
+        err_console.print(f"[yellow]note:[/] merged {named} to fit the storage", soft_wrap=True)

@@ -154,6 +154,14 @@ def load_items(args):
     return result.items, result
 
 
+def _plan_sites(path):
+    """The sites each polygon and circle of a compiled ``.plan`` stands for (None for other
+    files)."""
+    from alphafence.formats.qgc_plan import read_plan_geofence
+
+    return read_plan_geofence(path).sites if path.lower().endswith(".plan") else None
+
+
 def onboard_kind(path):
     """``"waypoints"`` (a QGC WPL file) or ``"legacy"`` (ArduPilot's legacy fence file) for an
     onboard fence file told by its first bytes, whatever its suffix (both are often ``.txt``),
@@ -218,8 +226,9 @@ def check_items(path, items, profile, max_items=None):
     return fences
 
 
-def items_report(items, fences, profile) -> None:
-    """Print the items an upload sends: one row per polygon or circle, and the return point."""
+def items_report(items, fences, profile, sites=None) -> None:
+    """Print the items an upload sends: one row per polygon or circle (with the sites it
+    stands for, ``sites[k]`` for ``fences[k]``, when the plan says), and the return point."""
     from alphafence.mavlink.items import RETURN_POINT
     from alphafence.mavlink.storage import CIRCLE_BYTES, RETURN_BYTES, polygon_bytes, storage_bytes
 
@@ -227,23 +236,31 @@ def items_report(items, fences, profile) -> None:
         title=f"{len(items)} items, {storage_bytes(items)} of {profile.bytes} bytes "
         f"({profile.name}), at most {profile.items} items"
     )
-    for col in ("sent as", "fence", "size", "bytes", "first position (lat, lon)"):
+    cols = ("sent as", "fence", "stands for", "size", "bytes", "first position (lat, lon)")
+    for col in cols:
         t.add_column(col, justify="right" if col == "bytes" else "left")
     for k, it in enumerate(items):
         if it.command == RETURN_POINT:
             pos = f"{it.lat:.7f}, {it.lon:.7f}"
-            t.add_row(f"item {k}", "return point", "", str(RETURN_BYTES), pos)
-    for f in fences:
+            t.add_row(f"item {k}", "return point", "", "", str(RETURN_BYTES), pos)
+    sites = list(sites or []) + [[]] * len(fences)
+    for f, stands_for in zip(fences, sites):
         lon, lat = f.lonlat[0]
         polygon = f.shape == "polygon"
         t.add_row(
             f.items,
             f"{f.kind} {f.shape} {f.number}",
+            ", ".join(_site(x) for x in stands_for),
             f"{len(f.lonlat)} vertices" if polygon else f"radius {f.radius_m:g} m",
             str(polygon_bytes(len(f.lonlat)) if polygon else CIRCLE_BYTES),
             f"{lat:.7f}, {lon:.7f}",
         )
     out_console.print(t)
+
+
+def _site(site) -> str:
+    """A site as tables name it: ``hospital/way/1 (St Mary's)``, or its id alone."""
+    return f"{site['id']} ({site['name']})" if site.get("name") else site["id"]
 
 
 def run(args) -> int:
@@ -271,7 +288,7 @@ def run(args) -> int:
     else:
         fences = check_items(args.fences, items, profile, args.items)
         if args.dry_run:
-            items_report(items, fences, profile)
+            items_report(items, fences, profile, _plan_sites(args.fences))
     if args.figure:
         from alphafence.mavlink.items import RETURN_POINT
         from alphafence.plots.items import fence_items_figure

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,7 +60,9 @@ def group_polygons(items):
     return polygons, circles
 
 
-def plan_document(items, home_lonlat=None, mission_items=None, breach_return=None) -> dict:
+def plan_document(
+    items, home_lonlat=None, mission_items=None, breach_return=None, sites=None
+) -> dict:
     """A QGroundControl plan holding the fence ``items`` (and, optionally, a mission).
 
     Parameters
@@ -74,6 +76,9 @@ def plan_document(items, home_lonlat=None, mission_items=None, breach_return=Non
     breach_return : tuple, optional
         ``(lon, lat)`` of the fence's breach return point; by default the return point item
         among ``items`` (as a vehicle's fence holds it), if any.
+    sites : list of list, optional
+        Per polygon, then per circle: the sites it stands for (``{"id", "name"}`` each),
+        written in its entry under ``alphafence`` (QGroundControl ignores the key).
 
     Returns
     -------
@@ -97,7 +102,7 @@ def plan_document(items, home_lonlat=None, mission_items=None, breach_return=Non
     if breach_return is not None:
         lat, lon = latlon([breach_return])[0]
         fence["breachReturn"] = [lat, lon, 0]
-    return {
+    doc = {
         "fileType": "Plan",
         "version": 1,
         "groundStation": "AlphaFence",
@@ -132,6 +137,11 @@ def plan_document(items, home_lonlat=None, mission_items=None, breach_return=Non
         },
         "rallyPoints": {"version": 2, "points": []},
     }
+    entries = doc["geoFence"]["polygons"] + doc["geoFence"]["circles"]
+    for entry, stands_for in zip(entries, sites or ()):
+        if stands_for:
+            entry["alphafence"] = {"sites": list(stands_for)}
+    return doc
 
 
 def dumps(doc) -> str:
@@ -161,11 +171,15 @@ class PlanFence:
         ``(lon, lat)`` of its ``breachReturn``.
     version : int
         The section's layout: 1 (one inclusion polygon, QGroundControl 3.2 and before) or 2.
+    sites : list of list
+        Per polygon, then per circle: the sites it stands for, ``{"id", "name"}`` each, as
+        ``compile`` records them (``alphafence`` key of the entry; empty when none).
     """
 
     items: list
     return_point: tuple | None
     version: int
+    sites: list = field(default_factory=list)
 
     @property
     def upload_items(self) -> list:
@@ -233,7 +247,22 @@ def read_plan_geofence(path) -> PlanFence:
     ret = None
     if fence.get("breachReturn") is not None:
         ret = _latlon_pair(path, "geoFence breachReturn", fence["breachReturn"])
-    return PlanFence(items, ret, version)
+    entries = [] if version == 1 else [*fence["polygons"], *fence["circles"]]
+    return PlanFence(items, ret, version, [_sites(e) for e in entries])
+
+
+def _sites(entry) -> list:
+    """The sites a plan's polygon or circle stands for, as ``compile`` wrote them (its
+    ``alphafence`` key; anything else there is not ours: none)."""
+    own = entry.get("alphafence") if isinstance(entry, dict) else None
+    sites = own.get("sites") if isinstance(own, dict) else None
+    if not isinstance(sites, list):
+        return []
+    return [
+        {"id": str(x["id"]), "name": x.get("name") if isinstance(x.get("name"), str) else None}
+        for x in sites
+        if isinstance(x, dict) and isinstance(x.get("id"), str)
+    ]
 
 
 def _circle(path, where, circ):

@@ -54,6 +54,8 @@ class CompileResult:
     overshoot : Overshoot, optional
         The onboard fence's overshoot within the corridor: airspace it forbids there that
         the full-resolution fences allow, relative to what they forbid there.
+    names : dict
+        Site id -> the site's name, for the compiled fences that have one.
     """
 
     items: list
@@ -65,6 +67,35 @@ class CompileResult:
     return_point: tuple | None = None
     corridor: Corridor | None = None
     overshoot: Overshoot | None = None
+    names: dict = field(default_factory=dict)
+
+    def label(self, site_id: str) -> str:
+        """A site as tables name it: ``"hospital/way/1 (St Mary's)"``, or its id alone."""
+        name = self.names.get(site_id)
+        return f"{site_id} ({name})" if name else site_id
+
+    def fence_sites(self) -> list:
+        """The sites each polygon and circle of :attr:`items` stands for (``{"id", "name"}``
+        each), in the order :func:`~alphafence.onboard.decode.decode_fence` reads them (a
+        plan's polygons, then its circles): those of the piece it overlaps most (a piece
+        split at 180° stands behind each of its parts)."""
+        from alphafence.onboard.decode import decode_fence
+
+        chosen = [p.chosen.local for p in self.pieces]
+        out = []
+        for f in decode_fence(self.items):
+            xy = [tuple(self.frame.to_local(lon, lat)) for lon, lat in f.lonlat]
+            shape = (
+                shapely.Polygon(xy)
+                if f.shape == "polygon"
+                else shapely.Point(xy[0]).buffer(f.radius_m)
+            )
+            shape = shapely.make_valid(shape)
+            overlap = [shapely.area(shapely.intersection(shape, g)) for g in chosen]
+            k = max(range(len(chosen)), key=overlap.__getitem__, default=None)
+            ids = self.pieces[k].sources if k is not None and overlap[k] > 0 else []
+            out.append([{"id": i, "name": self.names.get(i)} for i in ids])
+        return out
 
     @property
     def bytes_used(self) -> int:
@@ -243,6 +274,7 @@ def compile_fences(
         return_point,
         corridor,
         overshoot(corridor, onboard, full),
+        {r.site_id: r.name for r in records if r.name and r.kind in ("keep_out", "keep_in")},
     )
     used = storage_bytes(items)
     if len(items) > profile.items or used > profile.bytes:  # a fence split at 180° grew
