@@ -15,6 +15,8 @@ import sys
 from alphafence import __version__
 from alphafence.errors import AlphaFenceError, missing_dependency
 
+# in the order of the workflow (get data -> build -> compile / upload --dry-run -> upload ->
+# monitor -> check-flight), then planning, signing and trying out; --help lists them so
 VERBS = (
     "build",
     "compare",
@@ -22,14 +24,25 @@ VERBS = (
     "upload",
     "download",
     "monitor",
-    "bundle",
-    "signing",
-    "demo",
-    "sitl",
+    "check-flight",
     "route",
     "check-mission",
-    "check-flight",
+    "bundle",
+    "signing",
+    "sitl",
+    "demo",
 )
+
+EPILOG = """\
+the workflow:
+  1. get map data for your area (an OpenStreetMap extract, a geozone list)
+  2. alphafence build AREA.osm.pbf -o fences.geojson
+  3. alphafence upload fences.geojson --bbox MINLON,MINLAT,MAXLON,MAXLAT --dry-run
+  4. alphafence upload fences.geojson --bbox ... --connect /dev/ttyACM0
+  5. alphafence monitor --fences fences.geojson --connect udpin:0.0.0.0:14550
+  6. alphafence check-flight FLIGHT.tlog --fences fences.geojson
+'alphafence VERB --help' says more about each verb. The docs: docs/index.md in the
+AlphaFence checkout (browse them with 'mkdocs serve')."""
 
 
 def parser():
@@ -40,13 +53,25 @@ def parser():
     alphafence.cli.options.Parser
         Parsed arguments carry ``verb`` and ``func``, the verb's ``run``.
     """
+    import argparse
     import importlib
 
+    from alphafence.cli.common import DefaultsFormatter
     from alphafence.cli.options import Parser
+
+    class Formatter(DefaultsFormatter, argparse.RawDescriptionHelpFormatter):
+        """The workflow in the epilog keeps its lines; each verb's summary on its line."""
+
+        def add_argument(self, action):
+            super().add_argument(action)
+            if isinstance(action, argparse._SubParsersAction):  # listed 2 columns further in
+                self._action_max_length += 2
 
     p = Parser(
         prog="alphafence",
         description="Tight, safe alpha-shape geofences for ArduPilot vehicles.",
+        epilog=EPILOG,
+        formatter_class=Formatter,
     )
     p.add_argument("--version", action="version", version=f"alphafence {__version__}")
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True)

@@ -1,5 +1,5 @@
-"""What the verbs share besides argument types: consoles, progress bars, the fence-signature
-options and check, the MAVLink signing-key option and key."""
+"""What the verbs share besides argument types: consoles, progress bars, the help formatter,
+the fence-signature options and check, the MAVLink signing-key option and key."""
 
 from __future__ import annotations
 
@@ -24,6 +24,22 @@ from alphafence.errors import InputError, VehicleError
 # piped or captured output gets a table-friendly width instead of rich's default 80 columns
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
 out_console = Console(width=None if sys.stdout.isatty() else 120)
+
+
+class DefaultsFormatter(argparse.HelpFormatter):
+    """argparse's help formatter, adding ``(default: X)`` to an option's help when it has a
+    default worth saying (not None, False or an empty list) and its help does not already
+    say one."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if (
+            not action.option_strings
+            or action.default in (None, False, [], argparse.SUPPRESS)
+            or "default" in text
+        ):
+            return text
+        return f"{text} (default: %(default)s)"
 
 
 class RateColumn(ProgressColumn):
@@ -81,7 +97,9 @@ def add_trust_options(p: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="KEY.pub.pem",
-        help="accept fences signed by this Ed25519 key (repeatable; also $ALPHAFENCE_TRUSTED_KEYS)",
+        help="accept fences signed by this Ed25519 public key, from 'alphafence bundle "
+        "keygen' (who made the fences; not the link's --signing-key); repeatable; also "
+        "$ALPHAFENCE_TRUSTED_KEYS",
     )
     p.add_argument(
         "--allow-unsigned",
@@ -149,8 +167,9 @@ def add_signing_option(p: argparse.ArgumentParser) -> None:
         "--signing-key",
         metavar="FILE",
         default=None,
-        help="MAVLink 2 signing key file (64 hex digits or a passphrase; also "
-        "$ALPHAFENCE_SIGNING_KEY): sign what is sent, accept only what is signed",
+        help="MAVLink 2 link signing key file, from 'alphafence signing keygen' (who may "
+        "talk to the vehicle; not the fences' --trusted-key): 64 hex digits or a passphrase; "
+        "also $ALPHAFENCE_SIGNING_KEY: sign what is sent, accept only what is signed",
     )
 
 

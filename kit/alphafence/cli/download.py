@@ -33,7 +33,9 @@ def register(sub):
     p.add_argument(
         "--waypoints", metavar="FILE", help="also write an ArduPilot fence waypoint file"
     )
-    p.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    p.add_argument(
+        "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
+    )
     add_signing_option(p)
     add_link_option(p)
     p.set_defaults(func=run)

@@ -42,7 +42,13 @@ def register(sub):
         "alert the ground station and, with --enforce, brake/RTL/land.",
     )
     add_connect_option(p)
-    p.add_argument("--fences", required=True, metavar="FENCES.geojson")
+    p.add_argument(
+        "--fences",
+        required=True,
+        metavar="FENCES.geojson",
+        help="the full-resolution fences to watch: any fence file ('alphafence build' "
+        "output, KML, OpenAir, a .plan...), signed (--trusted-key) or --allow-unsigned",
+    )
     p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
     p.add_argument(
         "--horizon",
@@ -66,7 +72,12 @@ def register(sub):
         help="distance a re-route keeps from every keep-out fence (default 20)",
     )
     p.add_argument(
-        "--breach-action", type=_not_reroute("--breach-action"), choices=ACTIONS, default="rtl"
+        "--breach-action",
+        type=_not_reroute("--breach-action"),
+        choices=ACTIONS,
+        default="rtl",
+        help="with --enforce: what to do once inside a keep-out fence (or outside a keep-in "
+        "one): rtl, brake, land or none (not reroute)",
     )
     p.add_argument(
         "--decel",

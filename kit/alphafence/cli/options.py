@@ -22,6 +22,7 @@ import argparse
 import math
 import re
 
+from alphafence.cli.common import DefaultsFormatter
 from alphafence.errors import InputError
 
 _NUMBER = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -35,7 +36,8 @@ class Parser(argparse.ArgumentParser):
     argparse takes an argument that starts with ``-`` for an option unless it looks like a
     negative number (``-5``, ``-.5``), so ``--bbox -77.5,38.7,-77.0,39.0`` would fail with
     "expected one argument". This parser also accepts comma-separated lists of numbers that
-    start with a negative one; the sub-parsers of its verbs are of the same class.
+    start with a negative one; the sub-parsers of its verbs are of the same class. Its help
+    shows every option's default (:class:`DefaultsFormatter`).
 
     Examples
     --------
@@ -46,6 +48,7 @@ class Parser(argparse.ArgumentParser):
     """
 
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", DefaultsFormatter)  # every option's default shown
         super().__init__(*args, **kwargs)
         # argparse consults this when an argument starts with '-' and names no option
         self._negative_number_matcher = NEGATIVE_VALUE

@@ -1,5 +1,8 @@
 """alphafence signing: MAVLink 2 signing keys, and installing one on a vehicle (SETUP_SIGNING,
-as MAVProxy's ``signing`` module does)."""
+as MAVProxy's ``signing`` module does): who may talk to the vehicle.
+
+Not fence signatures (``alphafence bundle``, ``--trusted-key``), which say who made the
+fences."""
 
 from __future__ import annotations
 
@@ -14,13 +17,20 @@ def register(sub):
     """Add the ``signing`` verb (keygen, setup, remove) to the sub-parsers ``sub``."""
     p = sub.add_parser(
         "signing",
-        help="MAVLink 2 signing: make a key, install it on a vehicle, or switch signing off",
-        description="Once a vehicle holds a key it signs what it sends and ignores unsigned "
-        "commands on its telemetry links; upload, download and monitor then need --signing-key.",
+        help="MAVLink 2 link signing keys (who may talk to the vehicle)",
+        description="MAVLink 2 link signing: who may talk to the vehicle. 'signing keygen' "
+        "writes a secret key that the vehicle and the kit share; 'signing setup' installs it "
+        "on the vehicle. Once a vehicle holds a key it signs what it sends and ignores "
+        "unsigned commands on its telemetry links; upload, download and monitor then need "
+        "--signing-key KEY_FILE. This is not the fence signature of 'alphafence bundle' "
+        "('bundle keygen', --trusted-key): that key pair says who made the fences.",
     )
     verbs = p.add_subparsers(dest="signing_verb", required=True, metavar="ACTION")
-    k = verbs.add_parser("keygen", help="write a new random key file (mode 0600)")
-    k.add_argument("key", metavar="KEY_FILE")
+    k = verbs.add_parser(
+        "keygen",
+        help="write a new random link key file (mode 0600; not the fences' bundle key)",
+    )
+    k.add_argument("key", metavar="KEY_FILE", help="the key file to write")
     s = verbs.add_parser(
         "setup",
         help="install KEY_FILE's key on the vehicle",
@@ -31,11 +41,15 @@ def register(sub):
     add_connect_option(s)
     s.add_argument("--key", required=True, metavar="KEY_FILE", help="the key to install")
     add_signing_option(s)
-    s.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    s.add_argument(
+        "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
+    )
     r = verbs.add_parser("remove", help="switch signing off on the vehicle (needs its current key)")
     add_connect_option(r)
     add_signing_option(r)
-    r.add_argument("--timeout", type=float, default=10.0, metavar="S")
+    r.add_argument(
+        "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
+    )
     p.set_defaults(func=run)
 
 
