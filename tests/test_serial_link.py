@@ -179,4 +179,5 @@ def test_mavsdk_log_lines_reach_the_terminal_without_colour_codes(tmp_path):
     assert proc.returncode == 3, proc.stderr
     assert "\x1b" not in proc.stderr + proc.stdout
     assert "mavsdk: Call open failed: Inappropriate ioctl for device" in proc.stderr
+    assert "MAVSDK version" not in proc.stderr  # its info lines stay off the terminal
     assert "alphafence download: error: serial:///dev/null:57600: cannot open" in proc.stderr
