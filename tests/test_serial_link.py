@@ -181,3 +181,16 @@ def test_mavsdk_log_lines_reach_the_terminal_without_colour_codes(tmp_path):
     assert "mavsdk: Call open failed: Inappropriate ioctl for device" in proc.stderr
     assert "MAVSDK version" not in proc.stderr  # its info lines stay off the terminal
     assert "alphafence download: error: serial:///dev/null:57600: cannot open" in proc.stderr
+
+
+@pytest.mark.parametrize(
+    "port, warned", [("/dev/ttyUSB97", True), ("/dev/ttyAMA97", True), ("/dev/ttyACM97", False)]
+)
+def test_signing_setup_warns_before_sending_the_key_over_a_radio(tmp_path, capsys, port, warned):
+    key = tmp_path / "k"
+    assert main(["signing", "keygen", str(key)]) == 0
+    code = main(["signing", "setup", "--connect", port, "--key", str(key), "--timeout", "1"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 3 and f"{port}: no such serial port" in err  # no such port on this machine
+    said = f"SETUP_SIGNING carries the key in clear to {port}: if it is a telemetry radio"
+    assert (said in err) == warned
