@@ -194,3 +194,17 @@ def test_signing_setup_warns_before_sending_the_key_over_a_radio(tmp_path, capsy
     assert code == 3 and f"{port}: no such serial port" in err  # no such port on this machine
     said = f"SETUP_SIGNING carries the key in clear to {port}: if it is a telemetry radio"
     assert (said in err) == warned
+
+
+async def test_a_port_that_goes_away_is_said(tmp_path):
+    """The cable pulled (socat gone: the pty's other side closed): the link says so."""
+    if serial_fixtures.SOCAT is None:
+        pytest.skip(serial_fixtures.NO_SOCAT)
+    async with serial_fixtures.socat_pair(str(tmp_path)) as (_, b):
+        link = await VehicleLink(b).open()
+    try:
+        await asyncio.wait_for(link._stream.ended.wait(), 10)
+        assert link.closed.startswith(f"the serial port {b} went away")
+        assert link.stats.diagnosis(key_given=False) == "" and not link._stream.write(b"x")
+    finally:
+        await link.close()

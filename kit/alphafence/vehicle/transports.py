@@ -83,6 +83,7 @@ class SerialPort:
         self.endpoint = endpoint
         self.on_data = on_data
         self.closed: str | None = None
+        self.ended = asyncio.Event()  # set when the port went away (``closed`` says how)
         self.dropped = 0  # bytes not sent: the port could not take them fast enough
         self._serial = None
         self._fd: int | None = None
@@ -177,6 +178,7 @@ class SerialPort:
     def _lost(self, exc) -> None:
         why = f" ({exc.strerror or exc})" if isinstance(exc, OSError) else ""
         self.closed = f"the serial port {self.endpoint.device} went away{why}"
+        self.ended.set()
         self._detach()
 
     def _detach(self) -> None:
@@ -193,6 +195,7 @@ class SerialPort:
                 data = await asyncio.to_thread(port.read, max(1, port.in_waiting))
             except Exception as exc:  # pyserial's SerialException, or the port gone
                 self.closed = f"the serial port {self.endpoint.device} went away ({exc})"
+                self.ended.set()
                 return
             if data:
                 self.on_data(data)
