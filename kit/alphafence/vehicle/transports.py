@@ -92,7 +92,7 @@ class SerialPort:
 
     async def open(self) -> SerialPort:
         """Open the port. Raises TransportError (one line) when it cannot be opened."""
-        need(("serial", "serial ports"))
+        need(("serial", "a serial port"))
         import serial
 
         ep = self.endpoint
