@@ -3,7 +3,8 @@ telemetry radio: SITL's SERIAL1 (MAVLink 2, ArduPilot's channel 1, where signing
 on one end of a socat pseudo-terminal pair (``--serial1 uart:DIR/a:57600``), the kit on the
 other as the serial device ``DIR/b,57600``. Through the ``alphafence`` command: upload,
 download and monitor, unsigned; then ``signing setup`` over the port, and the same signed (a
-wrong key and no key refused). SITL's SERIAL0 stays on loopback UDP, where readiness and the
+wrong key refused). On each vehicle link (the ``link`` fixture; ``signing setup`` is the kit's
+own on both; MAVSDK opens the port itself, or through the kit's bridge when signing). SITL's SERIAL0 stays on loopback UDP, where readiness and the
 monitor's heartbeat count are watched.
 
 Skipped with one line without socat (Debian: apt-get install socat) or an arducopter binary.
@@ -18,7 +19,7 @@ from alphafence.formats.qgc_plan import read_plan_fence
 from tests.serial_fixtures import NO_SOCAT, SOCAT, socat_pair
 from tests.test_signing_sitl import DEMO_SCENE, _fence, alphafence, monitor_checks
 
-pytestmark = pytest.mark.sitl
+pytestmark = [pytest.mark.sitl, pytest.mark.usefixtures("link")]  # pymavlink, then MAVSDK
 
 
 @pytest.fixture
