@@ -139,3 +139,23 @@ def test_positions_as_typed_are_taken_when_no_swap_explains_them(fences, extent)
     assert distance > FAR_M and swapped is None
     distance, swapped = point_swap((lat, lon), geoms)
     assert distance > FAR_M and swapped == pytest.approx((lon, lat))
+
+
+def test_a_route_end_far_from_every_fence_is_refused_unless_asked(
+    fences, extent, tmp_path, capsys
+):
+    """``--to 40.0,7.43`` for Monaco's fences (a slip of a latitude, no swap): 414 km of
+    ground the fences do not describe is refused; --beyond-fences routes it with a note."""
+    lon, lat = _mid(extent)
+    start, far = f"{lat:.5f},{lon:.5f}", f"{round(lat - 3.0, 2):g},{round(lon, 2):g}"
+    out = ["-o", str(tmp_path / "r.plan"), "--clearance", "0"]
+    argv = ["route", str(fences), "--from", start, "--to", far, *out]
+    assert main(argv) == 2
+    err = _one_line(capsys)
+    assert f"error: --to: {far} (LAT,LON) is 33" in err and "--beyond-fences" in err
+    assert "did you mean" not in err
+    assert list(tmp_path.iterdir()) == []
+    assert main([*argv, "--beyond-fences"]) == 0
+    captured = capsys.readouterr()
+    assert f"note: --to {far} (LAT,LON) is 33" in " ".join(captured.out.split())
+    assert (tmp_path / "r.plan").exists()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from alphafence.cli.common import out_console
 from alphafence.cli.options import figure_wants, latlon, non_negative, positive
-from alphafence.errors import RoutingError, need
+from alphafence.errors import InputError, RoutingError, need
 
 
 def register(sub):
@@ -58,6 +58,12 @@ def register(sub):
         metavar="MISSION.plan",
         help="the mission, by its suffix: .plan (QGroundControl plan) or .waypoints "
         "(QGC WPL 110 mission file)",
+    )
+    p.add_argument(
+        "--beyond-fences",
+        action="store_true",
+        help="route to or from a point more than 50 km from every fence (an area these "
+        "fences do not describe: nothing there is known to be clear); refused without it",
     )
     p.add_argument("--waypoints", metavar="FILE", help="also write a QGC WPL 110 mission file")
     p.add_argument("--figure", metavar="PNG", help="draw fences, roadmap and route")
@@ -130,19 +136,28 @@ def run(args) -> int:
 
 
 def _check_ends(args, records):
-    """Refuse an end typed LON,LAT (far from every fence, its swap among them); note one far
-    from every fence (a typing slip, or fences for another area)."""
+    """Refuse an end typed LON,LAT (far from every fence, its swap among them), and an end
+    more than 50 km from every fence unless ``--beyond-fences`` (a typing slip, or fences
+    for another area: a route there crosses ground these fences do not describe)."""
     from alphafence.formats.mistakes import FAR_M, check_point
 
     geoms = [r.geometry for r in records]
     for name, lonlat in (("--from", args.start), ("--to", args.goal)):
         distance = check_point(name, lonlat, geoms, args.fences)
-        if geoms and distance > FAR_M:
-            out_console.print(
-                f"[yellow]note:[/] {name} {lonlat[1]:g},{lonlat[0]:g} is "
-                f"{distance / 1000:,.0f} km from the nearest fence of {args.fences}",
-                highlight=False,
+        if not geoms or distance <= FAR_M:
+            continue
+        where = f"{lonlat[1]:g},{lonlat[0]:g} (LAT,LON) is {distance / 1000:,.0f} km"
+        if not args.beyond_fences:
+            raise InputError(
+                name,
+                f"{where} from every fence of {args.fences}: the route would cross ground "
+                "these fences do not describe; check the value, build fences for the whole "
+                "way, or pass --beyond-fences",
             )
+        out_console.print(
+            f"[yellow]note:[/] {name} {where} from the nearest fence of {args.fences}",
+            highlight=False,
+        )
 
 
 def _print_corridor(corridor):
