@@ -95,6 +95,18 @@ def register(sub):
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
     p.add_argument(
+        "--tlog",
+        metavar="FLIGHT.tlog",
+        help="record every MAVLink frame the vehicle sends as a telemetry log (as MAVProxy and "
+        "QGroundControl write them), for 'alphafence check-flight'; the pymavlink link",
+    )
+    p.add_argument(
+        "--until-disarmed",
+        action="store_true",
+        help="stop once the vehicle, having been armed, is disarmed (the flight is over); "
+        "by default the monitor runs until Ctrl-C",
+    )
+    p.add_argument(
         "--onboard",
         choices=ONBOARD_MODES,
         default="watch",
@@ -225,6 +237,13 @@ def run(args) -> int:
         from alphafence.monitor.eventlog import check_log_path
 
         check_log_path(args.log)
+    if args.tlog:
+        from alphafence.monitor.tlog import check_tlog_path
+        from alphafence.vehicle.link import choose_link
+
+        if choose_link(args.link) != "pymavlink":
+            raise InputError("--tlog", "records the pymavlink link's frames: use --link pymavlink")
+        check_tlog_path(args.tlog)
     return asyncio.run(_run(args, fences, options))
 
 
@@ -241,13 +260,18 @@ def monitor_wants(options):
 
 
 async def _run(args, fences, options) -> int:
-    from alphafence.monitor.runner import run_monitor
+    from alphafence.monitor.run import run_monitor
     from alphafence.vehicle.link import LinkError
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    observers = []
+    if args.until_disarmed:
+        from alphafence.monitor.observe import UntilDisarmed
+
+        observers.append(UntilDisarmed(stop))
     mode = "enforcing" if options.enforce else "alerting only"
     out_console.print(
         f"monitoring {len(fences.records)} fences ({mode}); event times in UTC from this "
@@ -264,11 +288,16 @@ async def _run(args, fences, options) -> int:
             timeout=args.timeout,
             signing_key=args.key,
             link=args.link,
+            tlog_path=args.tlog,
+            observers=observers,
         )
     except LinkError as exc:
         err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)
         return 3
-    out_console.print(f"stopped after {monitor.engine.checks} checks")
+    out_console.print(
+        f"stopped after {monitor.engine.checks} checks"
+        + (f"; telemetry log {args.tlog}" if args.tlog else "")
+    )
     return 0
 
 

@@ -82,3 +82,36 @@ class Observer:
         """An event was put in the event log (the engine's, and the runner's own:
         ``action_done``, ``alert_failed``, ``adsb_unavailable``, ``log_write_failed``,
         ``onboard_fence``, ``onboard_failed``, ...)."""
+
+
+class UntilDisarmed(Observer):
+    """Set ``stop`` once the vehicle, having been armed, is disarmed: the flight is over (it
+    landed, or was disarmed by hand).
+
+    Parameters
+    ----------
+    stop : asyncio.Event
+        The monitor's stop event.
+
+    Examples
+    --------
+    >>> import asyncio
+    >>> stop = asyncio.Event()
+    >>> watch = UntilDisarmed(stop)
+    >>> for armed in (False, True, True, False):
+    ...     watch.on_value("armed", 0.0, armed)
+    >>> stop.is_set(), watch.flown
+    (True, True)
+    """
+
+    def __init__(self, stop):
+        self.stop = stop
+        self.flown = False
+
+    def on_value(self, stream: str, t: float, value) -> None:
+        if stream != "armed" or value is None:
+            return
+        if value:
+            self.flown = True
+        elif self.flown:
+            self.stop.set()

@@ -24,7 +24,7 @@ from datetime import datetime, timezone
 from alphafence.monitor.commands import Commands
 from alphafence.monitor.engine import Engine
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.events import UtcClock, alert_text, new_event
+from alphafence.monitor.events import alert_text, new_event
 from alphafence.monitor.feeds import (
     TELEMETRY,
     Feed,
@@ -337,59 +337,3 @@ class Monitor:
         task.add_done_callback(self.pending.discard)
         return task
 
-
-async def run_monitor(
-    url,
-    fences,
-    options,
-    log_path=None,
-    stop: asyncio.Event | None = None,
-    echo=None,
-    timeout: float = 10.0,
-    signing_key: bytes | None = None,
-    link: str | None = None,
-):
-    """Connect to the vehicle at ``url`` and run a :class:`Monitor` until ``stop`` is set.
-
-    Parameters
-    ----------
-    url : str
-        The vehicle's connection URL.
-    fences : FenceSet
-        Every fence.
-    options : MonitorOptions
-        What to predict, decide and command.
-    log_path : str or Path, optional
-        Append every event to this JSON-lines file.
-    stop : asyncio.Event, optional
-        Ends the monitor when set (never, if omitted).
-    echo : callable, optional
-        Called with every event (the CLI prints them).
-    timeout : float
-        Seconds to find the vehicle.
-    signing_key : bytes, optional
-        MAVLink 2 signing key for the link.
-    link : str, optional
-        The vehicle link (:func:`~alphafence.vehicle.link.choose_link`).
-
-    Returns
-    -------
-    Monitor
-        The monitor, stopped (``monitor.engine.checks``, ``monitor.log.events``).
-
-    Raises
-    ------
-    LinkError
-        When no vehicle answers within ``timeout``.
-    """
-    from alphafence.vehicle.link import open_vehicle
-
-    stop = stop or asyncio.Event()
-    log = EventLog(log_path, echo, clock=UtcClock.wall())
-    try:
-        async with open_vehicle(url, timeout, signing_key, link) as vehicle:
-            monitor = Monitor(vehicle, fences, options, log)
-            await monitor.run(stop)
-            return monitor
-    finally:
-        await log.close()

@@ -107,6 +107,7 @@ class VehicleLink:
         self.kind = self.endpoint.kind
         self.key = key
         self.on_message = on_message or (lambda msg: None)
+        self.recorder: Callable | None = None  # recorder(frame) gets each accepted frame
         self.stats = LinkStats()
         # one codec reads (and checks signatures), one writes (and signs)
         self.reader = mavlink.MAVLink(None)
@@ -213,6 +214,8 @@ class VehicleLink:
         if self.kind in ("udpin", "udpbcast") and addr is not None:
             self.remote = addr  # learnt from accepted (verified, when signing) messages only
         self.stats.received += 1
+        if self.recorder is not None:
+            self.recorder(msg.get_msgbuf())
         self.on_message(msg)
 
     def _reject(self, msg, addr) -> None:
