@@ -7,6 +7,8 @@ import math
 import re
 import sys
 
+from alphafence.cli.common import add_signing_option, signing_key
+from alphafence.cli.options import add_connect_option
 from alphafence.sitl.find import NOT_FOUND_HELP, find_sitl_binary
 
 
@@ -17,7 +19,9 @@ def register(sub):
         help="ArduPilot SITL helpers",
         description=(
             "Find a user-built ArduPilot SITL binary (--find, the default), list the named "
-            "homes, or run one copter SITL by hand (--home) until Ctrl-C, MAVLink on loopback."
+            "homes, run one copter SITL by hand (--home) until Ctrl-C, MAVLink on loopback "
+            "(and on a serial device with --serial1), or fly a mission on a running SITL as a "
+            "pilot would (--fly MISSION --connect URL: upload, arm, AUTO, until it lands)."
         ),
     )
     p.add_argument(
@@ -61,7 +65,47 @@ def register(sub):
     p.add_argument(
         "--keep-dir", action="store_true", help="keep SITL's temporary working directory"
     )
+    p.add_argument(
+        "--serial1",
+        type=sitl_device,
+        metavar="uart:PATH:BAUD",
+        help="with --home: MAVLink on SERIAL1 over this serial device as SITL takes it, e.g. "
+        "one end of a socat pseudo-terminal pair (the other end is the kit's --connect PATH,BAUD)",
+    )
+    p.add_argument(
+        "--fly",
+        metavar="MISSION",
+        help="fly this mission (.plan or .waypoints, e.g. from 'alphafence route') on the "
+        "simulated vehicle at --connect: upload it, arm, AUTO, until it lands and disarms "
+        "(refused on a vehicle without SIM_ parameters: a real one)",
+    )
+    add_connect_option(p, required=False)
+    add_signing_option(p)
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="with --fly: seconds to find the vehicle (default 30)",
+    )
     p.set_defaults(func=run)
+
+
+def sitl_device(text: str) -> str:
+    """argparse type of ``--serial1``: a device as SITL's ``--serialN`` takes it.
+
+    Examples
+    --------
+    >>> sitl_device("uart:/tmp/fc:57600")
+    'uart:/tmp/fc:57600'
+    """
+    from alphafence.errors import InputError
+
+    if not re.fullmatch(r"uart:[^:]+:\d{3,7}", text.strip()):
+        raise InputError(
+            "--serial1", f"expected uart:PATH:BAUD (e.g. uart:/tmp/fc:57600), got {text!r}"
+        )
+    return text.strip()
 
 
 def param_value(text: str) -> tuple:
@@ -89,6 +133,8 @@ def run(args) -> int:
     or run SITL at ``--home`` until Ctrl-C."""
     if args.list_homes:
         return list_homes()
+    if args.fly is not None:
+        return fly(args)
     if args.home is None:
         found = find_sitl_binary()
         if found is None:
@@ -106,6 +152,7 @@ def run(args) -> int:
         params=args.param_file,
         param_values=dict(args.param),
         keep_dir=args.keep_dir,
+        serial1=args.serial1,
     )
     if find_sitl_binary() is None:
         print(NOT_FOUND_HELP, file=sys.stderr)
@@ -115,6 +162,34 @@ def run(args) -> int:
     except KeyboardInterrupt:
         print("alphafence sitl: stopped", file=sys.stderr)
         return 0
+
+
+def fly(args) -> int:
+    """Fly the mission ``args.fly`` on the simulated vehicle at ``args.connect``; exit 0 once
+    it has landed and disarmed, 3 when the vehicle or the flight fails."""
+    from alphafence.errors import InputError
+    from alphafence.formats.mission_items import mission_rows
+    from alphafence.sitl.fly import fly_mission
+    from alphafence.vehicle.link import open_vehicle
+
+    if args.connect is None:
+        raise InputError("--fly", "needs --connect: the simulated vehicle's connection")
+    rows = mission_rows(args.fly)
+    key = signing_key(args)
+
+    def say(text):
+        print(text, flush=True)
+
+    async def go():
+        async with open_vehicle(args.connect, args.timeout, key, "pymavlink") as vehicle:
+            return await fly_mission(vehicle, rows, say)
+
+    try:
+        asyncio.run(go())
+    except KeyboardInterrupt:
+        print("alphafence sitl: stopped (the vehicle flies on in its mode)", file=sys.stderr)
+        return 130
+    return 0
 
 
 def list_homes() -> int:
@@ -148,6 +223,8 @@ async def serve(sitl, *, wait: bool, timeout: float) -> int:
             state = await sitl.wait_ready(timeout)
             lat, lon, alt = state.position
             say(f"ready: position {lat:.7f},{lon:.7f} alt {alt:.1f} m")
+        if sitl.serial1:
+            say(f"SERIAL1:            {sitl.serial1} (MAVLink 2)")
         say(f"MAVSDK:             {sitl.connection_url}")
         say(f"pymavlink/MAVProxy: {sitl.pymavlink_url}   (one client at a time)")
         say("Ctrl-C stops SITL")
