@@ -55,6 +55,9 @@ FORMS_READ = [
     ("COM3,115200", serial("COM3", 115200)),
     ("serial://COM12:57600", serial("COM12", 57600)),
     ("  /dev/ttyACM0 ", serial("/dev/ttyACM0", USB_BAUD)),
+    # a device by a relative path (a pseudo-terminal pair's link made here)
+    ("./gcs,57600", serial("./gcs", 57600)),
+    ("../walk/gcs", serial("../walk/gcs", RADIO_BAUD)),
     # UDP: listen
     ("udpin:0.0.0.0:14550", net("udpin", "0.0.0.0", 14550)),
     ("udpin://0.0.0.0:14550", net("udpin", "0.0.0.0", 14550)),
@@ -100,7 +103,7 @@ REFUSED = [
     ("udpin:bad_host!:14550", "needs HOST:PORT"),
     ("udpout:-bad-.local:14550", "is not a host name or address"),
     ("/dev/ttyUSB0,12", "baud rate 12 is outside 50..12000000"),
-    ("serial://ttyUSB0:57600", "a serial port is a /dev/... path or COMn"),
+    ("serial://ttyUSB0:57600", "a serial port is a /dev/... path (or ./NAME) or COMn"),
     ("serial:///dev/:57600", "a serial port is a device, not a directory"),
 ]
 

@@ -69,6 +69,7 @@ SCHEMES = {
     "tcpin": "tcpin",
 }
 LISTEN_ANY = ("", "0.0.0.0", "::")
+PATHS = ("/", "./", "../", "~/")  # a serial device by its path (a pty pair's link: ./gcs)
 _SCHEME = re.compile(r"([A-Za-z_]+):(?://)?(.*)", re.S)
 _HOST_PORT = re.compile(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]*):(\d+)/?")
 _HOSTNAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?")
@@ -207,7 +208,7 @@ def parse_endpoint(text: str | Endpoint) -> Endpoint:
     value = raw.strip()
     if not value:
         raise EndpointError(raw, "empty")
-    if value.startswith("/") or _COM.fullmatch(value.split(",")[0].split(":")[0]):
+    if value.startswith(PATHS) or _COM.fullmatch(value.split(",")[0].split(":")[0]):
         return _serial(raw, value, flow_control=False)
     m = _SCHEME.fullmatch(value)
     if m is not None and m.group(1).lower() in SCHEMES:
@@ -225,8 +226,10 @@ def parse_endpoint(text: str | Endpoint) -> Endpoint:
 
 def _serial(raw: str, rest: str, flow_control: bool) -> Endpoint:
     device, baud = _DEVICE_BAUD.fullmatch(rest).groups()
-    if not (device.startswith("/") or _COM.fullmatch(device)):
-        raise EndpointError(raw, "a serial port is a /dev/... path or COMn")
+    if not (device.startswith(PATHS) or _COM.fullmatch(device)):
+        raise EndpointError(raw, "a serial port is a /dev/... path (or ./NAME) or COMn")
+    if device.startswith("~/"):
+        device = os.path.expanduser(device)
     if device.endswith("/"):
         raise EndpointError(raw, "a serial port is a device, not a directory")
     if baud is None:
