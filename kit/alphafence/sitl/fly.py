@@ -164,6 +164,7 @@ class _Armed:
 
 async def _progress(vehicle, reached, say) -> None:
     async for p in vehicle.mission_raw.subscribe_mission_progress():
-        if p.current > reached[0]:
+        last = p.total - 1  # home is item 0
+        if reached[0] < p.current <= last:
             reached[0] = p.current
-            say(f"item {p.current} of {p.total - 1}")
+            say(f"item {p.current} of {last}")
