@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 
-.PHONY: install demo test test-oldest sitl-test navio2-test bench soak fuzz fuzz-atheris lint clean
+.PHONY: install demo test test-oldest sitl-test navio2-test bench soak fuzz fuzz-atheris lint docs clean
 
 install: $(STAMP)
 
@@ -78,9 +78,13 @@ fuzz-atheris: $(STAMP)
 		echo "atheris $$t: $$(grep -E '^Done' $$log)"; \
 	done
 
+# the docs site into site/ (mkdocs.yml; `make test` builds it strictly and runs its commands)
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict -d site
+
 lint: $(STAMP)
 	$(BIN)/ruff check kit tests bench
 	$(BIN)/ruff format --check kit tests bench
 
 clean:
-	rm -rf $(VENV) $(OLDEST) demo-out bench-out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(OLDEST) demo-out bench-out site .pytest_cache .hypothesis
