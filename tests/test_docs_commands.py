@@ -1,0 +1,371 @@
+"""Every command the docs show is run, so no page tells a user to type something that fails.
+
+A page's fenced blocks are read in order:
+
+- ```` ```console ```` blocks: each ``$ `` line (with ``\\`` continuation lines) is a command;
+  the other lines are what it prints, shown for the reader and not compared.
+- ```` ```bash ````, ```` ```sh ```` and ```` ```shell ```` blocks: every line that is not blank
+  or a comment is a command.
+- ```` ```python ```` blocks: run as one script.
+
+Each command runs with ``bash -c`` in a temporary directory of the page's own (the commands of
+one page share it, in order, so a page builds what its later commands read), with the kit's
+``alphafence`` first on PATH, and must exit 0. An HTML comment on the line before a block says
+otherwise:
+
+- ``<!-- not-run: REASON -->``: shown, not run (a network download, a real device, root on a
+  Pi). The reason is required; the Navio2 page's ``<!-- navio2-install: SUITE -->`` and
+  ``<!-- navio2-service -->`` blocks count as not run here (``make navio2-test`` runs the
+  install blocks in a Debian armhf userland: ``tests/navio2/readme.py``).
+- ``<!-- docs-test: OPTION ... -->`` with any of
+  ``exit=N`` (the block's last command exits N; those before it 0),
+  ``sitl`` (needs ArduPilot SITL: without a binary the page's other blocks run and the test
+  is skipped at the end, naming how many blocks were not run),
+  ``background="TEXT"`` (the command keeps running, as SITL and the monitor do until Ctrl-C:
+  it is started, must print TEXT, and is stopped with SIGINT once the page's blocks have run;
+  it must then exit 0),
+  ``needs=PROGRAM`` (skipped, and counted, when PROGRAM is not on PATH).
+
+The directory holds, before the first block, the files the pages say come from elsewhere:
+:data:`GIVEN`. A block of another language (``text``, ``toml``, ``json``) is never run and
+must hold no ``$ `` command line.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+BIN = Path(sys.executable).parent
+MALTA = ROOT.parent / "shared" / "data" / "osm" / "malta-2018-08-27.osm.pbf"
+
+RUN = {"console", "bash", "sh", "shell", "python"}
+COMMAND_TIMEOUT_S = 300
+READY_TIMEOUT_S = 240
+_FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
+_MARKER = re.compile(r"^<!--\s*([a-z0-9-]+)\s*(?::\s*(.*?))?\s*-->$")
+_NAVIO2 = {
+    "navio2-install": "make navio2-test runs it in a Debian armhf userland",
+    "navio2-service": "needs systemd on the Pi",
+}
+
+
+@dataclass
+class Block:
+    """One fenced block of a page, its commands and what its marker asks."""
+
+    page: str
+    line: int
+    lang: str
+    text: str
+    not_run: str | None = None
+    options: dict = field(default_factory=dict)
+
+    @property
+    def where(self) -> str:
+        return f"docs/{self.page} line {self.line}"
+
+    def commands(self) -> list[str]:
+        """The block's commands, continuation lines joined."""
+        if self.lang == "python":
+            return [self.text]
+        lines = self.text.splitlines()
+        if self.lang == "console":
+            out, current = [], None
+            for line in lines:
+                if current is not None:
+                    current += "\n" + line
+                elif line.startswith("$ "):
+                    current = line[2:]
+                else:
+                    continue
+                if not current.endswith("\\"):
+                    out.append(current)
+                    current = None
+            if current is not None:
+                out.append(current)
+            return out
+        out, current = [], ""
+        for line in lines:
+            current += line
+            if current.endswith("\\"):
+                current += "\n"
+                continue
+            if current.strip() and not current.lstrip().startswith("#"):
+                out.append(current)
+            current = ""
+        return out
+
+
+def _options(text: str, where: str) -> dict:
+    options = {}
+    for word in shlex.split(text or ""):
+        key, eq, value = word.partition("=")
+        if key not in ("exit", "sitl", "background", "needs", "timeout") or (
+            bool(eq) == (key == "sitl")
+        ):
+            raise ValueError(f"{where}: docs-test option {word!r} not understood")
+        options[key] = value if eq else True
+    return options
+
+
+def parse(page: str, text: str) -> list[Block]:
+    """The fenced blocks of ``text`` (a page of docs/), each with its marker's meaning.
+
+    Raises ValueError on a marker it does not understand, a not-run without a reason, or a
+    block never closed.
+    """
+    lines = text.splitlines()
+    blocks, i = [], 0
+    while i < len(lines):
+        m = _FENCE.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        indent, lang = m.group(1), m.group(2)
+        end = next((k for k in range(i + 1, len(lines)) if lines[k].strip() == "```"), None)
+        if end is None:
+            raise ValueError(f"docs/{page} line {i + 1}: code block never closed")
+        body = "\n".join(x[len(indent) :] for x in lines[i + 1 : end]) + "\n"
+        block = Block(page, i + 1, lang, body)
+        before = next((lines[k].strip() for k in range(i - 1, -1, -1) if lines[k].strip()), "")
+        marker = _MARKER.match(before)
+        if marker:
+            name, value = marker.group(1), marker.group(2)
+            if name == "not-run":
+                if not value:
+                    raise ValueError(f"{block.where}: not-run needs a reason")
+                block.not_run = value
+            elif name in _NAVIO2:
+                block.not_run = _NAVIO2[name]
+            elif name == "docs-test":
+                block.options = _options(value, block.where)
+        blocks.append(block)
+        i = end + 1
+    return blocks
+
+
+def pages() -> list[str]:
+    return sorted(p.name for p in DOCS.glob("*.md"))
+
+
+def _read(page: str) -> list[Block]:
+    return parse(page, (DOCS / page).read_text(encoding="utf-8"))
+
+
+# -- the files a page may use without making them -------------------------------------------
+def _given(directory: Path) -> None:
+    """Put :data:`GIVEN`'s files into ``directory``."""
+    for name, make in GIVEN.items():
+        make(directory / name)
+
+
+GIVEN = {
+    # a Geofabrik extract as the data page downloads it (a network download: not run here);
+    # Malta's of 2018, beside the checkout in ../shared
+    "malta-latest.osm.pbf": lambda p: p.symlink_to(MALTA),
+    # a national ED-269 geozone download and an OpenAir airspace file (the kit's own samples)
+    "zones.json": lambda p: shutil.copy(ROOT / "tests/data/ed269/uaszonelist.json", p),
+    "airspace.openair": lambda p: shutil.copy(ROOT / "tests/data/openair/sample.openair", p),
+    # the repository's example missions, as the routes page names them from a checkout
+    "missions": lambda p: shutil.copytree(ROOT / "missions", p),
+}
+
+
+# -- running a page ---------------------------------------------------------------------------
+def _env() -> dict:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ALPHAFENCE_")}
+    env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
+    env["COLUMNS"] = "120"
+    return env
+
+
+class Background:
+    """A command that runs until Ctrl-C (SITL, the monitor), its output read by a thread."""
+
+    def __init__(self, command: str, cwd: Path, ready: str, where: str):
+        self.where, self.command = where, command
+        self.proc = subprocess.Popen(
+            ["bash", "-c", f"exec {command}"],
+            cwd=cwd,
+            env=_env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            start_new_session=True,
+            # Ctrl-C must reach it even when the tests run in a background job (whose shell
+            # ignores SIGINT, and children inherit that)
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        )
+        self.lines: queue.Queue = queue.Queue()
+        self.seen: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+        while True:
+            try:
+                line = self.lines.get(timeout=READY_TIMEOUT_S)
+            except queue.Empty:
+                self.stop()
+                pytest.fail(f"{where}: no {ready!r} within {READY_TIMEOUT_S} s: {command}")
+            if line is None:
+                pytest.fail(f"{where}: exited before printing {ready!r}: {command}\n{self.text}")
+            if ready in line:
+                return
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.seen.append(line)
+            self.lines.put(line)
+        self.lines.put(None)
+
+    @property
+    def text(self) -> str:
+        return "".join(self.seen[-40:])
+
+    def stop(self) -> int:
+        """Ctrl-C, as the reader is told to press it; the exit status."""
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGINT)
+        try:
+            return self.proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+            return -9
+
+
+def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
+    """Run every block of ``page`` in ``directory``; the reasons blocks were left out."""
+    _given(directory)
+    left_out, background = [], []
+    try:
+        for block in _read(page):
+            if block.lang not in RUN or block.not_run:
+                continue
+            if block.options.get("sitl") and not have_sitl:
+                left_out.append(f"{block.where}: needs SITL")
+                continue
+            needs = block.options.get("needs")
+            if needs and shutil.which(needs) is None:
+                left_out.append(f"{block.where}: needs {needs}")
+                continue
+            expected = int(block.options.get("exit", 0))
+            timeout = float(block.options.get("timeout", COMMAND_TIMEOUT_S))
+            commands = block.commands()
+            for n, command in enumerate(commands, 1):
+                status = expected if n == len(commands) else 0
+                if "background" in block.options:
+                    background.append(
+                        Background(command, directory, block.options["background"], block.where)
+                    )
+                    continue
+                argv = (
+                    [sys.executable, "-c", command]
+                    if block.lang == "python"
+                    else ["bash", "-c", command]
+                )
+                done = subprocess.run(
+                    argv,
+                    cwd=directory,
+                    env=_env(),
+                    capture_output=True,
+                    text=True,
+                    timeout=timeout,
+                )
+                assert done.returncode == status, (
+                    f"{block.where}: exit {done.returncode}, not {status}: {command}\n"
+                    f"{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+                )
+            for job in background:
+                assert job.proc.poll() is None, f"{job.where}: stopped early:\n{job.text}"
+    finally:
+        codes = [(job, job.stop()) for job in reversed(background)]
+    for job, code in codes:
+        assert code == 0, f"{job.where}: exit {code} after Ctrl-C: {job.command}\n{job.text}"
+    return left_out
+
+
+def _params():
+    out = []
+    for page in pages():
+        blocks = _read(page)
+        if not any(b.lang in RUN and not b.not_run for b in blocks):
+            continue
+        sitl = any(b.options.get("sitl") and not b.not_run for b in blocks)
+        out.append(pytest.param(page, marks=[pytest.mark.sitl] if sitl else [], id=page))
+    return out
+
+
+@pytest.mark.parametrize("page", _params())
+def test_the_pages_commands_run(page, tmp_path):
+    if not MALTA.is_file():
+        pytest.skip(f"Malta extract not found at {MALTA} (../shared beside the checkout)")
+    from alphafence.sitl.find import find_sitl_binary
+
+    left_out = run_page(page, tmp_path, find_sitl_binary() is not None)
+    if left_out:
+        pytest.skip(f"{len(left_out)} block(s) not run: " + "; ".join(left_out))
+
+
+def test_every_command_block_is_run_or_says_why_not():
+    counts = {"run": 0, "not run": 0}
+    for page in pages():
+        for block in _read(page):
+            if block.lang in RUN:
+                counts["not run" if block.not_run else "run"] += 1
+                assert block.commands(), f"{block.where}: a {block.lang} block with no command"
+            else:
+                assert not block.options, f"{block.where}: docs-test on a block never run"
+                shown = [x for x in block.text.splitlines() if x.startswith("$ ")]
+                assert not shown, (
+                    f"{block.where}: a command in a ```{block.lang} block is never run; "
+                    "use ```console (or mark it <!-- not-run: REASON -->)"
+                )
+    assert counts["run"] >= 30, counts  # the pages show their tasks as commands
+    print(f"docs command blocks: {counts}")
+
+
+def test_blocks_and_markers_are_read_as_documented():
+    text = (
+        "<!-- not-run: downloads from Geofabrik -->\n```console\n$ curl -O URL\n```\n\n"
+        "<!-- docs-test: exit=2 sitl -->\n\n```console\n$ alphafence a \\\n    --b c\nout\n"
+        "$ alphafence d\n```\n"
+        "```sh\n# comment\nx \\\n  y\n\nz\n```\n"
+        "<!-- navio2-install: trixie -->\n```sh\nsudo apt update\n```\n"
+        "```text\nalphafence: error: x\n```\n"
+    )
+    a, b, c, d, e = parse("x.md", text)
+    assert a.not_run == "downloads from Geofabrik" and a.commands() == ["curl -O URL"]
+    assert b.options == {"exit": "2", "sitl": True} and b.line == 8
+    assert b.commands() == ["alphafence a \\\n    --b c", "alphafence d"]
+    assert c.commands() == ["x \\\n  y", "z"] and not c.not_run
+    assert d.not_run and e.lang == "text"
+    with pytest.raises(ValueError, match="not-run needs a reason"):
+        parse("x.md", "<!-- not-run -->\n```console\n$ x\n```\n")
+    with pytest.raises(ValueError, match="not understood"):
+        parse("x.md", "<!-- docs-test: exits=2 -->\n```console\n$ x\n```\n")
+    with pytest.raises(ValueError, match="never closed"):
+        parse("x.md", "```console\n$ x\n")
+
+
+def test_a_failing_command_fails_its_page(tmp_path, monkeypatch):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "bad.md").write_text("```console\n$ alphafence no-such-verb\n```\n")
+    monkeypatch.setattr(sys.modules[__name__], "DOCS", tmp_path / "docs")
+    monkeypatch.setattr(sys.modules[__name__], "GIVEN", {})
+    work = tmp_path / "work"
+    work.mkdir()
+    with pytest.raises(AssertionError, match=r"bad.md line 1: exit 2, not 0"):
+        run_page("bad.md", work, have_sitl=False)
