@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-README = ROOT / "docs" / "onboard.md"  # the Navio2 install steps
+README = ROOT / "docs" / "navio2.md"  # the Navio2 install steps
 UNIT = ROOT / "docker" / "alphafence-monitor.service"
 
 _MARKER = re.compile(r"^<!--\s*navio2-install:\s*([a-z0-9 ]+?)\s*-->\s*$")
