@@ -121,3 +121,41 @@ def test_the_flight_follows_the_armed_state():
 
     asyncio.run(armed.follow(V))
     assert armed.was_armed and armed.done.is_set()
+
+
+@pytest.mark.sitl
+def test_sitl_run_by_hand_stops_its_simulator_on_sigterm_and_ctrl_c(sitl_binary):
+    """``alphafence sitl --home`` stopped by SIGTERM (a service manager, ``kill``) or by
+    Ctrl-C when started with ``&`` (SIGINT ignored) takes its arducopter with it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    for sig, ignore_sigint in ((signal.SIGTERM, False), (signal.SIGINT, True)):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "alphafence", "sitl", "--home", "egham", "--no-wait"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+            if ignore_sigint
+            else None,
+        )
+        pid = None
+        for line in proc.stdout:
+            if line.startswith("SITL "):
+                pid = int(line.split("pid")[1].split()[0])
+            if "Ctrl-C stops SITL" in line:
+                break
+        assert pid is not None
+        proc.send_signal(sig)
+        rest = proc.stdout.read()
+        assert proc.wait(timeout=60) == 0, rest
+        assert "stopped" in rest
+        try:
+            os.kill(pid, 0)
+            alive = not open(f"/proc/{pid}/stat").read().split()[2] == "Z"
+        except (ProcessLookupError, FileNotFoundError):
+            alive = False
+        assert not alive, f"arducopter {pid} still runs after {sig.name}"

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
+import os
 import re
+import signal
 import sys
 
 from alphafence.cli.common import add_signing_option, signing_key
@@ -101,11 +104,13 @@ def sitl_device(text: str) -> str:
     """
     from alphafence.errors import InputError
 
-    if not re.fullmatch(r"uart:[^:]+:\d{3,7}", text.strip()):
+    m = re.fullmatch(r"uart:([^:]+):(\d{3,7})", text.strip())
+    if m is None:
         raise InputError(
             "--serial1", f"expected uart:PATH:BAUD (e.g. uart:/tmp/fc:57600), got {text!r}"
         )
-    return text.strip()
+    # SITL runs in a working directory of its own: a relative path is made absolute here
+    return f"uart:{os.path.abspath(os.path.expanduser(m.group(1)))}:{m.group(2)}"
 
 
 def param_value(text: str) -> tuple:
@@ -203,12 +208,16 @@ def list_homes() -> int:
 
 async def serve(sitl, *, wait: bool, timeout: float) -> int:
     """Start ``sitl``, print how to connect (after its position estimate when ``wait``), and
-    wait for it to exit (exit status 1) or for Ctrl-C."""
+    wait for it to exit (exit status 1) or for Ctrl-C or SIGTERM (SITL stopped, exit 0)."""
     from alphafence.sitl.cmdline import copter_defaults
 
     def say(text):
         print(text, flush=True)
 
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):  # also when started with & (SIGINT ignored)
+        loop.add_signal_handler(sig, stop.set)
     async with sitl:
         say(f"SITL {sitl.binary}  pid {sitl.pid}  instance {sitl.instance}")
         say(f"home {sitl.home.name} {sitl.home.arg()}  speedup {sitl.speedup:g}")
@@ -220,7 +229,10 @@ async def serve(sitl, *, wait: bool, timeout: float) -> int:
             )
         if wait:
             say("waiting for a position estimate ...")
-            state = await sitl.wait_ready(timeout)
+            state = await _until(sitl.wait_ready(timeout), stop)
+            if state is None:
+                say("stopped")
+                return 0
             lat, lon, alt = state.position
             say(f"ready: position {lat:.7f},{lon:.7f} alt {alt:.1f} m")
         if sitl.serial1:
@@ -228,7 +240,24 @@ async def serve(sitl, *, wait: bool, timeout: float) -> int:
         say(f"MAVSDK:             {sitl.connection_url}")
         say(f"pymavlink/MAVProxy: {sitl.pymavlink_url}   (one client at a time)")
         say("Ctrl-C stops SITL")
-        code = await sitl.process.wait()
+        code = await _until(sitl.process.wait(), stop)
+        if code is None:
+            say("stopped")
+            return 0
         say(f"SITL exited with code {code}")
         print(sitl.log_tail(), file=sys.stderr)
         return 1
+
+
+async def _until(coro, stop: asyncio.Event):
+    """``await coro``, or None as soon as ``stop`` is set (``coro`` cancelled)."""
+    task = asyncio.ensure_future(coro)
+    stopping = asyncio.ensure_future(stop.wait())
+    await asyncio.wait({task, stopping}, return_when=asyncio.FIRST_COMPLETED)
+    stopping.cancel()
+    if task.done():
+        return task.result()
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+    return None
