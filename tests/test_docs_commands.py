@@ -23,8 +23,11 @@ otherwise:
   is skipped at the end, naming how many blocks were not run),
   ``background="TEXT"`` (the command keeps running, as SITL and the monitor do until Ctrl-C:
   it is started, must print TEXT, and is stopped with SIGINT once the page's blocks have run;
-  it must then exit 0),
+  it must then exit 0, or 130 as socat does on Ctrl-C),
   ``needs=PROGRAM`` (skipped, and counted, when PROGRAM is not on PATH).
+
+A command ending in ``&`` runs in the background, as a shell runs it: the next command starts
+at once, and a later ``wait`` waits for every such command, each of which must exit 0.
 
 The directory holds, before the first block, the files the pages say come from elsewhere:
 :data:`GIVEN`. A block of another language (``text``, ``toml``, ``json``) is never run and
@@ -159,7 +162,8 @@ def parse(page: str, text: str) -> list[Block]:
 
 
 def pages() -> list[str]:
-    return sorted(p.name for p in DOCS.glob("*.md"))
+    """The docs' pages, and the README (its commands are shown first of all)."""
+    return [*sorted(p.name for p in DOCS.glob("*.md")), "../README.md"]
 
 
 def _read(page: str) -> list[Block]:
@@ -196,7 +200,7 @@ def _env() -> dict:
 class Background:
     """A command that runs until Ctrl-C (SITL, the monitor), its output read by a thread."""
 
-    def __init__(self, command: str, cwd: Path, ready: str, where: str):
+    def __init__(self, command: str, cwd: Path, ready: str | None, where: str):
         self.where, self.command = where, command
         self.proc = subprocess.Popen(
             ["bash", "-c", f"exec {command}"],
@@ -213,7 +217,7 @@ class Background:
         self.lines: queue.Queue = queue.Queue()
         self.seen: list[str] = []
         threading.Thread(target=self._read, daemon=True).start()
-        while True:
+        while ready is not None:
             try:
                 line = self.lines.get(timeout=READY_TIMEOUT_S)
             except queue.Empty:
@@ -249,7 +253,7 @@ class Background:
 def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
     """Run every block of ``page`` in ``directory``; the reasons blocks were left out."""
     _given(directory)
-    left_out, background = [], []
+    left_out, background, jobs = [], [], []
     try:
         for block in _read(page):
             if block.lang not in RUN or block.not_run:
@@ -266,6 +270,15 @@ def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
             commands = block.commands()
             for n, command in enumerate(commands, 1):
                 status = expected if n == len(commands) else 0
+                if command.rstrip().endswith("&"):  # a shell's job: `wait` waits for it
+                    jobs.append(Background(command.rstrip()[:-1], directory, None, block.where))
+                    continue
+                if command.strip() == "wait":
+                    for job in jobs:
+                        code = job.proc.wait(timeout=timeout)
+                        assert code == 0, f"{job.where}: exit {code}: {job.command}\n{job.text}"
+                    jobs.clear()
+                    continue
                 if "background" in block.options:
                     background.append(
                         Background(command, directory, block.options["background"], block.where)
@@ -291,9 +304,10 @@ def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
             for job in background:
                 assert job.proc.poll() is None, f"{job.where}: stopped early:\n{job.text}"
     finally:
-        codes = [(job, job.stop()) for job in reversed(background)]
+        codes = [(job, job.stop()) for job in reversed(background + jobs)]
+    assert not jobs, f"{jobs[0].where}: started with & and never waited for: {jobs[0].command}"
     for job, code in codes:
-        assert code == 0, f"{job.where}: exit {code} after Ctrl-C: {job.command}\n{job.text}"
+        assert code in (0, 130), f"{job.where}: exit {code} after Ctrl-C: {job.command}\n{job.text}"
     return left_out
 
 
