@@ -82,14 +82,7 @@ def load_mission(path, min_positions=2, rtl_alt_m=RTL_ALT_M) -> Mission:
     -------
     Mission
     """
-    try:
-        with open(path, encoding="utf-8") as fh:
-            head = fh.read(16)
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read ({exc})") from None
-    if head.startswith("QGC WPL"):
+    if is_wpl(path):
         home_amsl, steps = _wpl_steps(path)
         out = fly(path, steps, None, "seq", home_amsl, rtl_alt_m)
     else:
@@ -99,6 +92,24 @@ def load_mission(path, min_positions=2, rtl_alt_m=RTL_ALT_M) -> Mission:
         what = "no legs to check" if min_positions > 1 else "no positions to use"
         raise InputError(path, f"the mission has fewer than {min_positions} position(s): {what}")
     return Mission(out, home_amsl)
+
+
+def is_wpl(path) -> bool:
+    """Whether the mission file ``path`` is a QGC WPL file (else a QGroundControl plan).
+
+    Raises
+    ------
+    InputError
+        The file is missing or unreadable.
+    """
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(16)
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read ({exc})") from None
+    return head.startswith("QGC WPL")
 
 
 def _home_amsl(path, where, alt):

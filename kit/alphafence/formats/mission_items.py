@@ -12,7 +12,7 @@ import math
 
 from alphafence.errors import InputError
 from alphafence.formats.jsonfile import read_json
-from alphafence.formats.mission import _params
+from alphafence.formats.mission import _params, is_wpl
 from alphafence.formats.qgc_wpl import WplRow, wpl_records
 from alphafence.mavlink import ids
 
@@ -36,14 +36,7 @@ def mission_rows(path) -> list[WplRow]:
     InputError
         One line naming the file and the item: not a mission, a complex item, no items.
     """
-    try:
-        with open(path, encoding="utf-8") as fh:
-            head = fh.read(16)
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read ({exc})") from None
-    rows = list(wpl_records(path)) if head.startswith("QGC WPL") else _plan_rows(path)
+    rows = list(wpl_records(path)) if is_wpl(path) else _plan_rows(path)
     if len(rows) < 2:
         raise InputError(path, "the mission has no items to fly")
     return [row._replace(seq=seq) for seq, row in enumerate(rows)]
