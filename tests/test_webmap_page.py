@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -56,3 +57,50 @@ def test_leaflet_and_the_kit_script_are_inlined():
     assert "Leaflet 1.9.4" in html and "window.afLayers" in html
     assert ".leaflet-container" in html
     assert not re.search(r"<(script|link|img)[^>]+(src|href)=", html)
+
+
+def test_the_maps_colours_are_the_figures_colours():
+    from alphafence.plots.common import KIND_STYLE, METHOD_COLOR
+    from alphafence.plots.webmap import KIND_LAYERS, METHOD_COLORS
+
+    assert {k: v["color"] for k, v in KIND_LAYERS.items()} == {
+        k: v["edgecolor"] for k, v in KIND_STYLE.items()
+    }
+    assert METHOD_COLORS == METHOD_COLOR
+
+
+def _mbtiles(path, tiles, fmt="png"):
+    import sqlite3
+
+    db = sqlite3.connect(path)
+    db.execute("CREATE TABLE metadata (name text, value text)")
+    db.execute(
+        "CREATE TABLE tiles (zoom_level integer, tile_column integer, tile_row integer, "
+        "tile_data blob)"
+    )
+    db.executemany(
+        "INSERT INTO metadata VALUES (?, ?)", [("format", fmt), ("attribution", "© sample")]
+    )
+    db.executemany("INSERT INTO tiles VALUES (?, ?, ?, ?)", tiles)
+    db.commit()
+    db.close()
+    return path
+
+
+def test_an_mbtiles_basemap_holds_the_tiles_around_the_data(tmp_path):
+    from alphafence.errors import InputError
+    from alphafence.formats.mbtiles import tile_range, tiles_around
+
+    bounds = [[35.88, 14.40], [35.92, 14.52]]
+    z = 12
+    x0, x1, y0, y1 = tile_range(bounds, z)
+    png = b"\x89PNG\r\n\x1a\n" + b"\0" * 100
+    inside = [(z, x, 2**z - 1 - y, png) for x in range(x0, x1 + 1) for y in range(y0, y1 + 1)]
+    far = [(z, x1 + 5, 2**z - 1 - y0, png)]  # a tile away from the data
+    path = _mbtiles(tmp_path / "base.mbtiles", inside + far)
+    held, attribution = tiles_around(path, bounds)
+    want = {f"{z}/{x}/{y}" for x in range(x0, x1 + 1) for y in range(y0, y1 + 1)}
+    assert set(held) == want and attribution == "© sample"
+    assert all(v.startswith("data:image/png;base64,") for v in held.values())
+    with pytest.raises(InputError, match="more than"):
+        tiles_around(path, bounds, max_bytes=len(png) * (len(want) - 1))

@@ -8,6 +8,7 @@ from rich.table import Table
 
 from alphafence.build import METHODS
 from alphafence.cli.common import err_console, out_console, progress
+from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import (
     add_database_options,
     at_least,
@@ -39,6 +40,7 @@ def register(sub):
         "--waypoints", metavar="FILE.waypoints", help="also write an ArduPilot fence waypoint file"
     )
     p.add_argument("--figure", metavar="MAP.png", help="also draw the fences on a map")
+    add_map_options(p)
     p.add_argument(
         "--method", choices=METHODS, default="alpha", help="fence method (default alpha)"
     )
@@ -102,6 +104,7 @@ def run(args) -> int:
     if writer_for(args.output).suffixes == (".parquet",):
         wants.append(("pyarrow", f"writing {args.output}"))
     need(*wants)
+    check_map_args(args)
     rules = load_rules(args.rules)
     opts = build_options(args)
     stream = DatabaseStream(
@@ -115,7 +118,7 @@ def run(args) -> int:
             raise
         raise InputErrors(exc.path, faults, SKIP_HINT) from None
     meta = build_meta(stream.database(), rules, opts)
-    keep = bool(args.plan or args.waypoints or args.figure)
+    keep = bool(args.plan or args.waypoints or args.figure or args.map)
     with progress(not args.quiet) as prog, open_writers([args.output], meta) as writers:
         result = build_tiled(
             stream,
@@ -145,6 +148,13 @@ def run(args) -> int:
             note=meta.get("attribution"),
         )
         written.append(args.figure)
+    if args.map:
+        from alphafence.cli.maps import write_map_page
+        from alphafence.plots.webmap import fence_layers, restricted_layer
+
+        layers = [restricted_layer(result.site_objects), *fence_layers(result.fences)]
+        title = f"AlphaFence: {opts.method} fences ({len(result.fences)})"
+        written.append(write_map_page(args, title, layers, note=meta.get("attribution")))
     if not args.quiet:
         summary(stream.database(), result, opts, written)
     return 0

@@ -10,6 +10,7 @@ import sys
 from rich.table import Table
 
 from alphafence.cli.common import out_console
+from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import figure_wants, positive
 
 SHOWN = 20  # fences listed in the table (--json lists every one)
@@ -48,6 +49,7 @@ def register(sub):
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON to stdout")
     p.add_argument("--figure", metavar="PNG", help="draw the track over the fences")
+    add_map_options(p)
     p.set_defaults(func=run)
 
 
@@ -139,6 +141,25 @@ def _verdict(rep):
     return f"[green]no fence entered[/]; the closest keep-out fence in force: {name}, {d:.1f} m"
 
 
+def flight_map(args, rep) -> None:
+    """Write ``--map``: the fences near the track (grey when never in force), the track by
+    height above home, the breaches and the alerts."""
+    from alphafence.cli.maps import write_map_page
+    from alphafence.plots.webmap import bounds_of, fence_layers
+    from alphafence.plots.webmap_layers import fence_indices_near, flight_layers
+
+    if not len(rep.track):
+        return
+    near = fence_indices_near(rep, max(rep.near_m, 1000.0))
+    in_force = {j: rep.in_force[k] for j, k in enumerate(near) if k in rep.in_force}
+    records = [rep.fences.records[k] for k in near]
+    verdict = "ENTERED a restricted zone" if rep.entered else "no restricted zone entered"
+    layers = [*fence_layers(records, in_force=in_force), *flight_layers(rep)]
+    bounds = bounds_of(rep.track[:, 1:3])
+    write_map_page(args, f"{args.log}: {verdict}", layers, note=f"fences: {args.fences}",
+                   bounds=bounds)  # fmt: skip
+
+
 def run(args) -> int:
     """Check the log against the fences; print the report (or JSON), draw the figure; exit 1
     when the flight entered a keep-out fence in force or left a keep-in fence, else 0."""
@@ -147,6 +168,7 @@ def run(args) -> int:
     from alphafence.monitor.postflight import check_flight, load_fences
 
     need(("pymavlink", f"reading {args.log}"), *figure_wants(args.figure))
+    check_map_args(args)
     fences = load_fences(args.fences)  # first: a map database given for fences is said at once
     log = FlightLog(args.log, sysid=args.sysid)
     rep = check_flight(log, fences, near_m=args.near)
@@ -154,6 +176,8 @@ def run(args) -> int:
         from alphafence.plots.flight_check import flight_check_figure
 
         flight_check_figure(rep, args.figure, note=f"fences: {args.fences}")
+    if args.map:
+        flight_map(args, rep)
     if args.json:
         doc = rep.to_json()
         doc["fences_file"] = str(args.fences)
@@ -179,6 +203,7 @@ def run(args) -> int:
     for note in list(info.notes) + rep.notes:
         out_console.print(f"[yellow]note:[/] {note}")
     out_console.print(_verdict(rep))
-    if args.figure:
-        out_console.print(f"wrote {args.figure}")
+    for path in (args.figure, args.map):
+        if path:
+            out_console.print(f"wrote {path}")
     return 1 if rep.entered else 0

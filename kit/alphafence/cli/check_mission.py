@@ -6,6 +6,7 @@ from __future__ import annotations
 from rich.table import Table
 
 from alphafence.cli.common import err_console, out_console
+from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import non_negative
 
 
@@ -50,6 +51,7 @@ def register(sub):
         help="the altitude above home RTL climbs to at least: the vehicle's RTL_ALT "
         "(default 15, ArduCopter's; ArduPlane's ALT_HOLD_RTL is 100)",
     )
+    add_map_options(p)
     p.set_defaults(func=run)
 
 
@@ -81,6 +83,7 @@ def run(args) -> int:
     from alphafence.formats.mission import load_mission
     from alphafence.monitor.mission_check import check_mission
 
+    check_map_args(args)
     records = read_fences(args.fences)
     mission = load_mission(args.mission, rtl_alt_m=args.rtl_alt)
     result = check_mission(mission, records, args.clearance)
@@ -116,4 +119,12 @@ def run(args) -> int:
         f"{len(legs)} legs: {len(crossing)} cross a keep-out fence, {len(grazing)} graze one "
         f"(within {args.clearance:g} m), {len(leaving)} leave a keep-in fence, {clear} clear"
     )
+    if args.map:
+        from alphafence.cli.maps import write_map_page
+        from alphafence.plots.webmap import fence_layers
+        from alphafence.plots.webmap_layers import mission_layers
+
+        layers = [*fence_layers(records), *mission_layers(result, args.clearance)]
+        title = f"{args.mission}: {len(legs)} legs"
+        out_console.print(f"wrote {write_map_page(args, title, layers)}")
     return 1 if crossing or leaving else 0

@@ -6,6 +6,7 @@ import json
 
 from alphafence.build import METHODS
 from alphafence.cli.common import callback, out_console, progress
+from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import add_database_options, build_options, build_wants
 from alphafence.cli.tables import stats_table
 from alphafence.errors import InputError, need
@@ -30,6 +31,7 @@ def register(sub):
     p.add_argument(
         "--figure", metavar="OUT.png", help="draw the methods side by side on telling sites"
     )
+    add_map_options(p)
     p.set_defaults(func=run)
 
 
@@ -59,6 +61,7 @@ def run(args) -> int:
     from alphafence.formats.rules import load_rules
 
     need(*build_wants(args.databases, args.figure))
+    check_map_args(args)
     rules = load_rules(args.rules)
     opts = build_options(args)
     with progress(not args.json) as prog:
@@ -79,10 +82,19 @@ def run(args) -> int:
         )
     else:
         out_console.print(stats_table(cmp, opts))
+    osm = any(".osm" in f or f.endswith(".pbf") for f in db.files)
+    if args.map:
+        from alphafence.cli.maps import write_map_page
+        from alphafence.plots.webmap import method_layers, restricted_layer
+
+        layers = [restricted_layer(cmp.sites), *method_layers(cmp.fences)]
+        title = f"AlphaFence: {', '.join(args.methods)} fences of {len(cmp.sites)} sites"
+        write_map_page(args, title, layers, note=OSM_ATTRIBUTION if osm else None)
+        if not args.json:
+            out_console.print(f"wrote {args.map}")
     if args.figure:
         from alphafence.plots.compare import comparison_figure
 
-        osm = any(".osm" in f or f.endswith(".pbf") for f in db.files)
         comparison_figure(
             telling_sites(cmp), cmp.fences, args.figure, note=OSM_ATTRIBUTION if osm else None
         )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from alphafence.cli.common import out_console
+from alphafence.cli.maps import add_map_options, check_map_args, onboard_map
 from alphafence.cli.options import add_compile_options, bbox, compile_from_args, figure_wants
 from alphafence.cli.tables import compile_report
 from alphafence.errors import need
@@ -51,6 +52,7 @@ def register(sub):
         metavar="PNG",
         help="draw the onboard fences over the full-resolution ones, the path and the corridor",
     )
+    add_map_options(p)
     p.set_defaults(func=run)
 
 
@@ -70,6 +72,7 @@ def run(args) -> int:
         from alphafence.build.bundle import check_private_key
 
         check_private_key(args.sign_key)
+    check_map_args(args)
     records = read_fences(args.fences)
     result = compile_from_args(args, records)
     if fmt == "plan":
@@ -90,7 +93,8 @@ def run(args) -> int:
         from alphafence.plots.fences import onboard_figure
 
         onboard_figure(records, result, args.figure)
-    out_console.print(
-        "wrote " + ", ".join(str(p) for p in [*out, *([args.figure] if args.figure else [])])
-    )
+    if args.map:
+        onboard_map(args, records, result, f"{args.fences}: {len(result.items)} onboard items")
+    shown = [*out, *([args.figure] if args.figure else []), *([args.map] if args.map else [])]
+    out_console.print("wrote " + ", ".join(str(p) for p in shown))
     return 0

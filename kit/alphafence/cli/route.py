@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from alphafence.cli.common import out_console
+from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import figure_wants, latlon, non_negative, positive
 from alphafence.errors import InputError, RoutingError, need
 
@@ -67,6 +68,7 @@ def register(sub):
     )
     p.add_argument("--waypoints", metavar="FILE", help="also write a QGC WPL 110 mission file")
     p.add_argument("--figure", metavar="PNG", help="draw fences, roadmap and route")
+    add_map_options(p)
     p.set_defaults(func=run)
 
 
@@ -84,6 +86,7 @@ def run(args) -> int:
 
     fmt = output_format(args.output, what="mission output")  # before the routing
     need(("scipy", "routing"), *figure_wants(args.figure))
+    check_map_args(args)
 
     start, goal = args.start, args.goal
     records = read_fences(args.fences)
@@ -112,6 +115,15 @@ def run(args) -> int:
 
         route_figure(planner.roadmap, route, args.figure)
     write_all(out)
+    if args.map:
+        from alphafence.cli.maps import write_map_page
+        from alphafence.plots.webmap import fence_layers
+        from alphafence.plots.webmap_layers import records_near, route_layers
+
+        near = records_near(records, planner.frame, route.xy, max(planner.half_width, 1000.0))
+        layers = [*fence_layers(near), *route_layers(planner, route, lonlat)]
+        title = f"Route {route.length_m:,.0f} m, {len(lonlat) - 1} legs"
+        write_map_page(args, title, layers)
     if planner.added:
         out_console.print(
             f"[yellow]note:[/] {planner.added} waypoints added along long legs: ArduPilot flies "
@@ -129,9 +141,8 @@ def run(args) -> int:
         f"(asked {args.clearance:g} m)"
         + (f", {route.warning_m:.0f} m inside warning layers" if route.warning_m > 0 else "")
     )
-    out_console.print(
-        "wrote " + ", ".join(str(p) for p in [*out, *([args.figure] if args.figure else [])])
-    )
+    shown = [*out, *([args.figure] if args.figure else []), *([args.map] if args.map else [])]
+    out_console.print("wrote " + ", ".join(str(p) for p in shown))
     return 0
 
 

@@ -26,6 +26,7 @@ from alphafence.cli.common import (
     signing_key,
     unsigned_hint,
 )
+from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import (
     add_compile_options,
     add_connect_option,
@@ -91,6 +92,7 @@ def register(sub):
         help="draw the fence items it sends: polygons and circles (inclusion green, exclusion "
         "red) and the return point",
     )
+    add_map_options(p)
     add_trust_options(p)
     add_signing_option(p)
     add_link_option(p)
@@ -273,6 +275,7 @@ def run(args) -> int:
     from alphafence.onboard.decode import decode_fence
 
     need(*figure_wants(args.figure))
+    check_map_args(args)
     check_trust(args, args.fences)
     profile = storage_profile(args)
     if args.reboot and not profile.file_backed:
@@ -284,7 +287,7 @@ def run(args) -> int:
     items, compiled = load_items(args)
     if compiled is not None:
         compile_report(compiled)
-        fences = decode_fence(items, source=args.fences) if args.figure else None
+        fences = decode_fence(items, source=args.fences) if args.figure or args.map else None
     else:
         fences = check_items(args.fences, items, profile, args.items)
         if args.dry_run:
@@ -296,6 +299,14 @@ def run(args) -> int:
         ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
         title = f"{args.fences}: {len(items)} fence items ({profile.name})"
         fence_items_figure(fences, ret, args.figure, title)
+    if args.map:
+        from alphafence.cli.maps import write_map_page
+        from alphafence.mavlink.items import RETURN_POINT
+        from alphafence.plots.webmap import onboard_layers
+
+        ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
+        title = f"{args.fences}: {len(items)} fence items ({profile.name})"
+        out_console.print(f"wrote {write_map_page(args, title, onboard_layers(fences, ret))}")
     if args.dry_run:
         out_console.print(f"dry run: {len(items)} fence items ready; nothing sent")
         return 0

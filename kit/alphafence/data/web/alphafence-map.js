@@ -82,7 +82,7 @@
       for (k = Math.ceil(w / step); k * step <= e; k++) {
         lon = k * step;
         this.addLayer(L.polyline([[s, lon], [n, lon]], line));
-        this._label([s, lon], label(lon, step, "E", "W"), [-2, 14]);
+        this._label([n, lon], label(lon, step, "E", "W"), [-3, -2]);
       }
     },
 
@@ -131,7 +131,7 @@
   }
 
   function createMap(element, data) {
-    var map = L.map(element, {preferCanvas: true, zoomSnap: 0.25});
+    var map = L.map(element, {preferCanvas: true, zoomSnap: 0.25, maxZoom: 21});
     map.attributionControl.setPrefix("Leaflet");
     var tiles = data.tiles;
     if (tiles && tiles.url) {
@@ -173,12 +173,16 @@
         r.colors.map(esc).join(",") + ')"></span><span>' + esc(r.high) + "</span></div>";
     }
     var rows = spec.legend_rows || [[spec.legend || spec.name, spec.color]];
+    var marker = (spec.features || []).every(function (f) {
+      return f.geometry && f.geometry.type === "Point" && (f.properties || {}).radius_m == null;
+    });
     return rows.map(function (row) {
-      var dash = spec.dash ? "dashed" : "solid";
-      var fill = spec.fill ? row[1] : "transparent";
-      return '<div class="af-row"><span class="af-swatch" style="border-color:' + esc(row[1]) +
-        ";border-style:" + dash + ";background:" + esc(fill) + '"></span><span>' +
-        esc(row[0]) + "</span></div>";
+      var style = marker ?
+        "width:10px;height:10px;border-radius:50%;border:1px solid #fff;background:" + row[1] :
+        "border-color:" + row[1] + ";border-style:" + (spec.dash ? "dashed" : "solid") +
+        ";background:" + (spec.fill ? row[1] + "40" : "transparent");
+      return '<div class="af-row"><span class="af-swatch" style="' + esc(style) +
+        '"></span><span>' + esc(row[0]) + "</span></div>";
     }).join("");
   }
 
@@ -186,7 +190,7 @@
     var present = (data.layers || []).filter(function (s) {
       return s.features && s.features.length;
     });
-    var legend = L.control({position: "bottomleft"});
+    var legend = L.control({position: "bottomright"});
     legend.onAdd = function () {
       var div = L.DomUtil.create("div", "af-legend");
       div.innerHTML = (data.title ? '<div class="af-title">' + esc(data.title) + "</div>" : "") +
