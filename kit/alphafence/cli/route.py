@@ -113,7 +113,7 @@ def run(args) -> int:
     if args.figure:  # drawn first: the slow part, before any file is written
         from alphafence.plots.route import route_figure
 
-        route_figure(planner.roadmap, route, args.figure)
+        route_figure(planner.roadmap, route, args.figure, planner.frame, records)
     write_all(out)
     if args.map:
         from alphafence.cli.maps import write_map_page

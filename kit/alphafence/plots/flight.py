@@ -1,12 +1,20 @@
 """A flight on a map: the track, the full-resolution fences, the fence the vehicle held and the
-monitor's events, in metres east and north of the take-off point."""
+monitor's events, in metres from the origin :func:`~alphafence.plots.common.map_frame` picks
+for the fences (as on the build's map)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from alphafence.geo.frame import LocalFrame
-from alphafence.plots.common import KIND_STYLE, draw_polygons, save_figure, subplots
+from alphafence.plots.common import (
+    KIND_LABEL,
+    draw_polygons,
+    kind_style,
+    map_frame,
+    save_figure,
+    subplots,
+)
+from alphafence.plots.mapmarks import finish_map, site_names
 
 #: Marker style per alert level and for commanded actions.
 EVENT_STYLE = {
@@ -39,30 +47,26 @@ def flight_figure(records, onboard, track, events, path, title="Flight", note=No
         The figure's title.
     note : str, optional
         A line of small print at the bottom.
-    """
-    from matplotlib.lines import Line2D
 
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure written (closed).
+    """
     track = np.asarray(track, dtype=float)
-    frame = LocalFrame(float(track[0, 0]), float(track[0, 1]))
+    frame = map_frame([(r.kind, r.geometry) for r in records], fallback=track)
     x, y = (np.asarray(v, dtype=float) for v in frame.to_local(track[:, 0], track[:, 1]))
     fig, ax = subplots(figsize=(9, 9))
     order = {"warning": 0, "keep_in": 1, "keep_out": 2}
     for r in sorted(records, key=lambda r: order.get(r.kind, 3)):
-        style = KIND_STYLE.get(r.kind, KIND_STYLE["keep_out"])
+        style = kind_style(r.kind, label=KIND_LABEL.get(r.kind, r.kind))
         draw_polygons(ax, frame.geom_to_local(r.geometry), **style)
     for f in onboard:
         color = "#2e7d32" if f.inclusion else "#1565c0"
-        draw_polygons(
-            ax, frame.geom_to_local(f.geometry()), edgecolor=color, facecolor="none", lw=1.6, ls=":"
-        )
-    ax.plot(x, y, "-", color="#212121", lw=1.5)
-    ax.plot(x[:1], y[:1], "^", color="#212121", ms=9)
-    handles = [
-        Line2D([], [], color=KIND_STYLE["keep_out"]["edgecolor"], label="keep-out fence"),
-        Line2D([], [], color=KIND_STYLE["warning"]["edgecolor"], ls="--", label="warning layer"),
-        Line2D([], [], color="#1565c0", ls=":", lw=1.6, label="onboard fence (vehicle's)"),
-        Line2D([], [], color="#212121", marker="^", label="track (from take-off)"),
-    ]
+        draw_polygons(ax, frame.geom_to_local(f.geometry()), label="onboard fence (vehicle's)",
+                      edgecolor=color, facecolor="none", lw=1.6, ls=":")  # fmt: skip
+    ax.plot(x, y, "-", color="#212121", lw=1.5, label="track")
+    ax.plot(x[:1], y[:1], "^", color="#212121", ms=9, ls="none", label="take-off")
     marked = set()
     for e in events:
         key = e.get("level") if e["event"] == "level" else e["event"]
@@ -72,7 +76,8 @@ def flight_figure(records, onboard, track, events, path, title="Flight", note=No
             continue  # a level coming down is not marked
         ex, ey = (float(v) for v in frame.to_local(e["lon"], e["lat"]))
         style = EVENT_STYLE[key]
-        ax.plot(ex, ey, ls="none", ms=9, mec="white", mfc=style["color"], marker=style["marker"])
+        ax.plot(ex, ey, ls="none", ms=9, mec="white", mfc=style["color"], marker=style["marker"],
+                label=None if key in marked else key)  # fmt: skip
         label = key if key != "action" else e.get("action", "action")
         if e.get("onboard_only"):
             label += " (onboard fence only)"
@@ -83,18 +88,11 @@ def flight_figure(records, onboard, track, events, path, title="Flight", note=No
             textcoords="offset points",
             fontsize=8,
         )
-        if key not in marked:
-            marked.add(key)
-            handles.append(
-                Line2D([], [], ls="none", marker=style["marker"], color=style["color"], label=key)
-            )
-    ax.set_xlim(min(x.min(), 0.0) - MARGIN_M, max(x.max(), 0.0) + MARGIN_M)
-    ax.set_ylim(min(y.min(), 0.0) - MARGIN_M, max(y.max(), 0.0) + MARGIN_M)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("east of take-off (m)")
-    ax.set_ylabel("north of take-off (m)")
+        marked.add(key)
+    ax.set_xlim(x.min() - MARGIN_M, x.max() + MARGIN_M)
+    ax.set_ylim(y.min() - MARGIN_M, y.max() + MARGIN_M)
+    finish_map(ax, frame, site_names(records, frame))
     ax.set_title(title)
-    ax.legend(handles=handles, loc="upper left", fontsize=8)
     if note:
         fig.text(0.01, 0.005, note, fontsize=7, color="#555")
-    save_figure(fig, path)
+    return save_figure(fig, path)
