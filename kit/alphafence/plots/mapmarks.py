@@ -113,9 +113,9 @@ def add_scale_bar(ax, fontsize=8):
     return bar
 
 
-def site_names(records, frame):
-    """What :func:`name_sites` needs of fences: ``(name, area m², geometry in metres)`` per
-    site (its fences and warning layers united).
+def site_names(records, frame, limit=4 * NAMES):
+    """What :func:`name_sites` needs of fences: ``(name, area m², geometry in metres)`` for
+    the ``limit`` largest sites (a site's fences and warning layers united).
 
     Parameters
     ----------
@@ -125,24 +125,35 @@ def site_names(records, frame):
         :class:`~alphafence.build.fence_types.Fence`).
     frame : LocalFrame
         The map's frame.
+    limit : int
+        How many sites to return: those whose fences add up to the largest areas (a
+        country's fences are not all united to name ten).
 
     Returns
     -------
     list of tuple
     """
+    records = list(records)
+    if not records:
+        return []
+    local = frame.geom_to_local(np.asarray([r.geometry for r in records], dtype=object))
     by_site = {}
-    for r in records:
-        by_site.setdefault((r.name or r.site_id), []).append(r.geometry)
+    for r, g, area in zip(records, local, shapely.area(local)):
+        entry = by_site.setdefault(r.name or r.site_id, [0.0, []])
+        entry[0] += area
+        entry[1].append(g)
+    largest = sorted(by_site.items(), key=lambda kv: -kv[1][0])[:limit]
     out = []
-    for name, geoms in by_site.items():
-        local = shapely.union_all(frame.geom_to_local(np.asarray(geoms, dtype=object)))
-        out.append((name if len(name) <= 32 else name[:31] + "…", local.area, local))
+    for name, (_, geoms) in largest:
+        united = shapely.union_all(geoms)
+        out.append((name if len(name) <= 32 else name[:31] + "…", united.area, united))
     return out
 
 
 def name_sites(ax, sites, count=NAMES, fontsize=8):
     """Name the ``count`` largest ``sites`` in view, each on its site (when it fits in the
-    site's box) or beside it, with a white halo, none over another name or the scale bar (a name with no free spot is left out).
+    site's box) or beside it, with a white halo, none over another text on the map or its
+    scale bar (a name with no free spot is left out).
 
     Parameters
     ----------
