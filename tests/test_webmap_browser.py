@@ -50,6 +50,23 @@ def test_the_malta_map_opens_with_no_network_and_draws_every_fence(browser, malt
         "return Array.from(document.querySelectorAll('.af-grid-label')).map(e => e.innerText)"
     )
     assert any(t.endswith("°N") and t.startswith("35.") for t in labels)
+    shots = os.environ.get("ALPHAFENCE_SHOTS")  # the docs' picture: make this run with it set
+    if shots:
+        browser.execute_script(
+            "var l = window.afLayers['keep-out fences'].getLayers().reduce(function (a, b) {"
+            " return a.getBounds().getNorthEast().distanceTo(a.getBounds().getSouthWest()) >"
+            " b.getBounds().getNorthEast().distanceTo(b.getBounds().getSouthWest()) ? a : b; });"
+            "l.fire('click', {latlng: l.getBounds().getCenter()}, true);"
+        )
+        from selenium.webdriver.support.ui import WebDriverWait
+
+        WebDriverWait(browser, 30).until(
+            lambda d: d.execute_script(
+                "var p = document.querySelector('.leaflet-popup');"
+                "return p && getComputedStyle(p).opacity === '1';"
+            )
+        )  # faded in
+        browser.save_screenshot(os.path.join(shots, "map-malta.png"))
 
 
 def _lonely_point(features, kind="keep_out"):

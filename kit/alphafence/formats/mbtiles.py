@@ -58,7 +58,7 @@ def tile_range(bounds, zoom):
     Examples
     --------
     >>> tile_range([[35.8, 14.3], [36.1, 14.6]], 10)
-    (552, 553, 408, 409)
+    (552, 553, 401, 402)
     """
     (s, w), (n, e) = bounds
     count = 2**zoom
