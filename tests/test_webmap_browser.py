@@ -178,3 +178,42 @@ def test_an_unwritable_map_is_refused_in_one_line_before_any_work(tmp_path, caps
         ro.mkdir(mode=0o555)
         code = main(["build", str(tmp_path / "x.pbf"), "-o", "f.geojson", "--map", str(ro / "m.html")])  # fmt: skip
         assert code == 2 and "cannot write" in capsys.readouterr().err
+
+
+def test_an_mbtiles_basemap_is_drawn_from_the_page_itself(browser, tmp_path):  # noqa: F811
+    import io
+
+    from PIL import Image
+
+    from alphafence.formats.mbtiles import tile_range
+    from tests.test_webmap_page import _mbtiles
+
+    buf = io.BytesIO()
+    Image.new("RGB", (256, 256), (200, 220, 255)).save(buf, format="PNG")
+    ring = [[14.50, 35.89], [14.52, 35.89], [14.52, 35.91], [14.50, 35.89]]
+    doc = {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
+           "properties": {"site_id": "prison/1", "kind": "keep_out", "name": "Kordin"}}]}  # fmt: skip
+    fences = tmp_path / "f.geojson"
+    fences.write_text(json.dumps(doc))
+    tiles = []
+    for z in (12, 13, 14):
+        x0, x1, y0, y1 = tile_range([[35.89, 14.50], [35.91, 14.52]], z)
+        tiles += [(z, x, 2**z - 1 - y, buf.getvalue()) for x in range(x0, x1 + 1) for y in range(y0, y1 + 1)]  # fmt: skip
+    base = _mbtiles(tmp_path / "base.mbtiles", tiles)
+    html = tmp_path / "m.html"
+    code = main(["compile", str(fences), "--bbox", "14.49,35.88,14.53,35.92", "-o", str(tmp_path / "o.plan"), "--map", str(html),
+                 "--tiles", str(base)])  # fmt: skip
+    assert code == 0
+    open_map(browser, html)
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    WebDriverWait(browser, 30).until(
+        lambda d: d.execute_script(
+            "return Array.from(document.querySelectorAll('.leaflet-tile')).some("
+            "function (t) { return t.src && t.src.indexOf('data:image/png') === 0 && t.complete; });"
+        )
+    )
+    assert [u for u in requests_made(browser) if not u.startswith("data:")] == []
+    assert "© sample" in browser.execute_script(
+        "return document.querySelector('.leaflet-control-attribution').innerText"
+    )
