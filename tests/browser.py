@@ -39,8 +39,11 @@ FLAGS = (
 )
 
 
-def start(window=(1000, 800)):
+def start(window=(1000, 800), loopback=False):
     """A new headless Chromium WebDriver with its own profile folder, or a skip.
+
+    ``loopback=True`` lets it reach 127.0.0.1 (a server the test runs, such as the live
+    map's); every other name still resolves nowhere.
 
     Returns
     -------
@@ -56,6 +59,8 @@ def start(window=(1000, 800)):
     options = webdriver.ChromeOptions()
     options.binary_location = CHROMIUM
     for flag in FLAGS:
+        if loopback and flag.startswith("--host-resolver-rules="):
+            flag += ", EXCLUDE 127.0.0.1"
         options.add_argument(flag)
     options.add_argument(f"--window-size={window[0]},{window[1]}")
     options.add_argument(f"--user-data-dir={profile}")

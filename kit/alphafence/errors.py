@@ -137,6 +137,7 @@ OPTIONAL = {
     "mavsdk": ("mavsdk", "vehicle", None, None),
     "pyarrow": ("pyarrow", "parquet", None, "17.0"),
     "lxml": ("lxml", "kml", "python3-lxml", None),
+    "aiohttp": ("aiohttp", "map", "python3-aiohttp", None),
 }
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from alphafence.build import METHODS
 from alphafence.cli.common import out_console
 from alphafence.cli.tables import stats_table
-from alphafence.errors import need
+from alphafence.errors import InputError, need
 
 NOTE = "Synthetic demo scene authored by the AlphaFence project (not real places)."
 HOME = (-0.5500, 51.4300)  # lon, lat: the scene's take-off point (the egham SITL home)
@@ -54,6 +54,13 @@ def register(sub):
         help="replay the recorded SITL flight even when a SITL binary is found",
     )
     p.add_argument(
+        "--map-server",
+        metavar="HOST:PORT",
+        help="with --replay: serve a live map of the replayed flight at http://HOST:PORT/ "
+        "(as 'alphafence monitor --map-server'); the replay starts, as recorded, when a page "
+        "opens the map, and the map stays up until Ctrl-C",
+    )
+    p.add_argument(
         "--speedup",
         type=float,
         default=SPEEDUP,
@@ -73,6 +80,13 @@ def run(args) -> int:
     from alphafence.onboard.compile import compile_fences
 
     need(("scipy", "building the demo's fences"), ("matplotlib", "drawing the demo's figures"))
+    if args.map_server:
+        from alphafence.monitor.livemap_server import parse_address
+
+        if not args.replay:
+            raise InputError("--map-server", "shows the replayed flight: add --replay")
+        need(("aiohttp", "--map-server"))
+        parse_address(args.map_server)
     out = Path(args.output_dir)
     fences_path = _build(out)
     records = read_fences(fences_path)
@@ -103,7 +117,7 @@ def run(args) -> int:
             "(`alphafence sitl --find` says how to get a binary)",
             soft_wrap=True,
         )
-        return _replay(out, fences_path, records)
+        return _replay(out, fences_path, records, args.map_server)
     return _fly(out, fences_path, records, compiled.items, binary, args.speedup)
 
 
@@ -199,7 +213,7 @@ async def _stopped_by_sigterm(flight):
         loop.remove_signal_handler(signal.SIGTERM)
 
 
-def _replay(out, fences_path, records) -> int:
+def _replay(out, fences_path, records, map_server=None) -> int:
     from alphafence.monitor.fenceset import FenceSet
     from alphafence.monitor.replay import Trace, replay, speedup_options
 
@@ -208,12 +222,62 @@ def _replay(out, fences_path, records) -> int:
     out_console.print(f"replay of {trace.recorded}", soft_wrap=True)
     clock = trace.utc_clock()
     out_console.print(f"replay: UTC from the {clock.source}", soft_wrap=True)
-    events = replay(trace, FenceSet.from_geojson(fences_path), options, clock, replay=True)
-    for e in events:
-        _echo(e, prefix="replay ")
+    fences = FenceSet.from_geojson(fences_path)
+    if map_server:
+        events = asyncio.run(_replay_on_map(trace, fences, options, map_server, clock))
+        if events is None:
+            out_console.print("stopped before a page opened the map: no flight written")
+            return 0
+    else:
+        events = replay(trace, fences, options, clock, replay=True)
+        for e in events:
+            _echo(e, prefix="replay ")
     title = f"REPLAY of {trace.recorded}"
     _write_flight(out, records, trace, events, title, "replay", clock, replay=True)
     return 0
+
+
+async def _replay_on_map(trace, fences, options, address, clock):
+    """The replay in real time with its live map served at ``address``: it starts when a
+    page opens the map; the map stays up until Ctrl-C (or SIGTERM). The events, or None when
+    stopped before a page opened the map."""
+    from alphafence.monitor.live_replay import replay_live
+    from alphafence.monitor.livemap_server import open_live_map
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    say = lambda line: out_console.print(line, soft_wrap=True)  # noqa: E731
+    livemap, server = await open_live_map(fences, address, say)
+    try:
+        say("replay: starts when a page opens the live map; Ctrl-C to stop")
+        opened = asyncio.ensure_future(livemap.opened.wait())
+        stopping = asyncio.ensure_future(stop.wait())
+        await asyncio.wait({opened, stopping}, return_when=asyncio.FIRST_COMPLETED)
+        opened.cancel()
+        if stop.is_set():
+            return None
+        done = await replay_live(
+            trace,
+            fences,
+            options,
+            [livemap],
+            clock=clock,
+            stop=stop,
+            echo=lambda e: _echo(e, prefix="replay "),
+            replay=True,
+        )
+        say(
+            f"replay: {done.steps} positions checked ({done.coalesced} coalesced); the map stays "
+            "up until Ctrl-C"
+        )
+        await stopping
+        return done.events
+    finally:
+        await server.close()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
 
 
 def _write_flight(out, records, trace, events, title, what, clock, **fields):

@@ -107,6 +107,14 @@ def register(sub):
         "by default the monitor runs until Ctrl-C",
     )
     p.add_argument(
+        "--map-server",
+        metavar="HOST:PORT",
+        help="serve a live map of the flight (the vehicle, its predicted path, the fences "
+        "near it, its own fence, other aircraft, events) at http://HOST:PORT/; 127.0.0.1 is "
+        "this computer only, any other address needs the token printed at start; read-only "
+        "(needs aiohttp: the map extra)",
+    )
+    p.add_argument(
         "--onboard",
         choices=ONBOARD_MODES,
         default="watch",
@@ -230,6 +238,11 @@ def run(args) -> int:
         rolling=_rolling_options(args),
     )
     need(*monitor_wants(options))
+    if args.map_server:
+        from alphafence.monitor.livemap_server import parse_address
+
+        need(("aiohttp", "--map-server"))
+        parse_address(args.map_server)
     check_trust(args, args.fences)
     fences = FenceSet.from_geojson(args.fences)
     args.key = signing_key(args)
@@ -272,6 +285,14 @@ async def _run(args, fences, options) -> int:
         from alphafence.monitor.observe import UntilDisarmed
 
         observers.append(UntilDisarmed(stop))
+    server = None
+    if args.map_server:
+        from alphafence.monitor.livemap_server import open_live_map
+
+        livemap, server = await open_live_map(
+            fences, args.map_server, lambda line: out_console.print(line, soft_wrap=True)
+        )
+        observers.append(livemap)
     mode = "enforcing" if options.enforce else "alerting only"
     out_console.print(
         f"monitoring {len(fences.records)} fences ({mode}); event times in UTC from this "
@@ -294,6 +315,9 @@ async def _run(args, fences, options) -> int:
     except LinkError as exc:
         err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)
         return 3
+    finally:
+        if server is not None:
+            await server.close()
     out_console.print(
         f"stopped after {monitor.engine.checks} checks"
         + (f"; telemetry log {args.tlog}" if args.tlog else "")

@@ -58,6 +58,11 @@ class Observer:
     ...         self.positions += stream == "position"
     """
 
+    def on_engine(self, engine) -> None:
+        """The engine the observed monitor decides with, once, when the observer is added:
+        read what it holds (``engine.onboard``: the vehicle's fence; ``engine.options``),
+        never change it."""
+
     def on_value(self, stream: str, t: float, value) -> None:
         """A feed delivered ``value`` at ``t`` (``time.monotonic()``).
 

@@ -121,6 +121,8 @@ class Monitor:
             the order things happen (see :mod:`alphafence.monitor.observe`).
         """
         self.observers.append(observer)
+        if hasattr(observer, "on_engine"):
+            observer.on_engine(self.engine)
         self.log.add_listener(observer.on_event)
 
     def _feeds(self) -> dict:

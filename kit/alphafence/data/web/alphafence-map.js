@@ -161,7 +161,9 @@
       named[spec.name] = layer;
       overlays[esc(spec.name)] = layer;
     });
-    L.control.layers(null, overlays, {collapsed: false, position: "topright"}).addTo(map);
+    // kept on the map: a live page adds its own overlays to it (control.addOverlay)
+    map.afControl = L.control.layers(null, overlays, {collapsed: false, position: "topright"});
+    map.afControl.addTo(map);
     return named;
   }
 
