@@ -19,6 +19,7 @@ from bench import (
     cli_bench,
     compile_bench,
     link_bench,
+    livemap_bench,
     monitor_bench,
     monitor_cpu_bench,
     rolling_bench,
@@ -48,6 +49,7 @@ def main(argv=None) -> int:
             "compile",
             "upload",
             "monitor",
+            "map",
             "rolling",
             "route",
             "scale",
@@ -88,6 +90,8 @@ def main(argv=None) -> int:
         rows += monitor_bench.run(args.osm, build_bench.Row)
         rows += monitor_cpu_bench.run(args.osm, build_bench.Row)
         rows += link_bench.run(build_bench.Row)
+    if args.only in (None, "map"):
+        rows += livemap_bench.run(args.osm, build_bench.Row)
     if args.only in (None, "rolling"):
         rows += rolling_bench.overshoot(args.osm, build_bench.Row)
         rows += rolling_bench.in_flight(args.osm, build_bench.Row)

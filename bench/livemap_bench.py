@@ -1,0 +1,152 @@
+"""The live map's cost to the monitor: the monitor's CPU on SITL with the map served and a page
+connected, against the same monitor without the map, at 10 and 50 Hz telemetry.
+
+Runs the real monitor (the link the kit chooses, telemetry tasks, checker) against one SITL at
+speedup 1 over the Malta fences, as ``monitor_cpu_bench`` does, three ways: without the map;
+with the map served (``LiveMap`` observing, aiohttp on the monitor's loop) and no page; and
+with one page connected: a WebSocket client in a process of its own, reading every message
+(so its CPU is not counted). The figure is this process's CPU time (all its threads) against
+wall time, the least of :data:`WINDOWS` windows of :data:`SECONDS`; the page's messages are
+counted to show it was fed. Target: no check lost to the map (checks/s within 10 % of the
+rate, each way); the ratio to the monitor without the map is reported (no target: at 10 Hz
+the monitor alone is a fraction of a percent of a core).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import subprocess
+import sys
+import time
+
+from alphafence.sitl.find import find_sitl_binary
+
+SECONDS = 6.0
+WINDOWS = 2
+SETTLE_S = 3.0
+RATES = (10.0, 50.0)
+WAYS = ("no map", "map, no page", "map + 1 page")
+
+PAGE = """
+import asyncio, sys, aiohttp
+async def main():
+    n = 0
+    async with aiohttp.ClientSession() as s:
+        async with s.ws_connect(sys.argv[1]) as ws:
+            print("open", flush=True)
+            async for m in ws:
+                n += 1
+                if n % 50 == 0:
+                    print(n, flush=True)
+asyncio.run(main())
+"""
+
+
+async def _measure_one(url, fences, hz, way):
+    from alphafence.monitor.eventlog import EventLog
+    from alphafence.monitor.observe import Observer
+    from alphafence.monitor.options import MonitorOptions
+    from alphafence.monitor.runner import Monitor
+    from alphafence.vehicle.link import open_vehicle
+
+    class Checks(Observer):
+        """Counts the positions the monitor checks against the fences."""
+
+        n = 0
+
+        def on_step(self, step):
+            self.n += step.checked
+
+    checks = Checks()
+    observers, server, page = [checks], None, None
+    if way != "no map":
+        from alphafence.monitor.livemap import LiveMap
+        from alphafence.monitor.livemap_server import start_map_server
+
+        livemap = LiveMap(fences)
+        observers.append(livemap)
+        server = await start_map_server(livemap, "127.0.0.1", 0)
+    async with open_vehicle(url) as vehicle:
+        monitor = Monitor(
+            vehicle, fences, MonitorOptions(), EventLog(None), rate_hz=hz, observers=observers
+        )
+        stop = asyncio.Event()
+        task = asyncio.create_task(monitor.run(stop))
+        if way == "map + 1 page":
+            page = subprocess.Popen(
+                [sys.executable, "-c", PAGE, f"ws://127.0.0.1:{server.port}/ws"],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            await asyncio.to_thread(page.stdout.readline)  # open
+        await asyncio.sleep(SETTLE_S)
+        best = None
+        for _ in range(WINDOWS):
+            c0, w0, n0 = time.process_time(), time.perf_counter(), checks.n
+            await asyncio.sleep(SECONDS)
+            cpu, wall, n = time.process_time() - c0, time.perf_counter() - w0, checks.n - n0
+            if best is None or cpu / wall < best[0]:
+                best = (cpu / wall, n / wall)
+        stop.set()
+        await task
+    received = 0
+    if page is not None:
+        page.terminate()
+        out = page.communicate(timeout=10)[0].split()
+        received = int(out[-1]) if out and out[-1].isdigit() else 0
+    if server is not None:
+        await server.close()
+    return (*best, received)
+
+
+async def _measure(osm):
+    from alphafence.build.pipeline import BuildOptions, build_fences
+    from alphafence.formats.database import read_database
+    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.formats.rules import load_rules
+    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.sitl import launch_sitl
+
+    rules = load_rules()
+    result = build_fences(read_database([osm], rules).features, rules, BuildOptions())
+    fences = FenceSet(
+        [
+            FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m, name=f.name, category=f.category)
+            for f in result.fences
+        ]
+    )
+    out = {}
+    async with launch_sitl(home="malta_airport", speedup=1) as sitl:
+        for hz in RATES:
+            for way in WAYS:
+                out[hz, way] = await _measure_one(sitl.connection_url, fences, hz, way)
+    return out, len(fences.records)
+
+
+def run(osm, Row):
+    """The rows: the monitor's CPU each way at each rate, the page's against none."""
+    try:
+        import aiohttp  # noqa: F401
+    except ImportError:
+        return [Row("live map CPU", "skipped: no aiohttp (the map extra)", "-", "-", "-", True)]
+    if find_sitl_binary() is None:
+        return [Row("live map CPU", "skipped: no SITL binary", "-", "-", "-", True)]
+    got, n = asyncio.run(_measure(osm))
+    rows = []
+    for hz in RATES:
+        base = got[hz, "no map"][0]
+        for way in WAYS:
+            share, rate, received = got[hz, way]
+            ratio = share / base if base > 0 else float("inf")
+            fed = f", page got {received} messages" if way == "map + 1 page" else ""
+            rows.append(
+                Row(
+                    f"monitor CPU on SITL, {hz:g} Hz, {n} Malta fences: {way}",
+                    f"{100 * share:.2f} % of a core, {rate:.0f} checks/s{fed}",
+                    f">= {0.9 * hz:g} checks/s",
+                    "-" if way == "no map" else f"no map {100 * base:.2f} %",
+                    "-" if way == "no map" else f"{ratio:.2f}x",
+                    rate >= 0.9 * hz,
+                )
+            )
+    return rows
