@@ -181,3 +181,75 @@ async def test_a_page_gets_the_vehicle_fences_near_it_its_own_fence_and_the_even
     assert len(onboard["geojson"]["features"]) == sum(
         n for n in [e for e in done.events if e["event"] == "onboard_fence"][0]["fences"].values()
     )
+
+
+async def test_a_page_gets_other_aircraft_in_their_cylinders_and_each_new_onboard_fence(
+    demo_fences,
+):
+    from alphafence.monitor.engine import Engine
+    from alphafence.monitor.observe import Step
+    from alphafence.monitor.predict import dynamic_radius
+
+    trace = Trace.read(trace_path())
+    engine = Engine(demo_fences, speedup_options(trace.speedup))
+    livemap = LiveMap(demo_fences)
+    livemap.on_engine(engine)
+    got = []
+
+    async def send(text):
+        got.append(json.loads(text))
+
+    page = livemap.connect()
+    serving = asyncio.ensure_future(livemap.serve(page, send))
+    try:
+        # an aircraft 300 m north of the vehicle flying south at 20 m/s, head on
+        s = trace.samples[-1]
+        x, y = demo_fences.frame.to_local(s.lon, s.lat)
+        lon, lat = (float(v) for v in demo_fences.frame.to_wgs84(float(x), float(y) + 300.0))
+        report = dict(key="4ca123", lat=lat, lon=lon, alt_amsl_m=s.alt_amsl_m, ve=0.0, vn=-20.0,
+                      callsign="TEST1")  # fmt: skip
+        engine.aircraft(t=s.t, **report)
+        livemap.on_value("adsb", s.t, report)
+        events = engine.step(s)
+        livemap.on_step(Step(s, s.t, True, engine.sm.level, tuple(events)))
+        for e in events:
+            livemap.on_event(e)
+        assert "traffic_conflict" in [e["event"] for e in events]
+        await _until(lambda: any(m["type"] == "traffic" and m["aircraft"] for m in got), "traffic")
+        (a,) = [m for m in got if m["type"] == "traffic" and m["aircraft"]][-1]["aircraft"]
+        closing = 20.0 + s.vn  # it flies south at 20 m/s, the vehicle north at s.vn
+        assert a["callsign"] == "TEST1" and a["conflict"] is True
+        assert a["radius_m"] == pytest.approx(
+            dynamic_radius(150.0, closing, 2.0), abs=abs(s.ve) * 2.0 + 0.1
+        )
+        # a new fence on the vehicle (a rolling upload's): the page gets it as it is loaded
+        items = trace.onboard_items[:12]  # its first polygon alone
+        for e in engine.load_onboard(items, t=s.t, cause="upload"):
+            livemap.on_event(e)
+        await _until(
+            lambda: any(m["type"] == "onboard" and m["cause"] == "upload" for m in got), "upload"
+        )
+        onboard = [m for m in got if m["type"] == "onboard"][-1]
+        assert onboard["items"] == 12 and len(onboard["geojson"]["features"]) == 1
+    finally:
+        serving.cancel()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["monitor", "--connect", "udpin://127.0.0.1:14550", "--allow-unsigned"],
+        ["demo", "--replay"],
+    ],
+)
+def test_a_bad_map_address_is_one_line_before_anything_runs(argv, tmp_path, capsys):
+    from alphafence.cli import main
+
+    fences = tmp_path / "fences.geojson"
+    fences.write_text('{"type": "FeatureCollection", "features": []}')
+    extra = ["--fences", str(fences)] if argv[0] == "monitor" else ["-o", str(tmp_path / "o")]
+    assert main([*argv, *extra, "--map-server", "127.0.0.1:http"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"alphafence {argv[0]}: error: --map-server 127.0.0.1:http: give HOST:PORT "
+                   "(a port 0-65535; 0 picks a free one)"]  # fmt: skip
+    assert not (tmp_path / "o").exists()
