@@ -253,3 +253,58 @@ def test_a_bad_map_address_is_one_line_before_anything_runs(argv, tmp_path, caps
     assert err == [f"alphafence {argv[0]}: error: --map-server 127.0.0.1:http: give HOST:PORT "
                    "(a port 0-65535; 0 picks a free one)"]  # fmt: skip
     assert not (tmp_path / "o").exists()
+
+
+async def test_the_monitors_live_map_follows_its_checks_and_events():
+    from types import SimpleNamespace
+
+    from alphafence.monitor.eventlog import EventLog
+    from alphafence.monitor.options import MonitorOptions
+    from alphafence.monitor.runner import Monitor
+    from tests.test_monitor_observer import NORTH, Action, Recorder, Telemetry, fences
+
+    recorder = Recorder()
+    telemetry = Telemetry(recorder)
+    vehicle = SimpleNamespace(telemetry=telemetry, action=Action(), system=None)
+    watched = fences()
+    livemap = LiveMap(watched)
+    log = EventLog(None)
+    monitor = Monitor(vehicle, watched, MonitorOptions(), log, observers=[recorder, livemap])
+    monitor.feeds.pop("adsb")  # no MAVSDK system behind the stub: no ADS-B
+
+    async def alert(text, event):
+        pass
+
+    monitor.commands.alert = alert
+    assert livemap.engine is monitor.engine  # told of the engine when added
+    server = await start_map_server(livemap, "127.0.0.1", 0)
+    got = []
+
+    async def page():
+        async with aiohttp.ClientSession() as s:
+            async with s.ws_connect(server.url + "ws") as ws:
+                async for m in ws:
+                    got.append(json.loads(m.data))
+
+    reader = asyncio.ensure_future(page())
+    stop = asyncio.Event()
+    try:
+        await _until(lambda: livemap.clients, "the page connected")
+        task = asyncio.create_task(monitor.run(stop))
+        await asyncio.wait_for(telemetry.done.wait(), DEADLINE_S)
+        await _until(
+            lambda: sum(m["type"] == "event" for m in got) == len(log.events), "every event"
+        )
+        await _until(
+            lambda: any(m["type"] == "vehicle" and m["checks"] == len(NORTH) for m in got),
+            "the last position",
+        )
+        stop.set()
+        await asyncio.wait_for(task, 5)
+    finally:
+        reader.cancel()
+        await server.close()
+    assert livemap.steps == monitor.engine.checks == len(NORTH)
+    assert [m["event"] for m in got if m["type"] == "event"] == list(log.events)
+    levels = [m["level"] for m in got if m["type"] == "vehicle"]
+    assert levels[0] == "CLEAR" and levels[-1] == "BREACH"
