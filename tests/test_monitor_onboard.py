@@ -231,7 +231,7 @@ def test_the_cli_passes_the_onboard_mode(tmp_path, monkeypatch, capsys):
         seen.append(options.onboard)
         return SimpleNamespace(engine=SimpleNamespace(checks=0))
 
-    monkeypatch.setattr("alphafence.monitor.runner.run_monitor", run_monitor)
+    monkeypatch.setattr("alphafence.monitor.run.run_monitor", run_monitor)
     feature = {
         "type": "Feature",
         "properties": {"site_id": "hospital/way/7", "kind": "keep_out"},

@@ -8,7 +8,7 @@ import shapely
 
 from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor import runner
+from alphafence.monitor import run, runner
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
 from tests.helpers import until
@@ -39,7 +39,7 @@ async def test_monitor_sees_a_vehicle_parked_in_a_keep_out_zone(sitl, tmp_path, 
             super().__init__(*args, **kwargs)
             made.append(self)
 
-    monkeypatch.setattr(runner, "Monitor", Counted)
+    monkeypatch.setattr(run, "Monitor", Counted)
 
     def echo(event):
         if event["event"] == "level" and event["level"] == "BREACH":
@@ -47,7 +47,7 @@ async def test_monitor_sees_a_vehicle_parked_in_a_keep_out_zone(sitl, tmp_path, 
 
     options = MonitorOptions(enforce=False, mavlink_traffic=True)
     task = asyncio.create_task(
-        runner.run_monitor(sitl.connection_url, fences, options, log, stop, echo=echo)
+        run.run_monitor(sitl.connection_url, fences, options, log, stop, echo=echo)
     )
     # however long connecting takes on a busy host; then positions go on being checked at the
     # telemetry rate: ten more after the breach
