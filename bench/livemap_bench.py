@@ -100,21 +100,10 @@ async def _measure_one(url, fences, hz, way):
 
 
 async def _measure(osm):
-    from alphafence.build.pipeline import BuildOptions, build_fences
-    from alphafence.formats.database import read_database
-    from alphafence.formats.fence_geojson import FenceRecord
-    from alphafence.formats.rules import load_rules
-    from alphafence.monitor.fenceset import FenceSet
     from alphafence.sitl import launch_sitl
+    from bench.monitor_cpu_bench import malta_fences
 
-    rules = load_rules()
-    result = build_fences(read_database([osm], rules).features, rules, BuildOptions())
-    fences = FenceSet(
-        [
-            FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m, name=f.name, category=f.category)
-            for f in result.fences
-        ]
-    )
+    fences = malta_fences(osm)
     out = {}
     async with launch_sitl(home="malta_airport", speedup=1) as sitl:
         for hz in RATES:

@@ -60,19 +60,28 @@ async def _measure_one(url, fences, link, hz):
     return best
 
 
-async def _measure(osm, links):
+def malta_fences(osm):
+    """The fences built from ``osm`` as the monitor loads them (with names, as a map shows)."""
     from alphafence.build.pipeline import BuildOptions, build_fences
     from alphafence.formats.database import read_database
     from alphafence.formats.fence_geojson import FenceRecord
     from alphafence.formats.rules import load_rules
     from alphafence.monitor.fenceset import FenceSet
-    from alphafence.sitl import launch_sitl
 
     rules = load_rules()
     result = build_fences(read_database([osm], rules).features, rules, BuildOptions())
-    fences = FenceSet(
-        [FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m) for f in result.fences]
+    return FenceSet(
+        [
+            FenceRecord(f.site_id, f.kind, f.geometry, f.margin_m, name=f.name, category=f.category)
+            for f in result.fences
+        ]
     )
+
+
+async def _measure(osm, links):
+    from alphafence.sitl import launch_sitl
+
+    fences = malta_fences(osm)
     out = {}
     async with launch_sitl(home="malta_airport", speedup=1) as sitl:
         for link in links:
