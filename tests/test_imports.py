@@ -200,3 +200,17 @@ def test_the_companion_verbs_run_on_pymavlink_alone(fences, tmp_path, verb):
     assert "no autopilot answered" in err
     assert "pymavlink" in modules
     assert not _loaded(modules, ("osmium", "scipy", "matplotlib", "mavsdk"))
+
+
+def test_a_build_of_malta_loads_no_other_verb_nor_what_it_does_not_use(malta, tmp_path):
+    """A whole build of Malta (alpha fences, no figure or map): no other verb's module, no
+    vehicle link or event loop, no matplotlib; and none of scipy's modules (only its package,
+    checked for as the build needs it), as Malta's regions are small enough to group without
+    scipy.sparse and its sites' fences need no triangulation."""
+    code, modules, err = _run(["build", str(malta), "-o", str(tmp_path / "f.geojson"), "-q"])
+    assert code == 0, err
+    others = [f"alphafence.cli.{v.replace('-', '_')}" for v in VERBS if v != "build"]
+    assert _loaded(modules, others) == []
+    assert _loaded(modules, ["asyncio", "matplotlib", "pymavlink", "alphafence.vehicle"]) == []
+    assert _loaded(modules, ["scipy.sparse", "scipy.spatial", "scipy.linalg"]) == []
+    assert (tmp_path / "f.geojson").stat().st_size > 0

@@ -195,3 +195,24 @@ def test_small_graph_components_are_scipys(n, edges):
     b = np.array([e[1] % n for e in edges], dtype=np.int64)
     graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
     assert _components(n, a, b).tolist() == connected_components(graph, directed=False)[1].tolist()
+
+
+@settings(max_examples=20, deadline=None)
+@given(n=st.integers(1000, 4096), seed=st.integers(0, 2**32 - 1), chords=st.integers(0, 50))
+def test_long_path_components_are_scipys(n, seed, chords):
+    """Graphs as large as the ones found without scipy, at their longest: a path through
+    the nodes in a random order, cut in places, with a few chords."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    from alphafence.build.regions import SMALL_GRAPH
+    from alphafence.build.sites import _components
+
+    rng = np.random.default_rng(seed)
+    n = min(n, SMALL_GRAPH)
+    order = rng.permutation(n)
+    keep = rng.random(n - 1) > 0.01
+    a = np.concatenate([order[:-1][keep], rng.integers(0, n, chords)])
+    b = np.concatenate([order[1:][keep], rng.integers(0, n, chords)])
+    graph = coo_array((np.ones(len(a)), (a, b)), shape=(n, n))
+    assert _components(n, a, b).tolist() == connected_components(graph, directed=False)[1].tolist()

@@ -10,13 +10,16 @@ import shapely
 
 M_PER_DEG_LAT = 110_574.0
 M_PER_DEG_LON = 111_320.0
-SMALL_GRAPH = 64  # components of graphs this small are found without scipy
+# components of graphs this small are found without scipy: a country's regions have a few
+# hundred features at most, and importing scipy.sparse.csgraph costs more (0.15 s) than
+# Malta's whole grouping
+SMALL_GRAPH = 4096
 
 
 def _components(n, a, b):
     """Connected-component labels of n nodes joined by edges a-b, numbered in the order of
     each component's smallest node (as scipy numbers them)."""
-    if n <= SMALL_GRAPH:  # most regions: a few features; scipy's sparse set-up costs more
+    if n <= SMALL_GRAPH:  # each round at least halves a path's span: a few dozen rounds
         labels = np.arange(n)
         while True:  # every node takes its neighbours' least label, then its label's label
             new = labels.copy()

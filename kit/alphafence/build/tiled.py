@@ -1,6 +1,6 @@
 """The build at country scale: stream the database, spool its restricted features, plan tile
-jobs, fence them on every core (or a Dask cluster) and hand each job's fences to the writers
-as it completes, in a fixed order.
+jobs, fence them on every core when the database is large enough to pay for the workers (or on
+a Dask cluster) and hand each job's fences to the writers as it completes, in a fixed order.
 
 Memory holds the features' extents (some 60 bytes each), a few tile jobs in flight and the
 writers' buffers; never the country's fences. The fences are exactly the untiled build's
@@ -26,6 +26,7 @@ from alphafence.formats.geojson_stream import BATCH
 from alphafence.mavlink.items import MAX_POLYGON_VERTICES
 
 WARM_POOL_BYTES = 32 * 2**20  # databases larger than this start the workers before reading
+AUTO_FEATURES = 5_000  # fewer restricted features than this are fenced in one process by default
 READ_BATCH = BATCH  # records per chunk of a text sequence read in the workers
 
 
@@ -35,6 +36,37 @@ def default_jobs() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
         return os.cpu_count() or 1
+
+
+def auto_jobs(features: int, nbytes: int, cores: int | None = None) -> int:
+    """The worker processes a build uses when not told (``--jobs auto``): every core for a
+    database over :data:`WARM_POOL_BYTES` (32 MiB) or with at least :data:`AUTO_FEATURES`
+    (5,000) restricted features, else one (this process). Starting a pool costs each worker
+    the imports of the fencing code (half a second on a busy core), more than fencing a
+    few thousand features takes; the fences are the same either way.
+
+    Parameters
+    ----------
+    features : int
+        Restricted features read.
+    nbytes : int
+        Size of the database's files.
+    cores : int, optional
+        Cores to use (default :func:`default_jobs`).
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> auto_jobs(432, 3_861_052, cores=2), auto_jobs(13_300, 9_000_000, cores=2)
+    (1, 2)
+    >>> auto_jobs(10, 40 * 2**20, cores=4)
+    4
+    """
+    cores = default_jobs() if cores is None else cores
+    return cores if features >= AUTO_FEATURES or nbytes > WARM_POOL_BYTES else 1
 
 
 def job_size(features: int) -> int:
@@ -182,7 +214,8 @@ def build_tiled(
     writers : sequence
         Output writers: ``encode`` runs where the job runs, ``write`` here, job by job.
     jobs : int, optional
-        Worker processes (default: every core; 1 = this process).
+        Worker processes (default :func:`auto_jobs`, chosen by the database's size; 1 = this
+        process).
     dask : str, optional
         A Dask scheduler's address: run the jobs there instead.
     keep : bool
@@ -213,13 +246,15 @@ def build_tiled(
     >>> result.features, result.sites, result.stats.fences
     (16, 11, 19)
     """
-    jobs = default_jobs() if jobs is None else max(1, int(jobs))
+    auto = jobs is None and not dask
+    nbytes = _input_bytes(stream.paths)
+    jobs = auto_jobs(0, nbytes) if auto else default_jobs() if jobs is None else max(1, int(jobs))
     result = TiledResult(site_kinds=Counter(), fences=[] if keep else None)
     result.site_objects = [] if keep else None
     t0 = time.perf_counter()
     with ExitStack() as stack:
         pool = None
-        if not dask and jobs > 1 and _input_bytes(stream.paths) > WARM_POOL_BYTES:
+        if not dask and jobs > 1 and nbytes > WARM_POOL_BYTES:
             pool = start_pool(jobs)  # its imports overlap the reading
             stack.callback(pool.shutdown, wait=False, cancel_futures=True)
         with Spool(spool_dir) as spool:
@@ -234,6 +269,8 @@ def build_tiled(
                 if progress is not None:
                     progress("reading", stream.count, None)
             result.features = len(spool)
+            if auto and pool is None:  # the database is small: as many features as it has
+                jobs = auto_jobs(result.features, nbytes)
             if target is None:
                 target = job_size(result.features)
             plan = plan_jobs(

@@ -45,8 +45,14 @@ the workflow:
 AlphaFence checkout (browse them with 'mkdocs serve')."""
 
 
-def parser():
+def parser(verb=None):
     """The ``alphafence`` argument parser, with one sub-parser per verb in :data:`VERBS`.
+
+    Parameters
+    ----------
+    verb : str, optional
+        Register only this verb's sub-parser (when it is one of :data:`VERBS`): a run of one
+        verb imports no other verb's modules.
 
     Returns
     -------
@@ -75,8 +81,8 @@ def parser():
     )
     p.add_argument("--version", action="version", version=f"alphafence {__version__}")
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True)
-    for verb in VERBS:
-        importlib.import_module(f"alphafence.cli.{verb.replace('-', '_')}").register(sub)
+    for name in (verb,) if verb in VERBS else VERBS:
+        importlib.import_module(f"alphafence.cli.{name.replace('-', '_')}").register(sub)
     return p
 
 
@@ -105,7 +111,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = None
     try:
-        args = parser().parse_args(argv)
+        args = parser(_verb(argv)).parse_args(argv)
         return int(args.func(args) or 0)
     except AlphaFenceError as exc:
         verb = args.verb if args is not None else _verb(argv)

@@ -59,9 +59,12 @@ def register(sub):
     )
     p.add_argument(
         "--jobs",
-        type=at_least("--jobs", 1),
+        type=jobs_count,
+        default="auto",
         metavar="N",
-        help="worker processes fencing tiles (default: every core; 1 = this process)",
+        help="worker processes fencing tiles; auto: every core for a database of 5,000 "
+        "restricted features or more (or over 32 MiB of files), else 1 (this process), as "
+        "starting workers costs more than fencing fewer",
     )
     p.add_argument(
         "--dask",
@@ -85,6 +88,18 @@ def register(sub):
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run)
+
+
+def jobs_count(text: str):
+    """argparse type of ``--jobs``: ``auto`` (None: chosen by the database's size, see
+    :func:`alphafence.build.tiled.auto_jobs`) or an integer of at least 1.
+
+    Examples
+    --------
+    >>> jobs_count("auto"), jobs_count("3")
+    (None, 3)
+    """
+    return None if text.strip().lower() == "auto" else at_least("--jobs", 1)(text)
 
 
 def run(args) -> int:
