@@ -3,11 +3,22 @@
 python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf
 python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf --only soak  # 30 min (make soak)
 python -m bench --osm ../shared/data/osm/malta-2018-08-27.osm.pbf --only scale --scale-sizes 13300
+
+Besides the table, the rows are written as JSON to ``--out``/results.json (default
+``bench-out/``): ``{"created", "argv", "cores", "loadavg": [at start, at end], "rows": [...]}``,
+each row ``{"group", "name", "result", "value", "unit", "target", "peer", "peer_value",
+"ratio", "ok"}`` (``value`` and ``peer_value`` numbers in ``unit``, or null where a row has
+none; ``ratio`` as the table shows it, null for "-").
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import datetime
+import json
+import math
+import os
 import sys
 
 from rich.console import Console
@@ -58,6 +69,12 @@ def main(argv=None) -> int:
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
     )
     p.add_argument(
+        "--out",
+        default="bench-out",
+        metavar="DIR",
+        help="folder of results.json, the rows as JSON (default bench-out)",
+    )
+    p.add_argument(
         "--soak-minutes",
         type=float,
         default=30.0,
@@ -74,44 +91,54 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     console = Console(width=150)
     rows = []
+    load_start = _loadavg()
+
+    def take(group, new):
+        for r in new:
+            r.group = r.group or group
+        rows.extend(new)
+
     if args.only in (None, "as-read"):
-        rows += as_read_bench.run(build_bench.Row)
+        take("as-read", as_read_bench.run(build_bench.Row))
     if args.only in (None, "build"):
-        rows += build_bench.run(args.osm, args.optimize_sites, console)
+        take("build", build_bench.run(args.osm, args.optimize_sites, console))
     if args.only in (None, "cli"):
-        rows += cli_bench.run(build_bench.Row)
+        take("cli", cli_bench.run(build_bench.Row, args.osm))
     if args.only in (None, "compile"):
-        rows += compile_bench.run(args.osm, build_bench.Row)
-        rows += compile_bench.navio2(args.osm, build_bench.Row)
-        rows += compile_bench.corridor(args.osm, build_bench.Row)
+        take("compile", compile_bench.run(args.osm, build_bench.Row))
+        take("compile", compile_bench.navio2(args.osm, build_bench.Row))
+        take("compile", compile_bench.corridor(args.osm, build_bench.Row))
     if args.only in (None, "upload"):
-        rows += upload_bench.run(build_bench.Row)
+        take("upload", upload_bench.run(build_bench.Row))
     if args.only in (None, "monitor"):
-        rows += monitor_bench.run(args.osm, build_bench.Row)
-        rows += monitor_cpu_bench.run(args.osm, build_bench.Row)
-        rows += link_bench.run(build_bench.Row)
+        take("monitor", monitor_bench.run(args.osm, build_bench.Row))
+        take("monitor_cpu", monitor_cpu_bench.run(args.osm, build_bench.Row))
+        take("link", link_bench.run(build_bench.Row))
     if args.only in (None, "map"):
-        rows += livemap_bench.run(args.osm, build_bench.Row)
+        take("map", livemap_bench.run(args.osm, build_bench.Row))
     if args.only in (None, "rolling"):
-        rows += rolling_bench.overshoot(args.osm, build_bench.Row)
-        rows += rolling_bench.in_flight(args.osm, build_bench.Row)
+        take("rolling", rolling_bench.overshoot(args.osm, build_bench.Row))
+        take("rolling", rolling_bench.in_flight(args.osm, build_bench.Row))
     if args.only in (None, "route"):
-        rows += route_bench.run(args.osm, build_bench.Row)
-        rows += route_national_bench.run(build_bench.Row)
+        take("route", route_bench.run(args.osm, build_bench.Row))
+        take("route", route_national_bench.run(build_bench.Row))
     if args.only in (None, "scale"):
-        rows += scale_bench.run(args.osm, build_bench.Row, console, args.scale_sizes)
+        take("scale", scale_bench.run(args.osm, build_bench.Row, console, args.scale_sizes))
     if args.only == "soak":
-        rows += soak_bench.run(args.osm, build_bench.Row, args.soak_minutes, console)
+        take("soak", soak_bench.run(args.osm, build_bench.Row, args.soak_minutes, console))
     elif args.only is None:  # too long for the default run
-        rows.append(
-            build_bench.Row(
-                "soak: monitor on SITL x10 with ADS-B, 30 min",
-                "not run: `make soak`",
-                "no missed check, 0 exceptions, < 20 MB",
-                "-",
-                "-",
-                True,
-            )
+        take(
+            "soak",
+            [
+                build_bench.Row(
+                    "soak: monitor on SITL x10 with ADS-B, 30 min",
+                    "not run: `make soak`",
+                    "no missed check, 0 exceptions, < 20 MB",
+                    "-",
+                    "-",
+                    True,
+                )
+            ],
         )
     table = Table(title="AlphaFence benchmarks (this machine, one run)")
     for col in ("benchmark", "result", "target", "peer", "ratio", "ok"):
@@ -123,7 +150,63 @@ def main(argv=None) -> int:
             r.name, r.result, r.target, r.peer, r.ratio, "[green]yes[/]" if r.ok else "[red]NO[/]"
         )
     console.print(table)
+    path = write_results(args.out, rows, argv, load_start)
+    console.print(f"rows written to {path}")
     return 1 if failed else 0
+
+
+def _loadavg():
+    try:
+        return list(os.getloadavg())
+    except OSError:
+        return None
+
+
+def _number(x):
+    """A finite float, or None (JSON has no NaN or infinity)."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def results(rows, argv=None, load_start=None) -> dict:
+    """The rows as the JSON document ``results.json`` holds (see the module's docstring)."""
+    out = []
+    for r in rows:
+        row = dataclasses.asdict(r)
+        ratio = row["ratio"]
+        out.append(
+            {
+                "group": row["group"],
+                "name": row["name"],
+                "result": row["result"],
+                "value": _number(row["value"]),
+                "unit": row["unit"] or None,
+                "target": row["target"],
+                "peer": None if row["peer"] == "-" else row["peer"],
+                "peer_value": _number(row["peer_value"]),
+                "ratio": None if ratio == "-" else ratio,
+                "ok": bool(row["ok"]),
+            }
+        )
+    return {
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "argv": list(sys.argv[1:] if argv is None else argv),
+        "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "loadavg": [load_start, _loadavg()],
+        "rows": out,
+    }
+
+
+def write_results(folder, rows, argv=None, load_start=None):
+    """Write ``folder``/results.json atomically (all of it or nothing); returns its path."""
+    from alphafence.formats.atomic import write_all
+
+    path = os.path.join(folder, "results.json")
+    doc = results(rows, argv, load_start)
+    write_all({path: json.dumps(doc, indent=1, allow_nan=False) + "\n"})
+    return path
 
 
 if __name__ == "__main__":

@@ -22,12 +22,22 @@ FIXED_ALPHA_M = 60.0
 
 @dataclass
 class Row:
+    """One result: the strings the table shows, and optionally the number behind them.
+
+    ``value`` (in ``unit``) and ``peer_value`` (the peer's, in the same unit) are for scripts
+    reading ``bench-out/results.json``; ``group`` is set by ``python -m bench`` per group.
+    """
+
     name: str
     result: str
     target: str
     peer: str
     ratio: str
     ok: bool
+    value: float | None = None
+    unit: str = ""
+    peer_value: float | None = None
+    group: str = ""
 
 
 def best_of(fn, repeat=3):
@@ -88,6 +98,8 @@ def run(osm, optimize_sites, console):
             "-",
             "-",
             t_read < 1.5,
+            value=t_read,
+            unit="s",
         )
     )
 
@@ -100,6 +112,8 @@ def run(osm, optimize_sites, console):
             "-",
             "-",
             t_fence < 0.5,
+            value=t_fence,
+            unit="s",
         )
     )
 
@@ -125,6 +139,9 @@ def run(osm, optimize_sites, console):
             f"alphashape {1e3 * t_peer:.0f} ms",
             f"{ratio:.1f}x",
             ratio >= 3,
+            value=t_ours,
+            unit="s",
+            peer_value=t_peer,
         )
     )
 
@@ -143,6 +160,9 @@ def run(osm, optimize_sites, console):
             f"optimizealpha {1e3 * t_opt / len(chosen):.0f} ms/site",
             f"{ratio:.0f}x",
             ratio >= 100,
+            value=t_auto / len(chosen),
+            unit="s/site",
+            peer_value=t_opt / len(chosen),
         )
     )
 
@@ -162,6 +182,9 @@ def run(osm, optimize_sites, console):
                 f"polygon {(p.overshoot if margin == 0.0 else p.excess):.3f}",
                 f"{100 * over:.0f}%",
                 over <= 0.40,
+                value=a.overshoot if margin == 0.0 else a.excess,
+                unit="of the restricted area",
+                peer_value=p.overshoot if margin == 0.0 else p.excess,
             )
         )
         rows.append(
@@ -172,6 +195,8 @@ def run(osm, optimize_sites, console):
                 "-",
                 "-",
                 abs(a.containment_pct - 100) < 1e-6,
+                value=a.containment_pct,
+                unit="%",
             )
         )
         rows.append(
@@ -182,6 +207,9 @@ def run(osm, optimize_sites, console):
                 f"polygon {p.vertices_p95:.0f}",
                 "-",
                 a.vertices_p95 <= 32,
+                value=float(a.vertices_p95),
+                unit="vertices",
+                peer_value=float(p.vertices_p95),
             )
         )
     return rows

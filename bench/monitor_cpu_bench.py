@@ -119,6 +119,9 @@ def run(osm, Row):
                     "-" if is_peer or peer is None else f"mavsdk {100 * peer[0]:.2f} %",
                     "-" if is_peer or peer is None else f"{share / peer[0]:.2f}x",
                     (link != chosen or share < TARGETS[hz]) and rate >= 0.8 * hz,
+                    value=100 * share,
+                    unit="% of a core",
+                    peer_value=None if is_peer or peer is None else 100 * peer[0],
                 )
             )
     return rows
