@@ -21,6 +21,7 @@ import numpy as np
 import shapely
 
 from alphafence.geo.frame import LocalFrame
+from alphafence.monitor.fencegrid import FenceGrid, first_hit
 
 KEEP_OUT, WARNING, KEEP_IN = 0, 1, 2
 KIND_CODES = {"keep_out": KEEP_OUT, "warning": WARNING, "keep_in": KEEP_IN}
@@ -151,6 +152,7 @@ class FenceSet:
         self._timed_keep_out = [k for k in self.timed if self.kind[k] == KEEP_OUT]
         self._keep_in = [int(k) for k in np.flatnonzero(self.kind == KEEP_IN)]
         self._keep_out_all = np.flatnonzero(self.kind == KEEP_OUT)
+        self._grid = None  # built at the first check
 
     def recentre(self, lon, lat):
         """A new frame centred on ``(lon, lat)``, and the index rebuilt in it."""
@@ -276,7 +278,13 @@ class FenceSet:
         from the ground up). The common case (nowhere near a fence) costs three STRtree
         look-ups in C."""
         p = shapely.Point(x, y)
-        inside = self.tree.query(p, predicate="intersects")
+        if self._grid is None:
+            self._grid = FenceGrid(self.local, *self._by_kind[KEEP_OUT])
+        cell = self._grid.cell(x, y)  # -1 outside the grid: the STRtree answers
+        if cell >= 0:
+            inside = self._grid.inside(self.local, cell, x, y)
+        else:
+            inside = np.sort(self.tree.query(p, predicate="intersects"))
         inside_out, inside_warn, inside_in = [], [], set()
         if inside.size:
             inside = inside[self._in_alt(inside, alt)]
@@ -288,15 +296,18 @@ class FenceSet:
         nearest = None
         ahead = None
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
-        if ko_tree is not None:
-            j, d = ko_tree.query_nearest(p, return_distance=True, all_matches=False)
-            if j.size:
-                k = int(ko_idx[j[0]])
+        if ko_tree is not None and cell >= 0:
+            k, d = self._grid.nearest(self.local, cell, p)
+            nearest = Hit(k, d, d == 0.0)
+        elif ko_tree is not None:
+            j, d = ko_tree.query_nearest(p, return_distance=True, all_matches=True)
+            if j.size:  # the lowest index among equals
+                k = int(ko_idx[j].min())
                 nearest = Hit(k, float(d[0]), float(d[0]) == 0.0)
         for k in self._timed_keep_out:
             if self.active[k]:
                 d = float(shapely.distance(p, self.local[k]))
-                if nearest is None or d < nearest.distance_m:
+                if nearest is None or (d, k) < (nearest.distance_m, nearest.index):
                     nearest = Hit(k, d, d == 0.0)
         any_m = math.inf if nearest is None else nearest.distance_m
         banded = not math.isinf(vertical_m)
@@ -326,7 +337,7 @@ class FenceSet:
             if math.isinf(r):
                 cand = np.flatnonzero(ok)
             else:  # every fence within r of p has its envelope in this square
-                cand = self.tree.query(shapely.box(p.x - r, p.y - r, p.x + r, p.y + r))
+                cand = np.sort(self.tree.query(shapely.box(p.x - r, p.y - r, p.x + r, p.y + r)))
                 cand = cand[ok[cand]]
             if cand.size:
                 d = shapely.distance(p, self.local[cand])
@@ -366,7 +377,7 @@ class FenceSet:
         """The first keep-out in force along the ray (those in ``skip`` left out; with
         ``reach = (alt, vertical_m)`` only those whose band is within reach)."""
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
-        ray = shapely.LineString([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
+        ray = shapely.linestrings([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
         cand = ko_idx[ko_tree.query(ray, predicate="intersects")] if ko_tree else ko_idx[:0]
         timed = [
             k for k in self._timed_keep_out if self.active[k] and ray.intersects(self.local[k])
@@ -379,8 +390,4 @@ class FenceSet:
             cand = cand[self._in_reach(cand, *reach)]
         if not cand.size:
             return None
-        # one vectorised intersection and distance over every candidate
-        along = shapely.distance(p, shapely.intersection(ray, self.local[cand]))
-        along = np.where(np.isnan(along), np.inf, along)  # an empty intersection: not ahead
-        j = int(np.argmin(along))
-        return (int(cand[j]), float(along[j])) if np.isfinite(along[j]) else None
+        return first_hit(p, ray, self.local, cand)
