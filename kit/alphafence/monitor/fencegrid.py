@@ -72,7 +72,8 @@ class FenceGrid:
                 self.x0 + (ii.ravel() + 0.5) * size, self.y0 + (jj.ravel() + 0.5) * size
             )
             _, d = keep_out_tree.query_nearest(centres, return_distance=True, all_matches=False)
-            reach = (d + size * math.sqrt(2.0)) * (1.0 + SLACK) + SLACK * size
+            self.reach = d + size * math.sqrt(2.0)  # the candidates' radius around the centre
+            reach = self.reach * (1.0 + SLACK) + SLACK * size
             c, j = keep_out_tree.query(centres, predicate="dwithin", distance=reach)
             self.near = _csr(c, np.asarray(keep_out)[j], count)
 
@@ -100,17 +101,25 @@ class FenceGrid:
 
     def nearest(self, local, cell, p):
         """The nearest keep-out to the point ``p`` in ``cell`` and its distance, the lowest
-        index among equals: ``(index, metres)``."""
+        index among equals, and the cell's keep-outs with their distances from ``p``:
+        ``(index, metres, (candidates, distances))``."""
         indptr, fences = self.near
         cand = fences[indptr[cell] : indptr[cell + 1]]
         d = shapely.distance(p, local[cand])
         j = int(np.argmin(d))
-        return int(cand[j]), float(d[j])
+        return int(cand[j]), float(d[j]), (cand, d)
+
+    def holds(self, cell, metres) -> bool:
+        """Whether the keep-outs of ``cell`` include every one within ``metres`` of any of
+        its points (those farther than its candidates' radius less a half diagonal are not
+        there)."""
+        return metres + self.size * math.sqrt(0.5) <= self.reach[cell]
 
 
-def first_hit(p, ray, local, cand):
+def first_hit(p, ray, local, cand, lower=None):
     """The first of the fences ``local[cand]`` along ``ray`` from its start ``p`` and how far
     along it that is, the lowest index among equals: ``(index, metres)``, or None.
+    ``lower``: their distances from ``p``, if known.
 
     The fences are taken nearest first: one met at ``a`` metres along the ray ends the search
     at the first fence farther than ``a`` from ``p`` (none of its points can be met sooner),
@@ -124,7 +133,7 @@ def first_hit(p, ray, local, cand):
     ...     shapely.Point(0, 0), ray, boxes, np.array([2, 0]))
     ((0, 10.0), (2, 5.0))
     """
-    lower = shapely.distance(p, local[cand])
+    lower = shapely.distance(p, local[cand]) if lower is None else lower
     order = np.lexsort((cand, lower))
     best, best_k = math.inf, None
     for k, low in zip(cand[order].tolist(), lower[order].tolist()):

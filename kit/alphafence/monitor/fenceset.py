@@ -1,6 +1,8 @@
 """All fences in one metric frame with an STRtree: the monitor's per-position queries.
 
-One check costs a few STRtree queries in C, independent of how many fences there are.
+One check looks its fences up in a grid (:mod:`alphafence.monitor.fencegrid`): a GEOS call
+over the few fences of the position's cell for each question, with the answers of a plain
+loop over every fence (among equals, the lowest index); the STRtree answers outside the grid.
 The frame is centred on the fences; positions farther than ``recentre_m`` from its origin
 get a new frame (the index is rebuilt), so distances stay accurate to centimetres.
 
@@ -22,37 +24,12 @@ import shapely
 
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.fencegrid import FenceGrid, first_hit
+from alphafence.monitor.references import AMSL_REFERENCES, GROUND_REFERENCES, reference
 
 KEEP_OUT, WARNING, KEEP_IN = 0, 1, 2
 KIND_CODES = {"keep_out": KEEP_OUT, "warning": WARNING, "keep_in": KEEP_IN}
 NEAREST_DIRECT = 64  # up to this many keep-outs in reach are measured without the tree
 HOME_TOLERANCE_M = 0.01  # a home AMSL this close to the last one moves no limit
-# references compared with the altitude AMSL, and what each comparison approximates
-AMSL_REFERENCES = {"AMSL": "", "MSL": "", "ALT": ""}
-AMSL_REFERENCES.update(
-    WGS84="heights above the WGS84 ellipsoid compared with the altitude AMSL (the geoid's "
-    "separation, up to 100 m, not applied)",
-    STD="flight levels compared with the altitude AMSL (no pressure altitude)",
-)
-GROUND_REFERENCES = ("AGL", "SFC", "GND", "ASFC")  # limits above the ground below
-
-
-def reference(record, which: str):
-    """A fence's vertical reference for its ``"lower"`` or ``"upper"`` limit, upper case, or
-    None: kept on the fence itself (KML, OpenAir) or in its ED-269 ``zone``.
-
-    Examples
-    --------
-    >>> from alphafence.formats.fence_geojson import FenceRecord
-    >>> r = FenceRecord("z", "keep_out", shapely.box(0, 0, 1, 1), properties={"zone": {
-    ...     "lower_reference": "agl", "upper_reference": "AMSL"}})
-    >>> reference(r, "lower"), reference(r, "upper"), reference(FenceRecord("y", "keep_out",
-    ...     shapely.box(0, 0, 1, 1)), "upper")
-    ('AGL', 'AMSL', None)
-    """
-    props = record.properties or {}
-    ref = props.get(f"{which}_reference") or (props.get("zone") or {}).get(f"{which}_reference")
-    return str(ref).upper() if ref else None
 
 
 @dataclass
@@ -275,8 +252,7 @@ class FenceSet:
         The position is inside a fence when within its band; the prediction (the nearest
         keep-out, a breach ahead within ``lookahead_m``) counts the keep-out fences whose band
         is within ``vertical_m`` of ``alt`` (infinite, the default: every keep-out, as a wall
-        from the ground up). The common case (nowhere near a fence) costs three STRtree
-        look-ups in C."""
+        from the ground up). The grid is built at the first check."""
         p = shapely.Point(x, y)
         if self._grid is None:
             self._grid = FenceGrid(self.local, *self._by_kind[KEEP_OUT])
@@ -293,11 +269,11 @@ class FenceSet:
             inside_warn = inside[kinds == WARNING].tolist()
             inside_in = set(inside[kinds == KEEP_IN].tolist())
         outside_in = [k for k in self._keep_in if self.active[k] and k not in inside_in]
-        nearest = None
+        nearest = near = None
         ahead = None
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
         if ko_tree is not None and cell >= 0:
-            k, d = self._grid.nearest(self.local, cell, p)
+            k, d, near = self._grid.nearest(self.local, cell, p)
             nearest = Hit(k, d, d == 0.0)
         elif ko_tree is not None:
             j, d = ko_tree.query_nearest(p, return_distance=True, all_matches=True)
@@ -317,7 +293,10 @@ class FenceSet:
         # a fence can only lie ahead within the look-ahead if the nearest one does
         if nearest is not None and 0 < nearest.distance_m <= lookahead_m and speed > 0.05:
             reach = (alt, vertical_m) if banded else None
-            ahead = self._ahead(p, x, y, vx / speed, vy / speed, lookahead_m, inside_out, reach)
+            if near is not None and not self._grid.holds(cell, lookahead_m):
+                near = None  # the cell's candidates may miss a keep-out within the look-ahead
+            u = (vx / speed, vy / speed)
+            ahead = self._ahead(p, x, y, *u, lookahead_m, inside_out, reach, near)
         return Check(inside_out, inside_warn, outside_in, nearest, ahead, any_m)
 
     def _nearest_in_reach(self, p, alt, vertical_m, start_m):
@@ -373,21 +352,32 @@ class FenceSet:
                 return k
         return None
 
-    def _ahead(self, p, x, y, ux, uy, lookahead_m, skip, reach=None):
+    def _ahead(self, p, x, y, ux, uy, lookahead_m, skip, reach=None, near=None):
         """The first keep-out in force along the ray (those in ``skip`` left out; with
-        ``reach = (alt, vertical_m)`` only those whose band is within reach)."""
+        ``reach = (alt, vertical_m)`` only those whose band is within reach); ``near``, the
+        grid cell's keep-outs and their distances when they hold all within the look-ahead."""
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
         ray = shapely.linestrings([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
-        cand = ko_idx[ko_tree.query(ray, predicate="intersects")] if ko_tree else ko_idx[:0]
+        lower = None
+        if near is not None:
+            cand, lower = near
+            hit = shapely.intersects(ray, self.local[cand])
+            cand, lower = cand[hit], lower[hit]
+        elif ko_tree is not None:
+            cand = ko_idx[ko_tree.query(ray, predicate="intersects")]
+        else:
+            cand = ko_idx[:0]
         timed = [
             k for k in self._timed_keep_out if self.active[k] and ray.intersects(self.local[k])
         ]
         if timed:
             cand = np.concatenate([cand, np.asarray(timed, dtype=cand.dtype)])
+            lower = None
+        keep = np.ones(cand.size, dtype=bool)
         if skip:
-            cand = cand[~np.isin(cand, skip)]
+            keep &= ~np.isin(cand, skip)
         if reach is not None and cand.size:
-            cand = cand[self._in_reach(cand, *reach)]
-        if not cand.size:
+            keep &= self._in_reach(cand, *reach)
+        if not keep.any():
             return None
-        return first_hit(p, ray, self.local, cand)
+        return first_hit(p, ray, self.local, cand[keep], None if lower is None else lower[keep])
