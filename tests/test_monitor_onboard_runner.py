@@ -169,3 +169,12 @@ async def test_with_the_layer_off_nothing_is_downloaded():
         assert not fake.received("MISSION_REQUEST_LIST")
     assert monitor.engine.onboard is None
     assert not [e for e in events if e["event"] in ONBOARD_EVENTS]
+
+
+async def test_the_position_check_is_indexed_before_the_first_position():
+    """The check's grid (seconds at 100,000 fences) is built as the monitor starts, never on
+    the event loop at the vehicle's first position: the scripted vehicle sends none."""
+    async with FakeVehicle(fence=()) as fake:
+        monitor, events, alerts = await run_monitor_on(fake)
+    assert monitor.engine.checks == 0
+    assert monitor.engine.fences._grid is not None

@@ -131,6 +131,12 @@ class FenceSet:
         self._keep_out_all = np.flatnonzero(self.kind == KEEP_OUT)
         self._grid = None  # built at the first check
 
+    def index(self) -> None:
+        """Build the position check's grid now (a monitor does it before the flight: at
+        100,000 fences it takes seconds), not at the first check."""
+        if self._grid is None:
+            self._grid = FenceGrid(self.local, *self._by_kind[KEEP_OUT])
+
     def recentre(self, lon, lat):
         """A new frame centred on ``(lon, lat)``, and the index rebuilt in it."""
         self.frame = LocalFrame(lon, lat)
@@ -254,8 +260,7 @@ class FenceSet:
         is within ``vertical_m`` of ``alt`` (infinite, the default: every keep-out, as a wall
         from the ground up). The grid is built at the first check."""
         p = shapely.Point(x, y)
-        if self._grid is None:
-            self._grid = FenceGrid(self.local, *self._by_kind[KEEP_OUT])
+        self.index()
         cell = self._grid.cell(x, y)  # -1 outside the grid: the STRtree answers
         if cell >= 0:
             inside = self._grid.inside(self.local, cell, x, y)

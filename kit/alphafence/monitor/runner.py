@@ -163,6 +163,8 @@ class Monitor:
         stop : asyncio.Event
             Set it to end the monitor.
         """
+        if hasattr(self.engine.fences, "index"):
+            self.engine.fences.index()  # before the first position, not at it
         # asked for beside the feeds: a vehicle that does not answer must not delay the checks
         self.tasks = [
             asyncio.create_task(set_rates(self.vehicle.telemetry, self.rate_hz), name="rates")
