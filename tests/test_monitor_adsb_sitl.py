@@ -105,6 +105,11 @@ async def _watch(sitl):
             if monitor.pending:
                 await asyncio.wait(set(monitor.pending))
             aircraft = dict(engine.traffic.aircraft)
+            # and the vehicle's own positions go on being checked beside the traffic (the
+            # conflict may come before ten of them on a fast start)
+            while engine.checks < 10:
+                assert not task.done(), f"the monitor stopped: {log.events}"
+                await asyncio.sleep(0.05)
         finally:
             stop.set()
             await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 5)
