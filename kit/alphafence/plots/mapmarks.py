@@ -194,7 +194,9 @@ def name_sites(ax, sites, count=NAMES, fontsize=8):
             inside = box.x0 <= bb.x0 and bb.x1 <= box.x1 and box.y0 <= bb.y0 and bb.y1 <= box.y1
             on_site = (dx, dy) == (0, 0)  # only when the name fits inside the site's box
             fits = bb.width <= np.ptp(site[:, 0]) and bb.height <= np.ptp(site[:, 1])
-            if inside and (fits or not on_site) and not any(bb.overlaps(t) for t in taken):
+            # 2 px apart at least: a final layout a pixel off must not make names touch
+            apart = not any(bb.padded(2).overlaps(t) for t in taken)
+            if inside and (fits or not on_site) and apart:
                 taken.append(bb)
                 placed.append(text)
                 named.add(name)

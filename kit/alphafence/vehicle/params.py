@@ -120,7 +120,11 @@ def vehicle_kind(mav_type: int) -> str | None:
     ):
         if mapping is modes:
             return kind
-    return None
+    # older pymavlink (the floor) maps no modes for VTOL types: ArduPlane's quadplanes report them
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    entry = mav.enums["MAV_TYPE"].get(mav_type)
+    return "plane" if entry is not None and entry.name.startswith("MAV_TYPE_VTOL") else None
 
 
 async def heartbeat_type(vehicle, timeout: float = 5.0) -> int:
