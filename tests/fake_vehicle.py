@@ -331,6 +331,11 @@ class FakeVehicle:
         return self
 
     async def stop(self):
+        await self._cancel_tasks()
+        await self._wire.close()
+
+    async def _cancel_tasks(self):
+        """Cancel the heartbeat and update tasks and wait for them to end."""
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:
@@ -339,7 +344,6 @@ class FakeVehicle:
             except asyncio.CancelledError:
                 pass
         self._tasks = []
-        await self._wire.close()
 
     async def __aenter__(self):
         return await self.start()

@@ -79,12 +79,7 @@ class StreamFake(FakeVehicle):
         return self
 
     async def stop(self):
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        self._tasks = []
+        await self._cancel_tasks()
         self._wire.transport = None
         await self._close_stream()
 

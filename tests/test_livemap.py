@@ -143,18 +143,19 @@ async def test_a_page_that_never_reads_is_bounded_then_dropped_and_slows_no_chec
         await server.close()
 
 
+async def _page(server, got):
+    """A page: every message the map sends, decoded, into ``got``."""
+    async with aiohttp.ClientSession() as s:
+        async with s.ws_connect(server.url + "ws") as ws:
+            async for m in ws:
+                got.append(json.loads(m.data))
+
+
 async def test_a_page_gets_the_vehicle_fences_near_it_its_own_fence_and_the_events(demo_fences):
     livemap = LiveMap(demo_fences, near_m=400.0)
     server = await start_map_server(livemap, "127.0.0.1", 0)
     got = []
-
-    async def page():
-        async with aiohttp.ClientSession() as s:
-            async with s.ws_connect(server.url + "ws") as ws:
-                async for m in ws:
-                    got.append(json.loads(m.data))
-
-    reader = asyncio.ensure_future(page())
+    reader = asyncio.ensure_future(_page(server, got))
     try:
         await _until(lambda: livemap.clients, "the page connected")
         done = await _replay(demo_fences, livemap)
@@ -279,14 +280,7 @@ async def test_the_monitors_live_map_follows_its_checks_and_events():
     assert livemap.engine is monitor.engine  # told of the engine when added
     server = await start_map_server(livemap, "127.0.0.1", 0)
     got = []
-
-    async def page():
-        async with aiohttp.ClientSession() as s:
-            async with s.ws_connect(server.url + "ws") as ws:
-                async for m in ws:
-                    got.append(json.loads(m.data))
-
-    reader = asyncio.ensure_future(page())
+    reader = asyncio.ensure_future(_page(server, got))
     stop = asyncio.Event()
     try:
         await _until(lambda: livemap.clients, "the page connected")
