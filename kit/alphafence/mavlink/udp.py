@@ -28,10 +28,22 @@ import asyncio
 from collections.abc import Callable
 
 BAD_DATA = "BAD_DATA"  # pymavlink's type name for a frame it could not accept
+MARKER_V1, MARKER_V2 = 0xFE, 0xFD  # the first byte of a MAVLink 1 and a MAVLink 2 frame
+HEADER_V1, HEADER_V2 = 6, 10  # header bytes, the marker included
+CHECKSUM, SIGNATURE = 2, 13  # the bytes after the payload: CRC, and signature when flagged
+SIGNED = 0x01  # MAVLINK_IFLAG_SIGNED: the frame carries a signature
 
 
 def _ignore(msg, addr) -> None:
     return None
+
+
+def _next_marker(buf, i: int, n: int) -> int:
+    """The index of the next MAVLink marker in ``buf[i:n]`` (``n`` when there is none)."""
+    v1, v2 = buf.find(MARKER_V1, i, n), buf.find(MARKER_V2, i, n)
+    if v1 < 0:
+        return n if v2 < 0 else v2
+    return v1 if v2 < 0 else min(v1, v2)
 
 
 class MavlinkDatagrams(asyncio.DatagramProtocol):
@@ -54,6 +66,16 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
     ----------
     peer : tuple or None
         The address the last datagram came from.
+    wanted_ids : set of int or None
+        When a set, only frames whose message id is in it are parsed (their CRC, signature and
+        fields checked by pymavlink); the others are framed from their header and dropped
+        unread, counted in ``skipped`` and given to ``on_skipped`` if it is set. None (the
+        default): every frame is parsed. A frame that is dropped is never delivered, so it
+        needs no checking: a listener that follows only a few message ids pays for those.
+    skipped : int
+        Frames dropped unread because their id was not wanted.
+    on_skipped : callable or None
+        ``on_skipped(frame)`` with the raw bytes of each frame dropped unread.
     transport : asyncio.DatagramTransport or None
         The endpoint while it is open.
     """
@@ -64,6 +86,10 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         self.on_message = on_message
         self.on_bad = on_bad or _ignore
         self.peer: tuple | None = None
+        self.wanted_ids: set[int] | None = None
+        self.skipped = 0
+        self.on_skipped: Callable | None = None
+        self._rest = b""  # an unfinished frame, when wanted_ids is set
         self.transport: asyncio.DatagramTransport | None = None
         self._connected = False  # opened with a remote address: sends go there only
         self._closed = asyncio.Event()
@@ -121,7 +147,45 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         self.feed(data, addr)
 
     def feed(self, data: bytes, addr=None) -> None:
-        """Parse ``data`` (a datagram, or a chunk of a stream) and deliver what it holds."""
+        """Parse ``data`` (a datagram, or a chunk of a stream) and deliver what it holds
+        (the frames of :attr:`wanted_ids` only, when it is set)."""
+        wanted = self.wanted_ids
+        if wanted is None:
+            self._parse(data, addr)
+            return
+        buf = self._rest + data if self._rest else data
+        n, i, start = len(buf), 0, 0  # buf[start:i]: frames (and bytes) to parse
+        while i < n:
+            marker = buf[i]
+            if marker == MARKER_V2:
+                if n - i < HEADER_V2:
+                    break
+                size = HEADER_V2 + buf[i + 1] + CHECKSUM + (SIGNATURE if buf[i + 2] & SIGNED else 0)
+                ident = buf[i + 7] | buf[i + 8] << 8 | buf[i + 9] << 16
+            elif marker == MARKER_V1:
+                if n - i < HEADER_V1:
+                    break
+                size = HEADER_V1 + buf[i + 1] + CHECKSUM
+                ident = buf[i + 5]
+            else:  # not MAVLink: up to the next marker, for pymavlink to reject
+                i = _next_marker(buf, i + 1, n)
+                continue
+            if n - i < size:
+                break
+            if ident not in wanted:
+                if start < i:
+                    self._parse(buf[start:i], addr)
+                self.skipped += 1
+                if self.on_skipped is not None:
+                    self.on_skipped(bytes(buf[i : i + size]))
+                start = i + size
+            i += size
+        if start < i:
+            self._parse(buf[start:i], addr)
+        self._rest = bytes(buf[i:]) if i < n else b""
+
+    def _parse(self, data, addr) -> None:
+        """pymavlink parses ``data`` (whole frames, or any bytes when every id is wanted)."""
         try:
             messages = self.mav.parse_buffer(data) or []
         except Exception:  # robust parsing should not raise; a corrupt datagram never crashes

@@ -34,6 +34,7 @@ LOOPBACK = "127.0.0.1"
 UDP_KINDS = ("udpin", "udpout", "udpbcast")
 UNSIGNED_OK = frozenset({mavlink.MAVLINK_MSG_ID_RADIO_STATUS, mavlink.MAVLINK_MSG_ID_RADIO})
 SIGNED_FLAG = mavlink.MAVLINK_IFLAG_SIGNED
+MESSAGE_IDS = {cls.msgname: msgid for msgid, cls in mavlink.mavlink_map.items()}  # name -> id
 
 
 class BridgeError(VehicleError):
@@ -107,7 +108,7 @@ class VehicleLink:
         self.kind = self.endpoint.kind
         self.key = key
         self.on_message = on_message or (lambda msg: None)
-        self.recorder: Callable | None = None  # recorder(frame) gets each accepted frame
+        self._recorder: Callable | None = None
         self.stats = LinkStats()
         # one codec reads (and checks signatures), one writes (and signs)
         self.reader = mavlink.MAVLink(None)
@@ -130,6 +131,34 @@ class VehicleLink:
         self._stream = None
         if self.kind not in UDP_KINDS:
             self._stream = stream_transport(self.endpoint, lambda data: self._received(data, None))
+
+    @property
+    def wanted_ids(self) -> set[int] | None:
+        """The message ids parsed and delivered; the other frames are dropped unread
+        (:attr:`~alphafence.mavlink.udp.MavlinkDatagrams.wanted_ids`). None (the default):
+        every message. The link reads the set it is given as it changes."""
+        return self._wire.wanted_ids
+
+    @wanted_ids.setter
+    def wanted_ids(self, ids: set[int] | None) -> None:
+        self._wire.wanted_ids = ids
+
+    @property
+    def skipped(self) -> int:
+        """Frames dropped unread: their message id was not :attr:`wanted`."""
+        return self._wire.skipped
+
+    @property
+    def recorder(self) -> Callable | None:
+        """``recorder(frame)`` gets the bytes of each accepted frame, and of each frame
+        dropped unread when the link is not signed (a log of the whole link, as it came; with
+        a key only what was verified is recorded)."""
+        return self._recorder
+
+    @recorder.setter
+    def recorder(self, recorder: Callable | None) -> None:
+        self._recorder = recorder
+        self._wire.on_skipped = recorder if self.key is None else None
 
     @property
     def closed(self) -> str | None:
@@ -214,8 +243,8 @@ class VehicleLink:
         if self.kind in ("udpin", "udpbcast") and addr is not None:
             self.remote = addr  # learnt from accepted (verified, when signing) messages only
         self.stats.received += 1
-        if self.recorder is not None:
-            self.recorder(msg.get_msgbuf())
+        if self._recorder is not None:
+            self._recorder(msg.get_msgbuf())
         self.on_message(msg)
 
     def _reject(self, msg, addr) -> None:

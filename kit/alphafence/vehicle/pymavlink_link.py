@@ -6,8 +6,9 @@ link offers, under the same names (``telemetry``, ``action``, ``param``, ``missi
 the kit's own methods of :class:`~alphafence.vehicle.link.Vehicle`), so they run one code path.
 
 Lean by construction: the messages nobody follows are framed and dropped without being
-decoded (:class:`Bus` tells the link which ids are wanted), so at 50 Hz telemetry the link
-costs little more than the positions it delivers. Signing is the link's own (no bridge): with a
+decoded (:class:`Bus` tells the link which ids are wanted: their frames alone are checked and
+unpacked, the others are dropped from their header), so at 50 Hz telemetry the link costs
+little more than the positions it delivers. Signing is the link's own (no bridge): with a
 key every message sent is signed and every message received must be.
 """
 
@@ -17,11 +18,12 @@ import asyncio
 import contextlib
 import time
 from collections import defaultdict
+from collections.abc import Callable
 
 from alphafence.mavlink import ids
 from alphafence.mavlink.commands import command_long_fields
 from alphafence.vehicle.base import LinkError, Vehicle
-from alphafence.vehicle.bridge import BridgeError, VehicleLink
+from alphafence.vehicle.bridge import MESSAGE_IDS, BridgeError, VehicleLink
 from alphafence.vehicle.mission_client import MissionClient
 from alphafence.vehicle.pymavlink_plugins import Action, MissionRaw, Param, Telemetry
 from alphafence.vehicle.values import Message
@@ -40,9 +42,23 @@ class Bus:
     A full queue drops its oldest message (a slow reader sees the latest telemetry, never an
     unbounded backlog)."""
 
-    def __init__(self):
+    def __init__(self, message_id: Callable[[str], int | None] = lambda name: None):
         self._subs: dict[str, list[tuple]] = defaultdict(list)  # name -> (queue, handle)
-        self.wanted: set[str] = set(ALWAYS)  # message types the link decodes
+        self._id = message_id
+        self.wanted: set[str] = set()  # message types the link decodes
+        self.wanted_ids: set[int] = set()  # and their ids, for the link's filter
+        for name in ALWAYS:
+            self._want(name)
+
+    def _want(self, name: str) -> None:
+        self.wanted.add(name)
+        if (msgid := self._id(name)) is not None:
+            self.wanted_ids.add(msgid)
+
+    def _unwant(self, name: str) -> None:
+        self.wanted.discard(name)
+        if (msgid := self._id(name)) is not None:
+            self.wanted_ids.discard(msgid)
 
     def publish(self, msg) -> None:
         """Hand ``msg`` to every subscriber of its type: its ``handle`` first, if it has one
@@ -66,7 +82,7 @@ class Bus:
         entry = (queue, handle)
         for name in names:
             self._subs[name].append(entry)
-            self.wanted.add(name)
+            self._want(name)
         try:
             yield queue
         finally:
@@ -74,7 +90,7 @@ class Bus:
                 self._subs[name].remove(entry)
                 if not self._subs[name] and name not in ALWAYS:
                     del self._subs[name]
-                    self.wanted.discard(name)
+                    self._unwant(name)
 
     async def stream(self, *names: str, maxsize: int = 64):
         """Every message of those types from now on (an async generator)."""
@@ -106,9 +122,9 @@ class PymavlinkVehicle(Vehicle):
 
     def __init__(self, url: str, signing_key: bytes | None = None):
         super().__init__(url)
-        self.bus = Bus()
+        self.bus = Bus(MESSAGE_IDS.get)
         self.link = VehicleLink(url, signing_key, self.bus.publish)
-        self.link.wanted = self.bus.wanted
+        self.link.wanted_ids = self.bus.wanted_ids  # the rest is dropped unread
         self.target = (0, AUTOPILOT_COMPONENT)
         self.mav_type = ids.MAV_TYPE_QUADROTOR
         self.last_heartbeat = -1e9
