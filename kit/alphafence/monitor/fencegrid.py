@@ -21,7 +21,6 @@ MIN_CELLS = 16_384  # fine enough that a cell of a small set holds a few fences
 MAX_CELLS = 1 << 20
 CELLS_PER_FENCE = 1
 SLACK = 1e-9  # relative slack on the candidates' radius, for rounding
-HIT_SLACK_M = 1e-6  # a fence met along a ray may round a little nearer than its distance
 
 
 def _csr(rows, values, count):
@@ -114,32 +113,3 @@ class FenceGrid:
         its points (those farther than its candidates' radius less a half diagonal are not
         there)."""
         return metres + self.size * math.sqrt(0.5) <= self.reach[cell]
-
-
-def first_hit(p, ray, local, cand, lower=None):
-    """The first of the fences ``local[cand]`` along ``ray`` from its start ``p`` and how far
-    along it that is, the lowest index among equals: ``(index, metres)``, or None.
-    ``lower``: their distances from ``p``, if known.
-
-    The fences are taken nearest first: one met at ``a`` metres along the ray ends the search
-    at the first fence farther than ``a`` from ``p`` (none of its points can be met sooner),
-    so the costly intersection is mostly computed once.
-
-    Examples
-    --------
-    >>> boxes = shapely.box([10.0, 30.0, 5.0], -1.0, [20.0, 40.0, 8.0], 1.0)
-    >>> ray = shapely.LineString([(0, 0), (50, 0)])
-    >>> first_hit(shapely.Point(0, 0), ray, boxes, np.array([0, 1])), first_hit(
-    ...     shapely.Point(0, 0), ray, boxes, np.array([2, 0]))
-    ((0, 10.0), (2, 5.0))
-    """
-    lower = shapely.distance(p, local[cand]) if lower is None else lower
-    order = np.lexsort((cand, lower))
-    best, best_k = math.inf, None
-    for k, low in zip(cand[order].tolist(), lower[order].tolist()):
-        if low - HIT_SLACK_M > best:
-            break
-        along = float(shapely.distance(p, shapely.intersection(ray, local[k])))
-        if not math.isnan(along) and (best_k is None or (along, k) < (best, best_k)):
-            best, best_k = along, k
-    return None if best_k is None else (best_k, best)

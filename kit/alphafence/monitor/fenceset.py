@@ -23,7 +23,8 @@ import numpy as np
 import shapely
 
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fencegrid import FenceGrid, first_hit
+from alphafence.monitor.fencegrid import FenceGrid
+from alphafence.monitor.rays import FenceEdges
 from alphafence.monitor.references import AMSL_REFERENCES, GROUND_REFERENCES, reference
 
 KEEP_OUT, WARNING, KEEP_IN = 0, 1, 2
@@ -130,12 +131,14 @@ class FenceSet:
         self._keep_in = [int(k) for k in np.flatnonzero(self.kind == KEEP_IN)]
         self._keep_out_all = np.flatnonzero(self.kind == KEEP_OUT)
         self._grid = None  # built at the first check
+        self._edges = None  # the fences' segments, for the track ahead
 
     def index(self) -> None:
         """Build the position check's grid now (a monitor does it before the flight: at
         100,000 fences it takes seconds), not at the first check."""
         if self._grid is None:
             self._grid = FenceGrid(self.local, *self._by_kind[KEEP_OUT])
+            self._edges = FenceEdges(self.local)
 
     def recentre(self, lon, lat):
         """A new frame centred on ``(lon, lat)``, and the index rebuilt in it."""
@@ -266,6 +269,7 @@ class FenceSet:
             inside = self._grid.inside(self.local, cell, x, y)
         else:
             inside = np.sort(self.tree.query(p, predicate="intersects"))
+        holding = inside  # at any altitude
         inside_out, inside_warn, inside_in = [], [], set()
         if inside.size:
             inside = inside[self._in_alt(inside, alt)]
@@ -301,7 +305,7 @@ class FenceSet:
             if near is not None and not self._grid.holds(cell, lookahead_m):
                 near = None  # the cell's candidates may miss a keep-out within the look-ahead
             u = (vx / speed, vy / speed)
-            ahead = self._ahead(p, x, y, *u, lookahead_m, inside_out, reach, near)
+            ahead = self._ahead(x, y, *u, lookahead_m, inside_out, reach, near, holding.tolist())
         return Check(inside_out, inside_warn, outside_in, nearest, ahead, any_m)
 
     def _nearest_in_reach(self, p, alt, vertical_m, start_m):
@@ -357,32 +361,33 @@ class FenceSet:
                 return k
         return None
 
-    def _ahead(self, p, x, y, ux, uy, lookahead_m, skip, reach=None, near=None):
+    def _ahead(self, x, y, ux, uy, lookahead_m, skip, reach=None, near=None, holding=()):
         """The first keep-out in force along the ray (those in ``skip`` left out; with
         ``reach = (alt, vertical_m)`` only those whose band is within reach); ``near``, the
-        grid cell's keep-outs and their distances when they hold all within the look-ahead."""
+        grid cell's keep-outs when they hold all within the look-ahead; ``holding``, the
+        fences the start lies in (at any altitude)."""
         ko_idx, ko_tree = self._by_kind[KEEP_OUT]
-        ray = shapely.linestrings([(x, y), (x + ux * lookahead_m, y + uy * lookahead_m)])
         lower = None
         if near is not None:
             cand, lower = near
-            hit = shapely.intersects(ray, self.local[cand])
-            cand, lower = cand[hit], lower[hit]
         elif ko_tree is not None:
-            cand = ko_idx[ko_tree.query(ray, predicate="intersects")]
+            end = (x + ux * lookahead_m, y + uy * lookahead_m)
+            box = shapely.box(min(x, end[0]), min(y, end[1]), max(x, end[0]), max(y, end[1]))
+            cand = ko_idx[ko_tree.query(box)]
         else:
             cand = ko_idx[:0]
-        timed = [
-            k for k in self._timed_keep_out if self.active[k] and ray.intersects(self.local[k])
-        ]
+        timed = [k for k in self._timed_keep_out if self.active[k]]
         if timed:
             cand = np.concatenate([cand, np.asarray(timed, dtype=cand.dtype)])
             lower = None
-        keep = np.ones(cand.size, dtype=bool)
-        if skip:
-            keep &= ~np.isin(cand, skip)
-        if reach is not None and cand.size:
-            keep &= self._in_reach(cand, *reach)
-        if not keep.any():
-            return None
-        return first_hit(p, ray, self.local, cand[keep], None if lower is None else lower[keep])
+        if skip or reach is not None:
+            keep = np.ones(cand.size, dtype=bool)
+            if skip:
+                keep &= ~np.isin(cand, skip)
+            if reach is not None and cand.size:
+                keep &= self._in_reach(cand, *reach)
+            cand = cand[keep]
+            lower = None if lower is None else lower[keep]
+        if self._edges is None:
+            self._edges = FenceEdges(self.local)
+        return self._edges.first_hit(x, y, ux, uy, lookahead_m, cand, holding, lower)

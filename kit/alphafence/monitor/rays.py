@@ -1,0 +1,171 @@
+"""The first fence along a straight track, from the fences' edges: no geometry built per check.
+
+The monitor asks, for each position, which keep-out the vehicle meets first within its
+look-ahead and how far along. Asking GEOS means intersecting the track with each candidate
+fence (an overlay that builds a new geometry) and measuring to it. Here every fence's boundary
+is kept as straight segments, grouped by fence, once (:class:`FenceEdges`); a check solves the
+track against the candidates' segments in a few vectorised numpy operations: the parameter
+``t`` along the track where it crosses each segment, the least per fence, the least of all.
+
+The answer is GEOS's to within rounding (a micrometre): the track from ``(x, y)`` along the
+unit vector ``u`` for ``L`` metres meets a fence at the least ``t`` in ``[0, L]`` at which it
+touches the fence's boundary, or at 0 when it starts inside the fence.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+TOUCH = 1e-9  # relative slack: a track that grazes a vertex or ends on an edge still meets it
+FEW = 48  # up to this many segments are solved one by one in Python (numpy's calls cost more)
+
+
+class FenceEdges:
+    """Every fence's boundary as straight segments, by fence.
+
+    Parameters
+    ----------
+    local : numpy.ndarray of shapely geometries
+        The fences (polygons or multipolygons), in metres.
+
+    Attributes
+    ----------
+    indptr : numpy.ndarray of int
+        The segments of fence ``k`` are ``indptr[k]:indptr[k + 1]``.
+    rows : numpy.ndarray
+        Each segment's ``(ax, ay, dx, dy)``: its start and its vector to its end (``ax`` ...
+        ``dy`` are its columns).
+    bounds : numpy.ndarray
+        Each fence's ``(xmin, ymin, xmax, ymax)`` (NaN for an empty one).
+
+    Examples
+    --------
+    >>> edges = FenceEdges(shapely.box([10.0, 30.0], -1.0, [20.0, 40.0], 1.0))
+    >>> edges.first_hit(0.0, 0.0, 1.0, 0.0, 50.0, np.array([1, 0]))
+    (0, 10.0)
+    >>> edges.first_hit(0.0, 0.0, -1.0, 0.0, 50.0, np.array([0, 1])) is None
+    True
+    """
+
+    def __init__(self, local):
+        parts, owner = shapely.get_parts(shapely.boundary(local), return_index=True)
+        coords, line = shapely.get_coordinates(parts, return_index=True)
+        same = line[1:] == line[:-1]  # consecutive vertices of one ring make a segment
+        a, b = coords[:-1][same], coords[1:][same]
+        fence = owner[line[:-1][same]]
+        order = np.argsort(fence, kind="stable")
+        a, b, fence = a[order], b[order], fence[order]
+        self.indptr = np.zeros(len(local) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(fence, minlength=len(local)), out=self.indptr[1:])
+        self.rows = np.column_stack([a, b - a])  # (ax, ay, dx, dy) per segment
+        self.ax, self.ay, self.dx, self.dy = self.rows.T
+        self.bounds = shapely.bounds(local)
+
+    def first_hit(self, x, y, ux, uy, length, cand, inside=(), lower=None):
+        """The first of the fences ``cand`` met along the track from ``(x, y)`` in the unit
+        direction ``(ux, uy)`` within ``length`` metres, and how far along:
+        ``(index, metres)``, the lowest index among equals, or None when none is met.
+
+        Parameters
+        ----------
+        x, y : float
+            The track's start, in metres.
+        ux, uy : float
+            Its direction, a unit vector.
+        length : float
+            How far it goes.
+        cand : numpy.ndarray of int
+            The fences asked (indices into the fences the edges were made of).
+        inside : collection of int
+            Fences that hold the start (met at 0 m), as the caller already knows them.
+        lower : numpy.ndarray of float, optional
+            The fences' distances from the start, if known: those farther than ``length``
+            are not looked at.
+        """
+        cand = np.asarray(cand, dtype=np.int64)
+        reach = length * (1.0 + TOUCH) + TOUCH
+        if lower is not None:
+            cand = cand[lower <= reach]
+        elif cand.size:
+            ex, ey = x + ux * length, y + uy * length
+            b = self.bounds[cand]
+            near = (b[:, 0] <= max(x, ex) + reach * TOUCH) & (b[:, 2] >= min(x, ex) - reach * TOUCH)
+            near &= (b[:, 1] <= max(y, ey) + reach * TOUCH) & (
+                b[:, 3] >= min(y, ey) - reach * TOUCH
+            )
+            cand = cand[near]
+        if not cand.size:
+            return None
+        indptr = self.indptr
+        starts, ends = indptr[cand].tolist(), indptr[cand + 1].tolist()
+        if sum(ends) - sum(starts) <= FEW:
+            best, best_k = math.inf, None
+            holds = set(inside)
+            for k, a, b in zip(cand.tolist(), starts, ends):
+                t = 0.0 if k in holds else self._along_few(x, y, ux, uy, length, a, b)
+                if t < best or (t == best and best_k is not None and k < best_k):
+                    best, best_k = t, k
+            return None if best_k is None else (best_k, best)
+        if cand.size == 1:  # most often: one fence within reach, its segments a slice
+            k = int(cand[0])
+            seg = slice(indptr[k], indptr[k + 1])
+            first = np.zeros(1, dtype=np.int64)
+        else:
+            starts, counts = indptr[cand], indptr[cand + 1] - indptr[cand]
+            first = np.cumsum(counts) - counts
+            seg = np.repeat(starts - first, counts) + np.arange(int(counts.sum()))
+        t = self._along(x, y, ux, uy, length, seg)
+        per = np.minimum.reduceat(t, first) if t.size else np.full(cand.size, np.inf)
+        if len(inside):
+            per[np.isin(cand, np.fromiter(inside, dtype=np.int64))] = 0.0
+        best = float(per.min())
+        if best == np.inf:
+            return None
+        return int(cand[per == best].min()), best
+
+    def _along_few(self, x, y, ux, uy, length, a, b):
+        """:meth:`_along`'s least, for the segments ``a:b``, in plain floats (the same
+        arithmetic, operation for operation)."""
+        best = math.inf
+        for ax, ay, dx, dy in self.rows[a:b].tolist():
+            px, py = ax - x, ay - y
+            den = ux * dy - uy * dx
+            slack = TOUCH * (abs(px) + abs(py) + abs(dx) + abs(dy) + length)
+            if den != 0:
+                t = (px * dy - py * dx) / den
+                s = (px * uy - py * ux) / den
+                ds = slack / abs(den)
+                if -ds <= s <= 1.0 + ds and -slack <= t <= length + slack and t < best:
+                    best = t
+            elif abs(px * uy - py * ux) <= slack:
+                t0 = px * ux + py * uy
+                t1 = t0 + (dx * ux + dy * uy)
+                lo, hi = min(t0, t1), max(t0, t1)
+                if hi >= -slack and lo <= length + slack and lo < best:
+                    best = lo
+        return max(best, 0.0)
+
+    def _along(self, x, y, ux, uy, length, seg):
+        """For each segment of ``seg``: how far along the track it is met (inf: it is not)."""
+        px, py = self.ax[seg] - x, self.ay[seg] - y
+        dx, dy = self.dx[seg], self.dy[seg]
+        den = ux * dy - uy * dx  # cross(u, d): zero when the segment is parallel to the track
+        size = np.abs(px) + np.abs(py) + np.abs(dx) + np.abs(dy) + length
+        slack = TOUCH * size  # metres
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t = (px * dy - py * dx) / den  # where the track's line meets the segment's
+            s = (px * uy - py * ux) / den  # and how far along the segment (0..1)
+            ds = slack / np.abs(den)  # the slack in s
+        t = np.where(
+            (s >= -ds) & (s <= 1.0 + ds) & (t >= -slack) & (t <= length + slack), t, np.inf
+        )
+        if not den.all():  # segments parallel to the track: met where one lies on its line
+            t0 = px * ux + py * uy
+            t1 = t0 + (dx * ux + dy * uy)
+            lo, hi = np.minimum(t0, t1), np.maximum(t0, t1)
+            on = (den == 0) & (np.abs(px * uy - py * ux) <= slack) & (hi >= -slack)
+            t = np.where(on & (lo <= length + slack), np.minimum(t, lo), t)
+        return np.maximum(t, 0.0)
