@@ -181,7 +181,7 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
                 start = i + size
             i += size
         if start < i:
-            self._parse(buf[start:i], addr)
+            self._parse(buf if start == 0 and i == n else buf[start:i], addr)
         self._rest = bytes(buf[i:]) if i < n else b""
 
     def _parse(self, data, addr) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 import shapely
 
 TOUCH = 1e-9  # relative slack: a track that grazes a vertex or ends on an edge still meets it
-FEW = 48  # up to this many segments are solved one by one in Python (numpy's calls cost more)
+FEW = 256  # up to this many segments are solved one by one in Python (numpy's calls cost more)
 
 
 class FenceEdges:
