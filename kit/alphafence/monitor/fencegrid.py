@@ -26,7 +26,7 @@ SLACK = 1e-9  # relative slack on the candidates' radius, for rounding
 def _csr(rows, values, count):
     """Values grouped by row, sorted by row then value: ``(indptr, values)``."""
     order = np.lexsort((values, rows))
-    indptr = np.zeros(count + 1, dtype=np.int64)
+    indptr = np.zeros(count + 1, dtype=np.intp)
     np.cumsum(np.bincount(rows, minlength=count), out=indptr[1:])
     return indptr, values[order].astype(np.intp)
 
@@ -77,10 +77,10 @@ class FenceGrid:
             self.near = _csr(c, np.asarray(keep_out)[j], count)
 
     def _col(self, x):
-        return np.clip(np.floor((x - self.x0) / self.size), 0, self.nx - 1).astype(np.int64)
+        return np.clip(np.floor((x - self.x0) / self.size), 0, self.nx - 1).astype(np.intp)
 
     def _row(self, y):
-        return np.clip(np.floor((y - self.y0) / self.size), 0, self.ny - 1).astype(np.int64)
+        return np.clip(np.floor((y - self.y0) / self.size), 0, self.ny - 1).astype(np.intp)
 
     def cell(self, x, y) -> int:
         """The cell holding ``(x, y)``, or -1 outside the grid (no fence there)."""

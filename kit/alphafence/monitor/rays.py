@@ -36,8 +36,8 @@ class FenceEdges:
     indptr : numpy.ndarray of int
         The segments of fence ``k`` are ``indptr[k]:indptr[k + 1]``.
     rows : numpy.ndarray
-        Each segment's ``(ax, ay, dx, dy)``: its start and its vector to its end (``ax`` ...
-        ``dy`` are its columns).
+        Each segment's ``(ax, ay, dx, dy, length)``: its start, its vector to its end and its
+        length (``ax`` ... ``length`` are its columns).
     bounds : numpy.ndarray
         Each fence's ``(xmin, ymin, xmax, ymax)`` (NaN for an empty one).
 
@@ -55,13 +55,14 @@ class FenceEdges:
         coords, line = shapely.get_coordinates(parts, return_index=True)
         same = line[1:] == line[:-1]  # consecutive vertices of one ring make a segment
         a, b = coords[:-1][same], coords[1:][same]
-        fence = owner[line[:-1][same]]
+        fence = owner[line[:-1][same]].astype(np.intp, copy=False)  # 32-bit numpy: int32
         order = np.argsort(fence, kind="stable")
         a, b, fence = a[order], b[order], fence[order]
-        self.indptr = np.zeros(len(local) + 1, dtype=np.int64)
+        self.indptr = np.zeros(len(local) + 1, dtype=np.intp)
         np.cumsum(np.bincount(fence, minlength=len(local)), out=self.indptr[1:])
-        self.rows = np.column_stack([a, b - a])  # (ax, ay, dx, dy) per segment
-        self.ax, self.ay, self.dx, self.dy = self.rows.T
+        d = b - a
+        self.rows = np.column_stack([a, d, np.hypot(d[:, 0], d[:, 1])])  # ax, ay, dx, dy, n
+        self.ax, self.ay, self.dx, self.dy, self.length = self.rows.T
         self.bounds = shapely.bounds(local)
 
     def first_hit(self, x, y, ux, uy, length, cand, inside=(), lower=None):
@@ -85,7 +86,7 @@ class FenceEdges:
             The fences' distances from the start, if known: those farther than ``length``
             are not looked at.
         """
-        cand = np.asarray(cand, dtype=np.int64)
+        cand = np.asarray(cand, dtype=np.intp)
         reach = length * (1.0 + TOUCH) + TOUCH
         if lower is not None:
             cand = cand[lower <= reach]
@@ -112,7 +113,7 @@ class FenceEdges:
         if cand.size == 1:  # most often: one fence within reach, its segments a slice
             k = int(cand[0])
             seg = slice(indptr[k], indptr[k + 1])
-            first = np.zeros(1, dtype=np.int64)
+            first = np.zeros(1, dtype=np.intp)
         else:
             starts, counts = indptr[cand], indptr[cand + 1] - indptr[cand]
             first = np.cumsum(counts) - counts
@@ -120,7 +121,7 @@ class FenceEdges:
         t = self._along(x, y, ux, uy, length, seg)
         per = np.minimum.reduceat(t, first) if t.size else np.full(cand.size, np.inf)
         if len(inside):
-            per[np.isin(cand, np.fromiter(inside, dtype=np.int64))] = 0.0
+            per[np.isin(cand, np.fromiter(inside, dtype=np.intp))] = 0.0
         best = float(per.min())
         if best == np.inf:
             return None
@@ -130,17 +131,17 @@ class FenceEdges:
         """:meth:`_along`'s least, for the segments ``a:b``, in plain floats (the same
         arithmetic, operation for operation)."""
         best = math.inf
-        for ax, ay, dx, dy in self.rows[a:b].tolist():
+        for ax, ay, dx, dy, n in self.rows[a:b].tolist():
             px, py = ax - x, ay - y
             den = ux * dy - uy * dx
-            slack = TOUCH * (abs(px) + abs(py) + abs(dx) + abs(dy) + length)
-            if den != 0:
+            slack = TOUCH * (abs(px) + abs(py) + n + length)
+            if abs(den) > TOUCH * n:  # the lines cross
                 t = (px * dy - py * dx) / den
                 s = (px * uy - py * ux) / den
-                ds = slack / abs(den)
+                ds = slack / n
                 if -ds <= s <= 1.0 + ds and -slack <= t <= length + slack and t < best:
                     best = t
-            elif abs(px * uy - py * ux) <= slack:
+            elif abs(px * uy - py * ux) <= slack:  # along the track's line
                 t0 = px * ux + py * uy
                 t1 = t0 + (dx * ux + dy * uy)
                 lo, hi = min(t0, t1), max(t0, t1)
@@ -149,23 +150,26 @@ class FenceEdges:
         return max(best, 0.0)
 
     def _along(self, x, y, ux, uy, length, seg):
-        """For each segment of ``seg``: how far along the track it is met (inf: it is not)."""
+        """For each segment of ``seg``: how far along the track it is met (inf: it is not).
+
+        A segment whose line crosses the track's (at more than :data:`TOUCH` radians) is met
+        where they cross, if that is on both; one (nearly) parallel to it, where its nearer
+        end lies, if it lies on the track's line."""
         px, py = self.ax[seg] - x, self.ay[seg] - y
-        dx, dy = self.dx[seg], self.dy[seg]
-        den = ux * dy - uy * dx  # cross(u, d): zero when the segment is parallel to the track
-        size = np.abs(px) + np.abs(py) + np.abs(dx) + np.abs(dy) + length
-        slack = TOUCH * size  # metres
+        dx, dy, n = self.dx[seg], self.dy[seg], self.length[seg]
+        den = ux * dy - uy * dx  # cross(u, d) = n sin(angle between them)
+        slack = TOUCH * (np.abs(px) + np.abs(py) + n + length)  # metres
+        cross = np.abs(den) > TOUCH * n
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t = (px * dy - py * dx) / den  # where the track's line meets the segment's
             s = (px * uy - py * ux) / den  # and how far along the segment (0..1)
-            ds = slack / np.abs(den)  # the slack in s
-        t = np.where(
-            (s >= -ds) & (s <= 1.0 + ds) & (t >= -slack) & (t <= length + slack), t, np.inf
-        )
-        if not den.all():  # segments parallel to the track: met where one lies on its line
+            ds = slack / n  # the slack in s
+        ok = cross & (s >= -ds) & (s <= 1.0 + ds) & (t >= -slack) & (t <= length + slack)
+        t = np.where(ok, t, np.inf)
+        if not cross.all():
             t0 = px * ux + py * uy
             t1 = t0 + (dx * ux + dy * uy)
             lo, hi = np.minimum(t0, t1), np.maximum(t0, t1)
-            on = (den == 0) & (np.abs(px * uy - py * ux) <= slack) & (hi >= -slack)
+            on = ~cross & (np.abs(px * uy - py * ux) <= slack) & (hi >= -slack)
             t = np.where(on & (lo <= length + slack), np.minimum(t, lo), t)
         return np.maximum(t, 0.0)
