@@ -14,17 +14,20 @@
 #             (docker/alphafence-monitor.service: its user, ExecStart and environment, plus
 #             enforce and the SITL port) on SITL's second MAVLink link over loopback; a flight
 #             from the host at a keep-out fence (tests/navio2/flight.py)
+#   bench     the monitor's CPU per position on x86 SITL's stream at 10 and 50 Hz, measured by
+#             bench/monitor_probe.py on x86 and in the userland under qemu-user (emulated),
+#             each beside the floor (tests/navio2/bench.py); results in $LOGS/bench/
 #   docker    (trixie) docker/Dockerfile.armv7's steps in another fresh overlay: no Docker
 #             engine here, so its RUN/COPY/ENV run as a script (tests/navio2/dockerfile.py)
 # Environment: NAVIO2_SUITE (trixie | bookworm; default trixie), NAVIO2_PHASES (default
-# "install tests flight docker"), NAVIO2_TESTS (pytest arguments instead of SELECTION),
+# "install tests flight bench docker"), NAVIO2_TESTS (pytest arguments instead of SELECTION),
 # ALPHAFENCE_FUZZ_EXAMPLES (default 20 here), NAVIO2_KEEP=1 (keep this run's overlay).
 # Logs: $CACHE/navio2/logs-SUITE/.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 SUITE=${NAVIO2_SUITE:-trixie}
-PHASES=${NAVIO2_PHASES:-install tests flight docker}
+PHASES=${NAVIO2_PHASES:-install tests flight bench docker}
 CACHE=${ALPHAFENCE_CACHE:-$HOME/.cache/alphafence}/navio2
 BASE=$CACHE/$SUITE-armhf
 STAMP=$BASE/.alphafence-userland
@@ -42,7 +45,8 @@ FUZZ=${ALPHAFENCE_FUZZ_EXAMPLES:-20}
 # tests/fake_vehicle.py (upload faults, hostile vehicle input: the MAVSDK cases skip, the
 # pymavlink ones run), signing and signed bundles, the navio2 profile and BRD_SD_FENCE, MAVLink
 # ids, geo (outward simplification), the format readers (OSM on Malta when ../shared is there),
-# every module's doctests, the entrypoint and the README's install steps. Left out: the
+# every module's doctests, the entrypoint and the README's install steps, the per-position check
+# (grid, track ahead) and the link's filter against a full parse. Left out: the
 # source-tree checks (test_layout reads the tree, not the install), the CLI, builds, routes and
 # the comparisons, which need no armhf run to be trusted, and SITL (x86 only: the flight).
 SELECTION=(
@@ -53,7 +57,7 @@ SELECTION=(
     tests/test_upload_faults.py tests/test_fuzz_vehicle_input.py tests/test_signing.py
     tests/test_bundle.py tests/test_navio2.py tests/test_mavlink_ids.py tests/test_outward.py
     tests/test_readers.py tests/test_doctests.py tests/test_docker_entrypoint.py
-    tests/test_navio2_install.py
+    tests/test_navio2_install.py tests/test_monitor_fastcheck.py tests/test_mavlink_filter.py
 )
 
 USERLAND_PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
@@ -234,6 +238,14 @@ flight() {
     return "${PIPESTATUS[0]}"
 }
 
+# -- the monitor's CPU on armhf (emulated) beside x86 --------------------------------------------
+bench_phase() {
+    say "bench: the monitor's CPU per position, x86 and armhf under qemu-user, on x86 SITL"
+    (cd "$ROOT" && "$HOSTPY" -m tests.navio2.bench --rootfs "$ROOTFS" --out "$LOGS/bench") 2>&1 |
+        tee "$LOGS/bench.log"
+    return "${PIPESTATUS[0]}"
+}
+
 # -- docker/Dockerfile.armv7's steps in a fresh overlay ----------------------------------------
 docker_steps() {
     [ "$SUITE" = trixie ] || { echo "(the armv7 image is trixie's: skipped on $SUITE)"; return 0; }
@@ -253,7 +265,7 @@ docker_steps() {
 summary() {
     local phase
     say "summary"
-    for phase in userland install tests flight docker; do
+    for phase in userland install tests flight bench docker; do
         [ -n "${SECONDS_OF[$phase]:-}" ] || continue
         printf '  %-9s %5d s  %s\n' "$phase" "${SECONDS_OF[$phase]}" \
             "$([[ " $FAILED " == *" $phase "* ]] && echo FAILED || echo ok)"
@@ -263,6 +275,9 @@ summary() {
     fi
     if [ -n "${SECONDS_OF[flight]:-}" ] && [ -f "$LOGS/flight.log" ]; then
         printf '  flight:   %s\n' "$(grep '^navio2 flight:' "$LOGS/flight.log" | tail -1)"
+    fi
+    if [ -n "${SECONDS_OF[bench]:-}" ] && [ -f "$LOGS/bench.log" ]; then
+        printf '  bench:    %s\n' "$(grep '^navio2 bench:' "$LOGS/bench.log" | tail -1)"
     fi
     [ -z "$FAILED" ] || { echo "navio2-test: FAILED:$FAILED"; return 1; }
     echo "navio2-test: all phases passed"
@@ -280,9 +295,14 @@ main() {
             die "no kept install at $RUN (run once with NAVIO2_KEEP=1)"
         NAVIO2_KEEP=1
         mount_userland reuse
+        say "the checkout's kit into the kept install (its dependencies as they are)"
+        copy_source "$ROOTFS/root/alphafence"
+        in_userland chroot "$ROOTFS" /opt/alphafence/bin/pip install -q --no-deps \
+            --force-reinstall /root/alphafence
     fi
     if [[ " $PHASES " == *" tests "* ]]; then timed tests run_tests || true; fi
     if [[ " $PHASES " == *" flight "* ]]; then timed flight flight || true; fi
+    if [[ " $PHASES " == *" bench "* ]]; then timed bench bench_phase || true; fi
     if [[ " $PHASES " == *" docker "* ]]; then timed docker docker_steps || true; fi
     summary
 }
