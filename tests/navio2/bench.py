@@ -100,11 +100,15 @@ def verdict(got: dict) -> tuple[list[dict], list[str]]:
             {
                 "group": "navio2",
                 "name": f"{name}, armhf under qemu-user (emulated)",
-                "result": f"{value:.0f} {unit}, {100 * r['share']:.2f} % of a core",
+                "result": (
+                    f"{value:.0f} {unit}, {100 * r['share']:.2f} % of a core"
+                    if per
+                    else f"{value:.2f} {unit}, {r['rate']:.0f} datagrams/s"
+                ),
                 "value": value,
                 "unit": unit,
                 "target": f"<= {MAX_EMULATED_RATIO:g}x x86's" if per else "-",
-                "peer": None if peer is None else f"x86 {peer:.1f} {unit}",
+                "peer": None if peer is None else f"x86 {peer:.{0 if per else 2}f} {unit}",
                 "peer_value": peer,
                 "ratio": None if ratio is None else f"{ratio:.1f}x",
                 "ok": ok,
@@ -135,7 +139,7 @@ def main(argv=None) -> int:
     rows, failed = verdict(got)
     (args.out / "results.json").write_text(json.dumps({"raw": got, "rows": rows}, indent=1) + "\n")
     for r in rows:
-        peer = f"   ({r['peer']}, {r['ratio']})" if r["peer"] else ""
+        peer = f"   (x86: {r['peer'][4:]}, {r['ratio']})" if r["peer"] else ""
         print(f"  {r['name']}: {r['result']}{peer}{'' if r['ok'] else '   NOT OK'}")
     summary = "; ".join(failed) if failed else "armhf figures within bounds of x86's"
     print(f"navio2 bench: {'FAILED: ' if failed else ''}{summary}")
