@@ -21,7 +21,8 @@
 #             engine here, so its RUN/COPY/ENV run as a script (tests/navio2/dockerfile.py)
 # Environment: NAVIO2_SUITE (trixie | bookworm; default trixie), NAVIO2_PHASES (default
 # "install tests flight bench docker"), NAVIO2_TESTS (pytest arguments instead of SELECTION),
-# ALPHAFENCE_FUZZ_EXAMPLES (default 20 here), NAVIO2_KEEP=1 (keep this run's overlay).
+# ALPHAFENCE_FUZZ_EXAMPLES (default 20 here), NAVIO2_KEEP=1 (keep this run's overlay: a later run
+# without the install phase reuses it, with the checkout's kit put into it, no dependency changed).
 # Logs: $CACHE/navio2/logs-SUITE/.
 set -euo pipefail
 
