@@ -34,7 +34,9 @@ LOOPBACK = "127.0.0.1"
 UDP_KINDS = ("udpin", "udpout", "udpbcast")
 UNSIGNED_OK = frozenset({mavlink.MAVLINK_MSG_ID_RADIO_STATUS, mavlink.MAVLINK_MSG_ID_RADIO})
 SIGNED_FLAG = mavlink.MAVLINK_IFLAG_SIGNED
-MESSAGE_IDS = {cls.msgname: msgid for msgid, cls in mavlink.mavlink_map.items()}  # name -> id
+MESSAGE_IDS = {  # name -> id (``msgname`` since pymavlink 2.4.31, ``name`` before)
+    getattr(cls, "msgname", None) or cls.name: msgid for msgid, cls in mavlink.mavlink_map.items()
+}
 
 
 class BridgeError(VehicleError):
