@@ -18,13 +18,14 @@ uses every compiled piece x86 uses, and the emulated CPU per position is within
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+
+from tests.navio2 import rootfs_args
 
 ROOT = Path(__file__).resolve().parents[2]
 MALTA = ROOT.parent / "shared" / "data" / "osm" / "malta-2018-08-27.osm.pbf"
@@ -128,13 +129,9 @@ def build_fences(out: Path) -> Path:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m tests.navio2.bench")
-    p.add_argument("--rootfs", required=True, type=Path, help="the armhf userland, installed")
-    p.add_argument("--out", type=Path, default=Path("navio2-bench"), help="results folder")
-    args = p.parse_args(argv)
     if os.geteuid() != 0:
         raise SystemExit("navio2 bench: run as root (chroot)")
-    args.out.mkdir(parents=True, exist_ok=True)
+    args = rootfs_args("python -m tests.navio2.bench", "navio2-bench", "results folder", argv)
     got = asyncio.run(measure(args.rootfs, build_fences(args.out)))
     rows, failed = verdict(got)
     (args.out / "results.json").write_text(json.dumps({"raw": got, "rows": rows}, indent=1) + "\n")

@@ -20,7 +20,6 @@ arriving (an event-log line, a FENCE_STATUS, a position), bounded by a timeout.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import os
@@ -31,6 +30,7 @@ from pathlib import Path
 
 import shapely
 
+from tests.navio2 import rootfs_args
 from tests.navio2.readme import UNIT, unit_settings
 
 HOME = "egham"
@@ -271,11 +271,7 @@ async def fly(rootfs: Path, out: Path) -> dict:
 
 def main(argv=None) -> int:
     """Fly; print what was measured as JSON; exit 1 on a failed check."""
-    p = argparse.ArgumentParser(prog="tests.navio2.flight")
-    p.add_argument("--rootfs", required=True, type=Path, help="the armhf userland, installed")
-    p.add_argument("--out", type=Path, default=Path("navio2-flight"), help="logs and the key")
-    args = p.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
+    args = rootfs_args("tests.navio2.flight", "navio2-flight", "logs and the key", argv)
     try:
         result = asyncio.run(fly(args.rootfs, args.out))
     except (Exception, BaseException) as exc:  # pytest.fail's Failed is a BaseException
