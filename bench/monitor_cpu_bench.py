@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 
 from alphafence.sitl.find import find_sitl_binary
+from bench import cold_bench
 from bench.monitor_probe import measure_floor, measure_monitor, port_of
 
 RATES = (10.0, 50.0)
@@ -44,10 +45,9 @@ def malta_fences(osm):
     )
 
 
-async def _measure(osm, links):
+async def _measure(fences, links):
     from alphafence.sitl import launch_sitl
 
-    fences = malta_fences(osm)
     out = {}
     async with launch_sitl(home="malta_airport", speedup=1) as sitl:
         for link in links:
@@ -70,8 +70,9 @@ def run(osm, Row):
         except NoLinkError:
             pass
     chosen = choose_link("auto")
-    got, n = asyncio.run(_measure(osm, links))
-    rows = []
+    fences = malta_fences(osm)
+    got, n = asyncio.run(_measure(fences, links))
+    rows = cold_bench.run(fences, Row)
     for hz in RATES:
         floor = got.get(("floor", hz))
         if floor is not None:
