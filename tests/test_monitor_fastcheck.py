@@ -13,7 +13,7 @@ from datetime import datetime, timezone
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from alphafence.formats.fence_geojson import FenceRecord
@@ -191,22 +191,34 @@ def test_positions_beyond_the_fences_are_answered_too():
     start=st.tuples(st.floats(-3000, 3000), st.floats(-3000, 3000)),
     heading=st.floats(-math.pi, math.pi),
     length=st.floats(0.1, 3000),
+    aim=st.one_of(st.none(), st.integers(0, 10**6)),
 )
 def test_a_few_segments_in_plain_floats_meet_the_track_where_numpy_does(
-    specs, start, heading, length
+    specs, start, heading, length, aim
 ):
     """The first fence ahead is solved one segment at a time for a few segments and in numpy
-    for many: the same arithmetic, the same metres to the last bit."""
+    for many: the same arithmetic, the same metres to the last bit; and leaving out the
+    segments whose boxes miss the track's (widened by the most slack) changes nothing, also
+    for a track that ends on a fence's vertex (``aim``: which one) or grazes it."""
     from alphafence.monitor.rays import FenceEdges
 
     local = np.array([geometry(spec) for _, spec, _, _ in specs], dtype=object)
     edges = FenceEdges(local)
+    if aim is not None:  # end the track on a vertex
+        vx, vy = shapely.get_coordinates(local)[aim % len(shapely.get_coordinates(local))]
+        heading, length = (
+            math.atan2(vx - start[0], vy - start[1]),
+            math.hypot(vx - start[0], vy - start[1]),
+        )
+        assume(length > 0.0)
     ux, uy = math.sin(heading), math.cos(heading)
+    box = edges.track_box(*start, ux, uy, length)
     for k in range(len(local)):
         a, b = int(edges.indptr[k]), int(edges.indptr[k + 1])
         few = edges._along_few(*start, ux, uy, length, a, b)
         many = edges._along(*start, ux, uy, length, np.arange(a, b))
         assert few == (float(many.min()) if many.size else math.inf), (k, start, heading)
+        assert edges._along_few(*start, ux, uy, length, a, b, box) == few, (k, start, heading)
 
 
 def test_a_track_along_a_fences_edge_meets_it_where_the_edge_begins():

@@ -21,6 +21,7 @@ import shapely
 
 TOUCH = 1e-9  # relative slack: a track that grazes a vertex or ends on an edge still meets it
 FEW = 256  # up to this many segments are solved one by one in Python (numpy's calls cost more)
+SIFT = 8  # a fence with more segments than this has those far from the track left out first
 
 
 class FenceEdges:
@@ -64,6 +65,12 @@ class FenceEdges:
         self.rows = np.column_stack([a, d, np.hypot(d[:, 0], d[:, 1])])  # ax, ay, dx, dy, n
         self.ax, self.ay, self.dx, self.dy, self.length = self.rows.T
         self.bounds = shapely.bounds(local)
+        # each segment's box as (xmin, -xmax, ymin, -ymax): it overlaps a box (x0, x1, y0, y1)
+        # where every column is <= (x1, -x0, y1, -y0); and what bounds any slack (_margin)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        self.boxes = np.column_stack([lo[:, 0], -hi[:, 0], lo[:, 1], -hi[:, 1]])
+        self._extent = float(np.abs(a).sum(axis=1).max()) if len(a) else 0.0
+        self._longest = float(self.length.max()) if len(a) else 0.0
 
     def first_hit(self, x, y, ux, uy, length, cand, inside=(), lower=None):
         """The first of the fences ``cand`` met along the track from ``(x, y)`` in the unit
@@ -105,8 +112,9 @@ class FenceEdges:
         if sum(ends) - sum(starts) <= FEW:
             best, best_k = math.inf, None
             holds = set(inside)
+            box = self.track_box(x, y, ux, uy, length)
             for k, a, b in zip(cand.tolist(), starts, ends):
-                t = 0.0 if k in holds else self._along_few(x, y, ux, uy, length, a, b)
+                t = 0.0 if k in holds else self._along_few(x, y, ux, uy, length, a, b, box)
                 if t < best or (t == best and best_k is not None and k < best_k):
                     best, best_k = t, k
             return None if best_k is None else (best_k, best)
@@ -127,11 +135,30 @@ class FenceEdges:
             return None
         return int(cand[per == best].min()), best
 
-    def _along_few(self, x, y, ux, uy, length, a, b):
+    def track_box(self, x, y, ux, uy, length):
+        """The track's box widened by :meth:`_margin`, as ``(xmax, -xmin, ymax, -ymin)``: a
+        segment can only meet the track where its box overlaps this one (``_along_few``)."""
+        ex, ey, m = x + ux * length, y + uy * length, self._margin(x, y, length)
+        return (max(x, ex) + m, m - min(x, ex), max(y, ey) + m, m - min(y, ey))
+
+    def _margin(self, x, y, length):
+        """How far beyond the track's box a segment that meets it may lie: twice the most
+        slack any segment has here (its start is at most ``_extent`` from the origin, so
+        ``|px| + |py|`` is at most ``_extent + |x| + |y|``), and what a segment parallel to the
+        track within :data:`TOUCH` may drift off its line; doubled again for rounding."""
+        slack = TOUCH * (self._extent + abs(x) + abs(y) + self._longest + length)
+        return 4.0 * slack + 2.0 * TOUCH * self._longest + 1e-9
+
+    def _along_few(self, x, y, ux, uy, length, a, b, box=None):
         """:meth:`_along`'s least, for the segments ``a:b``, in plain floats (the same
-        arithmetic, operation for operation)."""
+        arithmetic, operation for operation); with ``box``
+        (:meth:`track_box`), only the segments whose boxes overlap it: the others cannot meet
+        the track, so the least is the same."""
+        rows = self.rows[a:b]
+        if box is not None and b - a > SIFT:
+            rows = rows[(self.boxes[a:b] <= box).all(axis=1)]
         best = math.inf
-        for ax, ay, dx, dy, n in self.rows[a:b].tolist():
+        for ax, ay, dx, dy, n in rows.tolist():
             px, py = ax - x, ay - y
             den = ux * dy - uy * dx
             slack = TOUCH * (abs(px) + abs(py) + n + length)
