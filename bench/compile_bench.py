@@ -172,7 +172,7 @@ def navio2(osm, Row):
     as_own = sum(
         p.chosen.kind == "polygon"
         and not p.merged
-        and p.chosen.items == len(p.local.exterior.coords) - 1
+        and (p.chosen.own or p.chosen.items == len(p.local.exterior.coords) - 1)
         for p in compiled.pieces
     )
     kb = sd_fence_kb_needed(compiled.items)

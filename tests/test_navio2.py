@@ -92,16 +92,20 @@ def wavy(n, cx, cy, r, seed, noise=2.0):
 
 
 def onboard_shapes(items, verify):
-    """(exclusion polygons, inclusion polygons, circles) of items, in the verify frame."""
+    """(exclusion polygons, inclusion polygons, circles, each exclusion's vertex count) of
+    items, in the verify frame, each polygon's edges read as straight lon/lat lines (as
+    ArduPilot reads them)."""
     polys, circles = group_polygons(items)
-    out, keep_in = [], []
+    out, keep_in, counts = [], [], []
     for cmd, pts in polys:
         pts = np.asarray(pts)
-        poly = shapely.Polygon(np.column_stack(verify.xy(pts[:, 0], pts[:, 1])))
+        poly = verify.local(shapely.Polygon(pts))
         assert poly.is_valid and 3 <= len(pts) <= 255
         (out if cmd == POLYGON_EXCLUSION else keep_in).append(poly)
+        if cmd == POLYGON_EXCLUSION:
+            counts.append(len(pts))
     discs = [(*verify.xy(c.lon, c.lat), c.param1) for c in circles]
-    return out, keep_in, discs
+    return out, keep_in, discs, counts
 
 
 @st.composite
@@ -133,7 +137,7 @@ def test_navio2_fences_are_the_fences_and_contain_them(fs, kb):
     result = compile_fences(records, area, profile, distance_m=1e5)
     assert len(result.items) <= profile.items and storage_bytes(result.items) <= profile.bytes
     verify = VerifyFrame(lon0, lat0)
-    out, keep_in, discs = onboard_shapes(result.items, verify)
+    out, keep_in, discs, counts = onboard_shapes(result.items, verify)
     union = shapely.union_all(out) if out else shapely.Polygon()
     for rec in records:
         local = verify.local(rec.geometry)
@@ -151,10 +155,9 @@ def test_navio2_fences_are_the_fences_and_contain_them(fs, kb):
                 continue
             local = verify.local(rec.geometry)
             n = len(rec.geometry.exterior.coords) - 1
-            mine = [p for p in out if p.covers(local)]
+            mine = [(p, v) for p, v in zip(out, counts) if p.covers(local)]
             assert mine, rec.site_id
-            stored = min(mine, key=lambda p: p.area)
-            vertices = len(stored.exterior.coords) - 1
+            stored, vertices = min(mine, key=lambda pv: pv[0].area)
             if n <= 255:  # its own vertices, PAD_M out (a bevel at a spike adds one)
                 assert n - 2 <= vertices <= min(255, n + 5)
                 assert stored.area - local.area <= 2.5 * PAD_M * local.length + 1.0
@@ -162,6 +165,24 @@ def test_navio2_fences_are_the_fences_and_contain_them(fs, kb):
                 # 60 m fence of 700 vertices may keep far fewer: its noise is smoothed away)
                 assert vertices <= 255
                 assert stored.area - local.area <= 0.02 * local.area + 2.5 * PAD_M * local.length
+
+
+def test_a_fence_whose_edges_bow_goes_onboard_as_its_own_vertices():
+    """At 75°N a triangle 700 m across is read with dozens of vertices along its bowed lon/lat
+    edges; onboard it is its own three vertices, 5 cm out, and read as ArduPilot reads them
+    they contain it (found by the property test above: it took 7-9 vertices)."""
+    tri = shapely.Polygon([(-0.049, 75.0), (-0.068, 75.003), (-0.068, 74.997)])
+    verify = VerifyFrame(0.0, 75.0)
+    area = LocalFrame(0.0, 75.0).geom_to_wgs84(shapely.box(-3000, -3000, 3000, 3000))
+    for kind in ("keep_out", "keep_in"):
+        result = compile_fences([FenceRecord("t", kind, tri)], area, navio2_profile(64))
+        out, keep_in, discs, counts = onboard_shapes(result.items, verify)
+        local = verify.local(tri)
+        assert len(local.exterior.coords) > 30  # its reading bows
+        if kind == "keep_out":
+            assert counts == [3] and discs == [] and out[0].covers(local)
+        else:
+            assert len(result.items) == 3 and local.covers(keep_in[0])
 
 
 def test_demo_scene_at_full_resolution(tmp_path):

@@ -17,16 +17,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 import shapely
 
 from alphafence.errors import InputError
 from alphafence.geo.alpha import outer_polygons
 from alphafence.geo.frame import LocalFrame
+from alphafence.geo.lonlat import as_read
 from alphafence.mavlink.storage import END_BYTES, HEADER_BYTES, RETURN_BYTES, Profile, storage_bytes
 from alphafence.onboard.corridor import Corridor, LossModel, Overshoot, overshoot
-from alphafence.onboard.emit import emit_items
+from alphafence.onboard.emit import emit_items, held_lonlat
 from alphafence.onboard.merge import fit_by_merging, merge_to_upgrade, upgrade
-from alphafence.onboard.options import Piece, piece_options
+from alphafence.onboard.options import PAD_M, Piece, own_option, piece_options, with_own
 
 
 @dataclass
@@ -108,6 +110,33 @@ class CompileResult:
         piece, as the compiler counts them: in the corridor (area outside it counts
         ``corridor.LOSS_OUTSIDE`` as much)."""
         return sum(p.chosen.loss for p in self.pieces)
+
+
+def _own(rec, part, frame, max_vertices):
+    """The option of storing ``rec`` as its own vertices (:func:`own_option`), when ``part``,
+    its reading, has vertices along bowed edges, and only if that option, held as read and
+    rounded, holds the fence (None otherwise)."""
+    geom = rec.geometry
+    if geom.geom_type != "Polygon" or shapely.get_num_coordinates(geom) > 4 * max_vertices:
+        return None
+    lon = shapely.get_coordinates(geom.exterior)[:, 0]
+    if lon.max() - lon.min() > 180.0:  # across the antimeridian: as read, in parts
+        return None
+    own = shapely.Polygon(frame.geom_to_local(shapely.Polygon(geom.exterior)).exterior)
+    inclusion = rec.kind == "keep_in"
+    opt = own_option(own, part, inclusion, max_vertices)
+    if opt is None:
+        return None
+    lon, lat, ok = held_lonlat(opt.local, frame, not inclusion, part)
+    if not ok:
+        return None
+    # held against its own chords, not the fence: it must stand half its pad clear of it
+    read = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
+    if inclusion:
+        ok = part.covers(shapely.buffer(read, PAD_M / 2, join_style="mitre"))
+    else:
+        ok = read.covers(shapely.buffer(part, PAD_M / 2, join_style="mitre"))
+    return opt if ok else None
 
 
 def operating_area_from_plan(path):
@@ -214,8 +243,11 @@ def compile_fences(
         if rec.circle is not None:
             x, y = frame.to_local(rec.circle[0], rec.circle[1])
             circle = (float(x), float(y), rec.circle[2])
-        for part in outer_polygons(local):
+        parts = outer_polygons(local)
+        for part in parts:
             opts = piece_options(part, rec.kind == "keep_in", profile.max_polygon_vertices, circle)
+            if len(parts) == 1:
+                opts = with_own(opts, _own(rec, part, frame, profile.max_polygon_vertices))
             if opts:
                 pieces.append(Piece([rec.site_id], rec.kind == "keep_in", part, opts))
     model = LossModel(corridor, full[0])

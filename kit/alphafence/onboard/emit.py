@@ -54,6 +54,22 @@ def _sides(lon, lat):
     return out
 
 
+def held_lonlat(local, frame, grows, target):
+    """``local``'s exterior held as read (:func:`~alphafence.geo.hold.hold_as_read`: outward
+    when it ``grows``, else inward), counter-clockwise, rounded to 1e-7 degrees: ``(lon,
+    lat, ok)``, ``ok`` saying whether that ring, read as lon/lat lines, contains ``target``
+    (lies inside it, when it does not grow)."""
+    held = hold_as_read(shapely.Polygon(local.exterior), frame, outward=grows)
+    ring = shapely.LinearRing(held.exterior)
+    pts = np.asarray(ring.coords)[:-1]
+    if not ring.is_ccw:
+        pts = pts[::-1]
+    lon, lat = _round_lonlat(frame, pts)
+    check = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
+    ok = check.is_valid and (_covers(check, target) if grows else _covers(target, check))
+    return lon, lat, ok
+
+
 def emit_items(pieces, frame, return_point=None):
     """The fence items of the pieces' chosen options, in upload order.
 
@@ -101,14 +117,7 @@ def emit_items(pieces, frame, return_point=None):
             continue
         # held so that its lon/lat reading (ArduPilot's) contains what the polygon contains,
         # or lies inside it for an inclusion that must not grow
-        held = hold_as_read(shapely.Polygon(o.local.exterior), frame, outward=p.grows)
-        ring = shapely.LinearRing(held.exterior)
-        pts = np.asarray(ring.coords)[:-1]
-        if not ring.is_ccw:
-            pts = pts[::-1]
-        lon, lat = _round_lonlat(frame, pts)
-        check = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
-        ok = check.is_valid and (_covers(check, p.local) if p.grows else _covers(p.local, check))
+        lon, lat, ok = held_lonlat(o.local, frame, p.grows, p.local)
         if not ok:
             raise InputError(
                 "compile",

@@ -43,6 +43,9 @@ class Option:
         The stored shape, metric (a circumscribed polygon for a circle).
     circle : tuple, optional
         ``(x, y, r)`` in metres, for a circle.
+    own : bool
+        The fence's own vertices, where its reading has more along bowed edges
+        (:func:`own_option`).
     """
 
     kind: str  # "circle" | "polygon"
@@ -51,6 +54,7 @@ class Option:
     loss: float  # m² added (keep-out) or removed (keep-in) relative to the fence
     local: object  # metric polygon (a circumscribed polygon for circles)
     circle: tuple | None = None  # (x, y, r) metric
+    own: bool = False  # the fence's own vertices (own_option), where its reading has more
 
     @property
     def label(self):
@@ -151,6 +155,48 @@ def _keep_clear(found, poly, pad):
     joined = shapely.union(found, rounded) if pad > 0 else shapely.intersection(found, rounded)
     parts = outer_polygons(joined)
     return parts[int(np.argmax(shapely.area(parts)))] if len(parts) else None
+
+
+def own_option(own, poly, inclusion: bool, max_vertices: int):
+    """The fence stored as its own vertices, ``PAD_M`` out (in, for keep-in), where its
+    reading (``poly``) has more: a fence whose lon/lat edges bow in metres is read with
+    vertices along each bow, but its own vertices, written back, draw those very edges.
+    None when it has no fewer vertices than ``poly`` or more than ``max_vertices``. Whether
+    the option, held as read, contains the fence is for the caller to check.
+
+    Parameters
+    ----------
+    own : shapely.Polygon
+        The fence's own vertices in metres, joined by metric chords.
+    poly : shapely.Polygon
+        The fence as read (its edges followed in lon/lat), metric.
+    inclusion : bool
+        Keep-in (moved inward) rather than keep-out.
+    max_vertices : int
+        Most vertices of one polygon the vehicle accepts.
+
+    Returns
+    -------
+    Option or None
+    """
+    if not own.is_valid or _vertices(own) >= _vertices(poly):
+        return None
+    base = _offset(own, -PAD_M if inclusion else PAD_M, 5.0 if inclusion else 10.0)
+    if base is None or not 3 <= _vertices(base) <= max_vertices:
+        return None
+    v = _vertices(base)
+    loss = (poly.area - base.area) if inclusion else (base.area - poly.area)
+    return Option("polygon", v, polygon_bytes(v), max(loss, 0.0), base, own=True)
+
+
+def with_own(options, own):
+    """``options`` (:func:`piece_options`'s) with ``own`` (:func:`own_option`'s, or None) as
+    the last, least-loss one: the options of more vertices than the fence's own approximate
+    its reading along the bows, which its own vertices draw exactly (their metric losses
+    differ from its by the bows, not by what is fenced)."""
+    if own is None:
+        return options
+    return _pareto([o for o in options if o.items < own.items] + [own])
 
 
 def piece_options(poly, inclusion: bool, max_vertices: int, circle=None):
