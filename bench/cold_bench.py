@@ -39,8 +39,10 @@ def cpu_us(fn, gap_s: float, repeat: int = REPEAT) -> float:
 
 def stages(fences):
     """``{name: callable}``: the monitor's per-position stages on SITL's Malta home (decoding
-    a GLOBAL_POSITION_INT with pymavlink; the engine's step on it, with ``fences``), after a
-    calibration (the bare ``struct`` decode of the same payload)."""
+    a GLOBAL_POSITION_INT with pymavlink; the engine's step on it, with ``fences``), after two
+    calibrations (a Python function that does nothing; the bare ``struct`` decode of the same
+    payload), and the part of the step that costs most cold (pyproj's conversion of the
+    position to the fences' metres)."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
     from alphafence.monitor.engine import Engine
@@ -70,9 +72,16 @@ def stages(fences):
         # zeros) padded back and unpacked; no checksum, no object
         return fields.unpack(datagram[10:-2].ljust(fields.size, b"\0"))
 
+    def nothing():  # the least any Python code costs: a call and a return
+        return None
+
+    to_local = fences.frame.to_local
+
     return {
+        "a Python function that does nothing (the least any code costs)": nothing,
         "a bare struct decode of its payload (the least any decoder does)": bare,
         "pymavlink decodes one GLOBAL_POSITION_INT": lambda: receiver.parse_buffer(datagram),
+        "pyproj converts it to the fences' metres (part of the step)": lambda: to_local(lon, lat),
         "the engine's step on it (SITL's home, Malta's fences)": step,
     }
 

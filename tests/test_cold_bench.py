@@ -22,11 +22,14 @@ def _fences_near_home(x0):
 def test_stages_decode_and_step_the_home_position():
     home, fences = _fences_near_home(200.0)
     fences.index()
-    bare, decode, step = cold_bench.stages(fences).values()
+    nothing, bare, decode, to_local, step = cold_bench.stages(fences).values()
+    assert nothing() is None
     (msg,) = decode()
     assert bare() == tuple(msg.to_dict()[k] for k in msg.fieldnames)  # the same fields
     assert msg.get_type() == "GLOBAL_POSITION_INT"
     assert abs(msg.lat / 1e7 - home.lat) < 1e-7 and abs(msg.lon / 1e7 - home.lon) < 1e-7
+    home_m = shapely.Point(to_local())  # in the fences' metres: 200 m west of the square
+    assert abs(shapely.distance(home_m, fences.local[0]) - 200.0) < 0.01
     assert step() == [] and step() == []  # clear of the square: no event
 
 
