@@ -22,6 +22,7 @@ import shapely
 TOUCH = 1e-9  # relative slack: a track that grazes a vertex or ends on an edge still meets it
 FEW = 256  # up to this many segments are solved one by one in Python (numpy's calls cost more)
 SIFT = 8  # a fence with more segments than this has those far from the track left out first
+ALL_FOUR = 0x01010101  # four true numpy bools read as one 32-bit word (either byte order)
 
 
 class FenceEdges:
@@ -69,6 +70,7 @@ class FenceEdges:
         # where every column is <= (x1, -x0, y1, -y0); and what bounds any slack (_margin)
         lo, hi = np.minimum(a, b), np.maximum(a, b)
         self.boxes = np.column_stack([lo[:, 0], -hi[:, 0], lo[:, 1], -hi[:, 1]])
+        self._first = self.indptr.tolist()  # as plain ints: a few fences cost less than numpy
         self._extent = float(np.abs(a).sum(axis=1).max()) if len(a) else 0.0
         self._longest = float(self.length.max()) if len(a) else 0.0
 
@@ -107,14 +109,17 @@ class FenceEdges:
             cand = cand[near]
         if not cand.size:
             return None
-        indptr = self.indptr
-        starts, ends = indptr[cand].tolist(), indptr[cand + 1].tolist()
-        if sum(ends) - sum(starts) <= FEW:
+        indptr, first, ks = self.indptr, self._first, cand.tolist()
+        if sum(first[k + 1] - first[k] for k in ks) <= FEW:
             best, best_k = math.inf, None
-            holds = set(inside)
-            box = self.track_box(x, y, ux, uy, length)
-            for k, a, b in zip(cand.tolist(), starts, ends):
-                t = 0.0 if k in holds else self._along_few(x, y, ux, uy, length, a, b, box)
+            box = None
+            for k in ks:
+                if k in inside:
+                    t = 0.0
+                else:
+                    if box is None:
+                        box = np.array(self.track_box(x, y, ux, uy, length))
+                    t = self._along_few(x, y, ux, uy, length, first[k], first[k + 1], box)
                 if t < best or (t == best and best_k is not None and k < best_k):
                     best, best_k = t, k
             return None if best_k is None else (best_k, best)
@@ -155,8 +160,8 @@ class FenceEdges:
         (:meth:`track_box`), only the segments whose boxes overlap it: the others cannot meet
         the track, so the least is the same."""
         rows = self.rows[a:b]
-        if box is not None and b - a > SIFT:
-            rows = rows[(self.boxes[a:b] <= box).all(axis=1)]
+        if box is not None and b - a > SIFT:  # all four of a row <= box: its bools as one word
+            rows = rows[(self.boxes[a:b] <= box).view(np.uint32).ravel() == ALL_FOUR]
         best = math.inf
         for ax, ay, dx, dy, n in rows.tolist():
             px, py = ax - x, ay - y
