@@ -314,6 +314,14 @@ def test_plan_reader_version_1(version, polygon, breach_return):
     only_input_errors(read_plan_geofence, write(".plan", json.dumps(doc)))
 
 
+def test_a_version_2_geofence_without_polygons_or_circles_is_empty(tmp_path):
+    # found by test_plan_reader_version_1: a KeyError, where the lists default to none
+    path = tmp_path / "empty.plan"
+    path.write_text(json.dumps({"fileType": "Plan", "geoFence": {"version": 2}}))
+    fence = read_plan_geofence(path)
+    assert fence.items == [] and fence.return_point is None
+
+
 param_values = st.one_of(st.floats(-200, 200), st.integers(-2, 8), scalars)
 plan_items = st.lists(
     st.fixed_dictionaries(

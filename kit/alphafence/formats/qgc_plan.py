@@ -247,7 +247,7 @@ def read_plan_geofence(path) -> PlanFence:
     ret = None
     if fence.get("breachReturn") is not None:
         ret = _latlon_pair(path, "geoFence breachReturn", fence["breachReturn"])
-    entries = [] if version == 1 else [*fence["polygons"], *fence["circles"]]
+    entries = [] if version == 1 else [*fence.get("polygons", []), *fence.get("circles", [])]
     return PlanFence(items, ret, version, [_sites(e) for e in entries])
 
 
