@@ -1,11 +1,22 @@
-"""A small model of how ArduPilot decides a fence breach, and a containment check that owes
-nothing to the kit's metric frames.
+"""A model of how ArduPilot decides a fence breach, and a containment check that owes nothing
+to the kit's metric frames.
 
-ArduPilot (``AC_PolyFence_loader::breached``) tests a position against a polygon with
-``Polygon_outside`` on the latitude and longitude integers (1e-7 degrees) of the position and
-of the vertices: straight lines in lat/lng, no wrap at the antimeridian. A circle is breached
-by ``Location::get_distance`` to its centre: a flat-earth distance on a 6,378,137 m sphere,
-the longitude difference scaled by the cosine of the centre's latitude.
+ArduPilot's ``AC_PolyFence_loader::breached`` (current master, ``libraries/AC_Fence``):
+
+- a position inside any exclusion polygon (``Polygon_outside`` on the latitude and longitude
+  integers, 1e-7 degrees, of the position and the vertices: straight lines in lat/lng, no wrap
+  at the antimeridian) or exclusion circle (``Location::get_distance`` below the radius) is a
+  breach;
+- of the inclusion polygons and circles (outside a circle: distance above the radius), the
+  position must be inside **every** one (their intersection), or with ``FENCE_OPTIONS`` bit 1
+  (``INCLUSION_UNION``) inside at least one: :func:`breached`.
+
+``Location::get_distance`` scales the longitude difference at the **mean** latitude of the two
+points (``longitude_scale((lat + loc2.lat) / 2)``) and multiplies by LOCATION_SCALING_FACTOR,
+0.011131884502145034 m per 1e-7 degree (a 6,378,100 m sphere). The integer arithmetic lives in
+the kit (``alphafence.geo.vehicle_distance``), which this model uses, and which
+``tests/test_ardupilot_model.py`` holds to cases written from ArduPilot's source and to SITL's
+own FENCE_STATUS.
 
 :func:`clearance` measures, for the zone's boundary as its file means it (straight lon/lat
 edges, sampled densely), whether ArduPilot would call every sample inside a fence, and the
@@ -22,8 +33,16 @@ import shapely
 from pyproj import Geod
 from scipy.spatial import cKDTree
 
+from alphafence.geo import vehicle_distance as vd
+from alphafence.mavlink.items import (
+    CIRCLE_EXCLUSION,
+    CIRCLE_INCLUSION,
+    POLYGON_EXCLUSION,
+    POLYGON_INCLUSION,
+)
+
 GEOD = Geod(ellps="WGS84")
-LATLON_TO_M = 0.011131884502145034  # ArduPilot's LATLON_TO_M: 6378137 m * pi / 180 * 1e-7
+LATLON_TO_M = 0.011131884502145034  # ArduPilot's LOCATION_SCALING_FACTOR: m per 1e-7 degree
 
 
 def e7(deg):
@@ -36,32 +55,58 @@ def polygon_outside(lat, lon, ring_lat, ring_lon):
 
     Every argument in degrees; all are taken to 1e-7 degree integers first, as the vehicle
     holds them. The ring is not closed."""
-    px, py = e7(lat), e7(lon)
-    vx, vy = e7(ring_lat), e7(ring_lon)
-    outside = np.ones(px.shape, bool)
-    n = len(vx)
-    for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        crosses = (vy[i] > py) != (vy[j] > py)
-        if not crosses.any():
+    return vd.polygon_outside(lon, lat, ring_lon, ring_lat)
+
+
+def location_distance_m(lat, lon, clat, clon, mean=True):
+    """ArduPilot's ``Location::get_distance`` from positions to a circle's centre (metres):
+    the longitude scaled at the mean latitude (``mean=False``: at the centre's, as earlier
+    firmware did)."""
+    return vd.vehicle_distance_m(lon, lat, clon, clat, mean=mean)
+
+
+def fence_shapes(items):
+    """A flat list of fence items as ArduPilot's loader groups them: ``(command, ring or
+    centre, radius)`` per polygon (its run of vertices) and circle; return points left out."""
+    shapes, k = [], 0
+    while k < len(items):
+        it = items[k]
+        if it.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
+            n = int(it.param1)
+            ring = np.array([(v.lon, v.lat) for v in items[k : k + n]], float)
+            shapes.append((it.command, ring, None))
+            k += n
             continue
-        dx1, dx2 = px - vx[i], vx[j] - vx[i]
-        dy1, dy2 = py - vy[i], vy[j] - vy[i]
-        if dy2 < 0:
-            flip = dx1 * dy2 > dx2 * dy1
+        if it.command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION):
+            shapes.append((it.command, np.array([(it.lon, it.lat)], float), float(it.param1)))
+        k += 1
+    return shapes
+
+
+def breached(items, lon, lat, union=False):
+    """``AC_PolyFence_loader::breached`` for many positions (lon, lat arrays): True where the
+    vehicle holding ``items`` is in breach, its inclusions read as their intersection, or
+    their union with ``union`` (``FENCE_OPTIONS`` bit 1)."""
+    lon, lat = np.atleast_1d(np.asarray(lon, float)), np.atleast_1d(np.asarray(lat, float))
+    excluded = np.zeros(lon.shape, bool)
+    inclusions, outside = 0, np.zeros(lon.shape, int)
+    for command, ring, radius in fence_shapes(list(items)):
+        if radius is None:
+            out = polygon_outside(lat, lon, ring[:, 1], ring[:, 0])
         else:
-            flip = dx1 * dy2 < dx2 * dy1
-        outside ^= crosses & flip
-    return outside
-
-
-def location_distance_m(lat, lon, clat, clon):
-    """ArduPilot's ``Location::get_distance`` from positions to a circle's centre (metres)."""
-    dlat = (e7(clat) - e7(lat)).astype(float)
-    dlng = (e7(clon) - e7(lon)).astype(float)
-    dlng = np.where(dlng > 1.8e9, dlng - 3.6e9, np.where(dlng < -1.8e9, dlng + 3.6e9, dlng))
-    scale = max(math.cos(math.radians(float(e7(clat)) * 1e-7)), 0.01)
-    return np.hypot(dlat, dlng * scale) * LATLON_TO_M
+            d = location_distance_m(lat, lon, ring[0, 1], ring[0, 0])
+            # an exclusion breaches below its radius, an inclusion above it
+            out = d > radius if command == CIRCLE_INCLUSION else d >= radius
+        if command in (POLYGON_EXCLUSION, CIRCLE_EXCLUSION):
+            excluded |= ~out
+        else:
+            inclusions += 1
+            outside += out
+    if union:
+        left = (outside == inclusions) if inclusions else np.zeros(lon.shape, bool)
+    else:
+        left = outside > 0
+    return excluded | left
 
 
 def _unwrap(lon):
@@ -209,13 +254,8 @@ def excursion_m(zone, rings, margin_m, spacing_m=None, reach_m=None):
 
 def circle_rim(lon, lat, radius_m, n=720):
     """Positions ArduPilot measures ``radius_m`` from a circle's centre (lon, lat arrays):
-    its flat-earth distance inverted (latitude steps of LATLON_TO_M, longitude steps scaled
-    by the centre's cosine)."""
-    az = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
-    clat = float(e7(lat)) * 1e-7
-    scale = max(math.cos(math.radians(clat)), 0.01)
-    step = radius_m / (LATLON_TO_M * 1e7)  # degrees
-    return lon + step * np.sin(az) / scale, lat + step * np.cos(az)
+    its mean-latitude distance inverted."""
+    return vd.vehicle_circle_rim(lon, lat, radius_m, n)
 
 
 def circle_inradius_m(lon, lat, radius_m):

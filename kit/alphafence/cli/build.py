@@ -7,7 +7,7 @@ import os
 from rich.table import Table
 
 from alphafence.build import METHODS
-from alphafence.cli.common import err_console, out_console, progress
+from alphafence.cli.common import err_console, out_console, progress, union_hint
 from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import (
     add_database_options,
@@ -151,6 +151,10 @@ def run(args) -> int:
         )
         extra = render(result.fences, meta, None, args.plan, args.waypoints) if keep else {}
     write_all(extra)
+    if extra:
+        from alphafence.mavlink.items import fence_items
+
+        union_hint(fence_items(result.fences))
     written = [args.output, *extra]
     if args.figure:
         from alphafence.plots.fences import fence_map

@@ -199,3 +199,13 @@ def unsigned_hint(key):
         raise VehicleError(
             f"{exc} (if the vehicle has MAVLink signing on, give --signing-key)"
         ) from exc
+
+
+def union_hint(items) -> None:
+    """Print the note that fence items with more than one inclusion need ``FENCE_OPTIONS``
+    bit 1 on the vehicle (:func:`alphafence.mavlink.inclusions.union_note`), if they do."""
+    from alphafence.mavlink.inclusions import union_note
+
+    note = union_note(items)
+    if note:
+        err_console.print(f"[yellow]note:[/] {note}", soft_wrap=True)

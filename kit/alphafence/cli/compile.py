@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from alphafence.cli.common import out_console
+from alphafence.cli.common import out_console, union_hint
 from alphafence.cli.maps import add_map_options, check_map_args, onboard_map
 from alphafence.cli.options import add_compile_options, bbox, compile_from_args, figure_wants
 from alphafence.cli.tables import compile_report
@@ -89,6 +89,7 @@ def run(args) -> int:
 
         out.update({sign(path, args.sign_key): None for path in list(out)})
     compile_report(result)
+    union_hint(result.items)
     if args.figure:
         from alphafence.plots.fences import onboard_figure
 

@@ -24,6 +24,7 @@ from alphafence.cli.common import (
     check_trust,
     out_console,
     signing_key,
+    union_hint,
     unsigned_hint,
 )
 from alphafence.cli.maps import add_map_options, check_map_args
@@ -37,6 +38,7 @@ from alphafence.cli.options import (
 )
 from alphafence.cli.tables import compile_report
 from alphafence.errors import InputError, VehicleError, need
+from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
 from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
 
 # MAVSDK's results for a fence the vehicle has no room for (too many items; too many bytes)
@@ -116,6 +118,10 @@ class _Presets(argparse.Action):
             t.add_column(col)
         for name, vehicle in VEHICLE.items():
             t.add_row(name, vehicle, describe(name))
+        t.caption = (
+            f"A fence of two or more inclusion areas also gets {UNION_WORDS}, whatever the "
+            "preset: ArduPilot otherwise reads them as their intersection"
+        )
         out_console.print(t)
         parser.exit(0)
 
@@ -308,7 +314,12 @@ def run(args) -> int:
         title = f"{args.fences}: {len(items)} fence items ({profile.name})"
         out_console.print(f"wrote {write_map_page(args, title, onboard_layers(fences, ret))}")
     if args.dry_run:
-        out_console.print(f"dry run: {len(items)} fence items ready; nothing sent")
+        union = inclusion_count(items) > 1
+        out_console.print(
+            f"dry run: {len(items)} fence items ready"
+            + (f" (the upload also sets {UNION_WORDS})" if union else "")
+            + "; nothing sent"
+        )
         return 0
     if not args.connect:
         raise InputError("--connect", "needed unless --dry-run")
@@ -319,12 +330,14 @@ def run(args) -> int:
 async def _upload(args, items, profile) -> int:
     from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
     from alphafence.vehicle.link import open_vehicle
-    from alphafence.vehicle.params import apply_params, check_preset
+    from alphafence.vehicle.params import apply_params, check_preset, check_union_supported
 
     with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
             if args.params:
                 await check_preset(vehicle, args.params)
+            inclusions = inclusion_count(items)
+            options = await check_union_supported(vehicle, inclusions) if inclusions > 1 else None
             if profile.file_backed:
                 await _storage(args, vehicle, items, profile)
             try:
@@ -336,6 +349,8 @@ async def _upload(args, items, profile) -> int:
             out_console.print(
                 f"uploaded {rep.items} fence items and read them back identical ({rep.seconds:.2f} s)"
             )
+            if options is not None:
+                await _union(vehicle, options, inclusions)
             if args.params:
                 got = await apply_params(vehicle, PARAM_PROFILES[args.params])
                 out_console.print(
@@ -343,6 +358,24 @@ async def _upload(args, items, profile) -> int:
                     + ", ".join(f"{k}={v:g}" for k, v in got.values.items())
                 )
     return 0
+
+
+async def _union(vehicle, options, inclusions):
+    """Set FENCE_OPTIONS' union bit after the fence of ``inclusions`` inclusion areas is
+    uploaded (until then the vehicle's stricter reading, their intersection, holds)."""
+    from alphafence.vehicle.params import ParamError, set_union
+
+    try:
+        got = await set_union(vehicle, options)
+    except ParamError as exc:
+        raise VehicleError(
+            f"the fence is uploaded, but {exc}: the vehicle reads its {inclusions} inclusion "
+            "areas as their intersection (it must stay inside all of them)"
+        ) from None
+    out_console.print(
+        f"FENCE_OPTIONS={got.values['FENCE_OPTIONS']:g} set and read back: the vehicle reads "
+        f"its {inclusions} inclusion areas as their union"
+    )
 
 
 async def _storage(args, vehicle, items, profile):

@@ -17,6 +17,7 @@ from alphafence.errors import InputError
 from alphafence.formats.jsonfile import read_json
 from alphafence.geo.coords import checked_position, latlon
 from alphafence.mavlink import ids
+from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     CIRCLE_INCLUSION,
@@ -137,6 +138,13 @@ def plan_document(
         },
         "rallyPoints": {"version": 2, "points": []},
     }
+    inclusions = inclusion_count(items)
+    if inclusions > 1:  # ArduPilot intersects inclusions unless told otherwise
+        doc["geoFence"]["alphafence"] = {
+            "inclusion_areas": inclusions,
+            "requires": f"{UNION_WORDS}: without it ArduPilot reads the areas as their "
+            "intersection (alphafence upload sets it)",
+        }
     entries = doc["geoFence"]["polygons"] + doc["geoFence"]["circles"]
     for entry, stands_for in zip(entries, sites or ()):
         if stands_for:

@@ -1,12 +1,18 @@
-"""Distances as ArduPilot measures them, for the circles a vehicle holds.
+"""Distances and polygons as ArduPilot reads them, for the fence items a vehicle holds.
 
-ArduPilot decides a circle breach with ``Location::get_distance``: a flat-earth distance on a
-6,378,137 m sphere, the longitude difference scaled by the cosine of the circle centre's
-latitude (``LATLON_TO_M``). Near the equator that reads north-south distances up to 0.7 %
-longer than the WGS84 geodesic, near the poles 0.3 % shorter, and off the centre's latitude
-east-west ones differ too. A circle item therefore carries the radius that makes the vehicle's
-circle contain (exclusion) or stay inside (inclusion) the geodesic circle it stands for:
+ArduPilot decides a circle breach with ``Location::get_distance`` (``AP_Common/Location.cpp``):
+a flat-earth distance on its integer 1e-7 degrees, the longitude difference scaled by the
+cosine of the **mean** latitude of the two points (``longitude_scale((lat + loc2.lat) / 2)``,
+an integer division), times ``LOCATION_SCALING_FACTOR`` (0.011131884502145034 m per 1e-7
+degree: a 6,378,100 m sphere). Older firmware scaled at the circle centre's latitude, and
+some builds used 0.01113195 (6,378,137 m). Near the equator the distance reads north-south
+up to 0.7 % longer than the WGS84 geodesic, near the poles 0.3 % shorter. A circle item
+therefore carries the radius that makes the vehicle's circle contain (exclusion) or stay
+inside (inclusion) the geodesic circle it stands for under **every** one of these readings:
 :func:`vehicle_radius`.
+
+A polygon is tested with ``Polygon_outside`` on the integers of the position and of the
+vertices: edges straight in lat/lng, no wrap at the antimeridian (:func:`polygon_outside`).
 """
 
 from __future__ import annotations
@@ -19,30 +25,59 @@ from pyproj import Geod
 from alphafence.geo.coords import E7
 
 GEOD = Geod(ellps="WGS84")
-LATLON_TO_M = 6_378_137.0 * math.pi / 180.0  # ArduPilot's metres per degree (LATLON_TO_M * 1e7)
+LATLON_TO_M = 0.011131884502145034 * E7  # ArduPilot's metres per degree (6,378,100 m sphere)
+LEGACY_LATLON_TO_M = 0.01113195 * E7  # earlier firmware's (about 6,378,137 m)
 _AZIMUTHS = np.arange(0.0, 360.0, 0.5)
 
 
-def vehicle_distance_m(lon, lat, clon, clat):
+def _e7(deg):
+    return np.rint(np.asarray(deg, float) * E7)
+
+
+def vehicle_distance_m(lon, lat, clon, clat, mean=True, latlon_to_m=LATLON_TO_M):
     """ArduPilot's ``Location::get_distance`` from positions to a circle's centre, metres.
 
     Positions and centre are taken at the vehicle's 1e-7 degrees first.
+
+    Parameters
+    ----------
+    lon, lat : float or array
+        Positions, degrees.
+    clon, clat : float
+        The centre, degrees.
+    mean : bool
+        Scale longitude at the mean latitude of the two points (current ArduPilot), or at
+        the centre's (earlier firmware).
+    latlon_to_m : float
+        Metres per degree (:data:`LATLON_TO_M`, or :data:`LEGACY_LATLON_TO_M`).
 
     Examples
     --------
     >>> round(float(vehicle_distance_m(0.0, 0.01, 0.0, 0.0)), 2)  # 0.01° of latitude
     1113.19
     """
-    q = lambda v: np.rint(np.asarray(v, float) * E7) / E7  # noqa: E731
-    dlat = q(clat) - q(lat)
-    dlon = (q(clon) - q(lon) + 180.0) % 360.0 - 180.0
-    scale = max(math.cos(math.radians(float(q(clat)))), 0.01)
-    return np.hypot(dlat, dlon * scale) * LATLON_TO_M
+    lat_i, clat_i = _e7(lat), _e7(clat)
+    dlat = clat_i - lat_i
+    dlon = (_e7(clon) - _e7(lon) + 1.8e9) % 3.6e9 - 1.8e9
+    at = np.trunc((lat_i + clat_i) / 2.0) if mean else clat_i + 0.0 * lat_i
+    scale = np.maximum(np.cos(np.radians(at / E7)), 0.01)
+    return np.hypot(dlat, dlon * scale) * (latlon_to_m / E7)
+
+
+def vehicle_distances(lon, lat, clon, clat):
+    """:func:`vehicle_distance_m` under each reading ArduPilot has had (mean or centre
+    latitude, either constant), as rows of an array."""
+    return np.array([
+        vehicle_distance_m(lon, lat, clon, clat, mean, k)
+        for mean in (True, False)
+        for k in (LATLON_TO_M, LEGACY_LATLON_TO_M)
+    ])  # fmt: skip
 
 
 def vehicle_radius(lon, lat, radius_m, outward=True):
     """The radius a circle item needs so that ArduPilot's circle around ``(lon, lat)``
-    contains (``outward``) or lies inside the geodesic circle of ``radius_m``.
+    contains (``outward``) or lies inside the geodesic circle of ``radius_m``, whichever way
+    the firmware reads distance (:func:`vehicle_distances`).
 
     The geodesic circle is drawn at 720 azimuths and measured as the vehicle measures;
     the largest (outward) or smallest distance is taken, widened or narrowed by a
@@ -74,7 +109,61 @@ def vehicle_radius(lon, lat, radius_m, outward=True):
     n = len(_AZIMUTHS)
     plon, plat, _ = GEOD.fwd(np.full(n, float(lon)), np.full(n, float(lat)), _AZIMUTHS,
                              np.full(n, float(radius_m)))  # fmt: skip
-    d = vehicle_distance_m(plon, plat, lon, lat)
+    d = vehicle_distances(plon, plat, lon, lat)
     if outward:
         return float(d.max() * (1 + 1e-6) + 0.01)
     return float(max(d.min() * (1 - 1e-6) - 0.01, 0.0))
+
+
+def vehicle_circle_rim(lon, lat, radius_m, n=64, iterations=3):
+    """Positions (lon, lat arrays) at ArduPilot's distance ``radius_m`` from a circle's
+    centre, at ``n`` bearings: its mean-latitude distance inverted by fixed-point steps
+    (the scale of each point's mean latitude, from the centre's first).
+
+    Examples
+    --------
+    >>> lo, la = vehicle_circle_rim(14.5, 35.9, 1000.0, n=8)
+    >>> bool(np.allclose(vehicle_distance_m(lo, la, 14.5, 35.9), 1000.0, atol=0.02))
+    True
+    """
+    ang = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    dlat = radius_m / LATLON_TO_M * np.cos(ang)
+    clat = float(np.round(lat * E7) / E7)
+    scale = np.full(n, max(math.cos(math.radians(clat)), 0.01))
+    for _ in range(iterations):
+        dlon = radius_m / LATLON_TO_M * np.sin(ang) / scale
+        scale = np.maximum(np.cos(np.radians(clat + dlat / 2.0)), 0.01)
+    return lon + radius_m / LATLON_TO_M * np.sin(ang) / scale, lat + dlat
+
+
+def polygon_outside(lon, lat, ring_lon, ring_lat):
+    """ArduPilot's ``Polygon_outside`` for many positions: True where outside.
+
+    Every argument in degrees; all are taken to 1e-7 degree integers first, as the vehicle
+    holds them; the ring is not closed. The crossing rule is ArduPilot's (``AP_Math/
+    polygon.cpp``): an edge counts where it straddles the position's longitude, compared
+    with 64-bit products.
+
+    Examples
+    --------
+    >>> sq_lon, sq_lat = [0.0, 1.0, 1.0, 0.0], [0.0, 0.0, 1.0, 1.0]
+    >>> polygon_outside(np.array([0.5, 1.5]), np.array([0.5, 0.5]), sq_lon, sq_lat).tolist()
+    [False, True]
+    """
+    px, py = _e7(lat).astype(np.int64), _e7(lon).astype(np.int64)
+    vx, vy = _e7(ring_lat).astype(np.int64), _e7(ring_lon).astype(np.int64)
+    outside = np.ones(np.shape(px), bool)
+    n = len(vx)
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        crosses = (vy[i] > py) != (vy[j] > py)
+        if not np.any(crosses):
+            continue
+        dx1, dx2 = px - vx[i], vx[j] - vx[i]
+        dy1, dy2 = py - vy[i], vy[j] - vy[i]
+        if dy2 < 0:
+            flip = dx1 * dy2 > dx2 * dy1
+        else:
+            flip = dx1 * dy2 < dx2 * dy1
+        outside ^= crosses & flip
+    return outside

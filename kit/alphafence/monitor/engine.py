@@ -190,12 +190,15 @@ class Engine(RerouteDecisions):
             return None
         return self.clearance.assess(self.fences, x, y, speed, lookahead, self.options.braking)
 
-    def load_onboard(self, items, t=None, **fields) -> list:
+    def load_onboard(self, items, t=None, union=False, **fields) -> list:
         """The vehicle's fence (its items, as downloaded) becomes the onboard layer, checked
-        beside the full-resolution fences from the next step on; returns the events
+        beside the full-resolution fences from the next step on, its inclusions read by the
+        vehicle's rule (``union``: ``FENCE_OPTIONS`` bit 1); returns the events
         (``onboard_fence``, ``onboard_none``, ``onboard_failed``: see
         :func:`~alphafence.monitor.onboard.load_layer`)."""
-        self.onboard, events = load_layer(self.onboard, items, self.fences, t, self.last, **fields)
+        self.onboard, events = load_layer(
+            self.onboard, items, self.fences, t, self.last, union, **fields
+        )
         return events
 
     def onboard_unreadable(self, error, t=None, **fields) -> list:

@@ -23,7 +23,7 @@ from alphafence.formats.fence_geojson import FenceRecord
 from alphafence.monitor.events import new_event
 from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.state import Assessment, Level, assess
-from alphafence.onboard.decode import decode_fence
+from alphafence.onboard.decode import breached, decode_fence
 
 OUTSIDE_BAND_M = 20_000.0  # how far beyond an inclusion its keep-out band reaches
 SAME_FENCE_M = 2.0  # an onboard fence this close to a real one is that fence (rounding, arcs)
@@ -41,6 +41,10 @@ class OnboardLayer:
         The monitor's metric frame (the full-resolution fences').
     items : int
         How many items the fence had (the return point included).
+    union : bool
+        Whether the vehicle reads its inclusions as their union (``FENCE_OPTIONS`` bit 1,
+        :mod:`alphafence.mavlink.inclusions`) or, ArduPilot's default, their intersection:
+        outside any one of them is then a breach.
 
     Attributes
     ----------
@@ -50,27 +54,39 @@ class OnboardLayer:
         None when no fence has an area.
     """
 
-    def __init__(self, fences, frame, items: int):
+    def __init__(self, fences, frame, items: int, union: bool = False):
         self.items = items
+        self.union = union
         shapes = [(f, f.geometry()) for f in fences]
         self.fences = [f for f, g in shapes if not g.is_empty]
         self.empty = [f for f, g in shapes if g.is_empty]
         self.frame = frame
+        inclusions = [frame.read_geom(g) for f, g in shapes if f.inclusion and not g.is_empty]
+        # under the union, leaving one inclusion for another is no breach: each band leaves
+        # out every inclusion
+        allowed = shapely.union_all(inclusions) if union and len(inclusions) > 1 else None
         records, self._owner = [], []
         for k, (f, geometry) in enumerate((f, g) for f, g in shapes if not g.is_empty):
             if f.inclusion:
                 records.append(FenceRecord(f.name, "keep_in", geometry))
                 self._owner.append(k)
-                geometry = _outside_band(geometry, frame)
+                geometry = _outside_band(geometry, frame, allowed)
             records.append(FenceRecord(f.name, "keep_out", geometry))
             self._owner.append(k)
-        self.index = FenceSet(records, frame=frame) if records else None
+        self.index = FenceSet(records, frame=frame, keep_in_union=union) if records else None
 
     @classmethod
-    def from_items(cls, items, frame, source: str = "the vehicle's fence"):
-        """Decode ``items`` (raising InputError for a malformed fence) and index them."""
+    def from_items(cls, items, frame, source: str = "the vehicle's fence", union: bool = False):
+        """Decode ``items`` (raising InputError for a malformed fence) and index them, the
+        inclusions read by the vehicle's rule (``union``: ``FENCE_OPTIONS`` bit 1)."""
         items = list(items)
-        return cls(decode_fence(items, source), frame, len(items))
+        return cls(decode_fence(items, source), frame, len(items), union)
+
+    def breached(self, lon, lat) -> bool:
+        """Whether the vehicle breaches this fence at ``(lon, lat)`` by its own rule
+        (:func:`alphafence.onboard.decode.breached`: polygons on its integer degrees, circles
+        by its distance, inclusions by :attr:`union`)."""
+        return breached(self.fences, lon, lat, self.union)
 
     @property
     def counts(self) -> dict:
@@ -148,13 +164,15 @@ class OnboardLayer:
         return float(onboard.difference(real).area)
 
 
-def _outside_band(inclusion, frame):
+def _outside_band(inclusion, frame, allowed=None):
     """The keep-out band around an inclusion (WGS84): a box reaching ``OUTSIDE_BAND_M`` beyond
-    it, minus the inclusion."""
+    it, minus the inclusion (or minus ``allowed``, the union of every inclusion, in the
+    frame's metres)."""
     local = frame.read_geom(inclusion)
     x0, y0, x1, y1 = local.bounds
     d = OUTSIDE_BAND_M
-    return frame.geom_to_wgs84(shapely.box(x0 - d, y0 - d, x1 + d, y1 + d).difference(local))
+    keep = local if allowed is None else allowed
+    return frame.geom_to_wgs84(shapely.box(x0 - d, y0 - d, x1 + d, y1 + d).difference(keep))
 
 
 @dataclass(frozen=True)
@@ -192,7 +210,7 @@ class Decision:
     site: str | None = None
 
 
-def load_layer(previous, items, full: FenceSet, t=None, at=None, **fields):
+def load_layer(previous, items, full: FenceSet, t=None, at=None, union=False, **fields):
     """The vehicle's fence items as the new onboard layer, and the event that says so.
 
     Parameters
@@ -207,6 +225,8 @@ def load_layer(previous, items, full: FenceSet, t=None, at=None, **fields):
         When (``time.monotonic()`` seconds).
     at : Sample, optional
         Where the vehicle was.
+    union : bool
+        The vehicle reads its inclusions as their union (``FENCE_OPTIONS`` bit 1).
     **fields
         More fields for the event (the runner's ``cause``).
 
@@ -215,7 +235,10 @@ def load_layer(previous, items, full: FenceSet, t=None, at=None, **fields):
     layer : OnboardLayer or None
     events : list of dict
         ``onboard_fence`` (``items``, ``fences`` by kind and shape, ``forbidden_beyond_m2``:
-        what the vehicle's exclusions forbid that no full-resolution keep-out does),
+        what the vehicle's exclusions forbid that no full-resolution keep-out does,
+        ``inclusions``: ``"union"`` or ``"intersection"``, and a ``warning`` when the vehicle
+        reads two or more inclusions as their intersection or its last position breaches the
+        fence as the vehicle reads it),
         ``onboard_none`` (the vehicle holds no fence: no layer) or ``onboard_failed`` (not a
         valid fence: the previous layer is kept).
     """
@@ -223,7 +246,7 @@ def load_layer(previous, items, full: FenceSet, t=None, at=None, **fields):
 
     items = list(items)
     try:
-        layer = OnboardLayer.from_items(items, full.frame)
+        layer = OnboardLayer.from_items(items, full.frame, union=union)
     except InputError as exc:
         return previous, unreadable(previous, str(exc), t, at, **fields)
     if layer.index is None:
@@ -238,6 +261,19 @@ def load_layer(previous, items, full: FenceSet, t=None, at=None, **fields):
         forbidden_beyond_m2=round(layer.forbidden_beyond(full)),
         **fields,
     )
+    inclusions = sum(f.inclusion for f in layer.fences)
+    if inclusions > 1:
+        event["inclusions"] = "union" if union else "intersection"
+    warnings = []
+    if inclusions > 1 and not union:
+        warnings.append(
+            f"the vehicle holds {inclusions} inclusions and reads them as their intersection "
+            f"(FENCE_OPTIONS bit 1 unset): it must stay inside every one of them"
+        )
+    if at is not None and layer.breached(at.lon, at.lat):
+        warnings.append("the vehicle's last position breaches its fence as the vehicle reads it")
+    if warnings:
+        event["warning"] = "; ".join(warnings)
     if layer.empty:
         event["without_area"] = [f.name for f in layer.empty]
     return layer, [event]
@@ -260,11 +296,14 @@ async def download_layer(monitor, cause: str) -> list:
     import time
 
     from alphafence.errors import VehicleError
+    from alphafence.mavlink.inclusions import needs_union
     from alphafence.vehicle.fence_transfer import download_fence
+    from alphafence.vehicle.params import vehicle_union
 
     t0 = time.monotonic()
     try:
         items = await download_fence(monitor.vehicle)
+        union = await vehicle_union(monitor.vehicle) if needs_union(items) else False
     except asyncio.CancelledError:
         raise
     except Exception as exc:  # a failed download is an event: the monitor goes on
@@ -272,7 +311,7 @@ async def download_layer(monitor, cause: str) -> list:
         events = monitor.engine.onboard_unreadable(error, cause=cause)
     else:
         seconds = round(time.monotonic() - t0, 3)
-        events = monitor.engine.load_onboard(items, cause=cause, seconds=seconds)
+        events = monitor.engine.load_onboard(items, cause=cause, seconds=seconds, union=union)
     for event in events:
         monitor.handle(event)
     return events

@@ -228,6 +228,9 @@ class Walker:
             s, k = int(si[p]), int(fi[p])
             if k not in inside[s] and k not in inside[s + 1]:
                 self._between(s, k, shapely.intersection(segs[s], fs.local[k]), segs, t, alt)
+        if fs.keep_in_union and len(self.keep_in) > 1:
+            self._between_keep_ins(ok, left, active, segs, t, alt)
+            return
         for k in self.keep_in:
             j = self.cols.get(k)
             cand = [s for s in ok if k not in left[s] and k not in left[s + 1]]
@@ -238,6 +241,22 @@ class Walker:
             for s in np.asarray(cand)[out]:
                 part = shapely.difference(segs[s], fs.local[k])
                 self._between(int(s), k, part, segs, t, alt)
+
+    def _between_keep_ins(self, ok, left, active, segs, t, alt):
+        """Under the union of keep-in fences: a line between two positions inside it that
+        leaves every keep-in in force there (named after the first of them)."""
+        fs = self.fs
+        for s in ok:
+            if left[s] or left[s + 1]:
+                continue
+            live = [k for k in self.keep_in
+                    if (j := self.cols.get(k)) is None or active[s, j]]  # fmt: skip
+            if not live:
+                continue
+            allowed = shapely.union_all(fs.local[live])
+            if shapely.covers(allowed, segs[s]):
+                continue
+            self._between(int(s), live[0], shapely.difference(segs[s], allowed), segs, t, alt)
 
     def _at(self, seg, point, t, alt, s):
         """Time and height above home at ``point`` on segment ``s`` (linear)."""

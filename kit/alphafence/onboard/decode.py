@@ -19,7 +19,12 @@ import shapely
 from alphafence.errors import InputError
 from alphafence.geo.coords import valid_lonlat
 from alphafence.geo.frame import LocalFrame
-from alphafence.geo.vehicle_distance import LATLON_TO_M
+from alphafence.geo.vehicle_distance import (
+    LATLON_TO_M,
+    polygon_outside,
+    vehicle_circle_rim,
+    vehicle_distance_m,
+)
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     CIRCLE_INCLUSION,
@@ -126,12 +131,11 @@ class OnboardFence:
             lon, lat = self.lonlat[0]
             if self.radius_m < LATLON_TO_M * 1e-7:  # within one step of the vehicle's degrees
                 return shapely.Polygon()
-            r = self.radius_m if self.inclusion else self.radius_m / math.cos(math.pi / segments)
-            ang = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
-            scale = max(math.cos(math.radians(lat)), 0.01)
-            dlat = r / LATLON_TO_M * np.cos(ang)
-            dlon = r / (LATLON_TO_M * scale) * np.sin(ang)
-            disc = shapely.Polygon(np.column_stack([lon + dlon, lat + dlat])[::-1])
+            # a centimetre and a millionth for the inverse's rounding, on the safe side
+            r = self.radius_m * (1 - 1e-6) - 0.01 if self.inclusion else (
+                (self.radius_m * (1 + 1e-6) + 0.01) / math.cos(math.pi / segments))
+            rlon, rlat = vehicle_circle_rim(lon, lat, max(r, 0.0), segments)
+            disc = shapely.Polygon(np.column_stack([rlon, rlat])[::-1])
             # a circle too small for degrees to tell its vertices apart has no area
             return disc if disc.is_valid and disc.area > 0 else shapely.Polygon()
         if self.wraps:
@@ -276,3 +280,41 @@ def _describe(command) -> str:
         RETURN_POINT: "a return point",
     }
     return names[command]
+
+
+def breached(fences, lon, lat, union=False) -> bool:
+    """Whether a vehicle holding ``fences`` breaches them at ``(lon, lat)``, as ArduPilot's
+    ``AC_PolyFence_loader::breached`` decides: inside an exclusion polygon (its integer
+    degrees, :func:`~alphafence.geo.vehicle_distance.polygon_outside`) or circle (its
+    distance, :func:`~alphafence.geo.vehicle_distance.vehicle_distance_m`); outside an
+    inclusion when ``union`` is False (ArduPilot's default: inside every one), outside all of
+    them when True (``FENCE_OPTIONS`` bit 1).
+
+    Examples
+    --------
+    >>> from alphafence.mavlink.items import FenceItem
+    >>> west = [FenceItem(5001, 4.0, x, y) for x, y in ((0, 0), (1, 0), (1, 1), (0, 1))]
+    >>> east = [FenceItem(5001, 4.0, x + 2, y) for x, y in ((0, 0), (1, 0), (1, 1), (0, 1))]
+    >>> fences = decode_fence(west + east)
+    >>> breached(fences, 0.5, 0.5), breached(fences, 0.5, 0.5, union=True)
+    (True, False)
+    >>> breached(fences, 1.5, 0.5, union=True)
+    True
+    """
+    lon, lat = np.asarray([float(lon)]), np.asarray([float(lat)])
+    inclusions = outside = 0
+    for f in fences:
+        if f.shape == "circle":
+            d = float(vehicle_distance_m(lon, lat, *f.lonlat[0])[0])
+            out = d > f.radius_m if f.inclusion else d >= f.radius_m  # as ArduPilot compares
+        else:
+            ring = np.asarray(f.lonlat, float)
+            out = bool(polygon_outside(lon, lat, ring[:, 0], ring[:, 1])[0])
+        if not f.inclusion and not out:
+            return True
+        if f.inclusion:
+            inclusions += 1
+            outside += out
+    if union:
+        return inclusions > 0 and outside == inclusions
+    return outside > 0

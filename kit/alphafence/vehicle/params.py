@@ -64,7 +64,7 @@ PROFILES = {
     for what, action in actions.items()
 }
 """The presets: name -> the parameters each sets, in the order set (``upload --params``)."""
-INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "BRD_SD_FENCE"}
+INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_OPTIONS", "BRD_SD_FENCE"}
 
 # How far a Copter goes past the fence it holds when ArduPilot alone acts on the breach
 # (FENCE_ACTION 4, copter-brake, or 1, copter-rtl), flown straight at the fence at each ground
@@ -266,3 +266,39 @@ def _call(vehicle, verb, kind, name, value=None):
     if verb == "get":
         return fn(name)
     return fn(name, int(value) if kind == "int" else float(value))
+
+
+async def vehicle_union(vehicle) -> bool:
+    """Whether the vehicle reads its inclusions as their union (``FENCE_OPTIONS`` bit 1);
+    False when it has no such parameter (firmware that always intersects them)."""
+    from alphafence.mavlink.inclusions import FENCE_OPTIONS, union_of
+
+    try:
+        return union_of(await _get(vehicle, FENCE_OPTIONS))
+    except Exception:
+        return False
+
+
+async def check_union_supported(vehicle, inclusions: int) -> float:
+    """Before a fence of ``inclusions`` inclusion areas is sent: the vehicle's
+    ``FENCE_OPTIONS``, or ParamError when it has none (it would read the areas as their
+    intersection, and nothing is sent)."""
+    from alphafence.mavlink.inclusions import FENCE_OPTIONS, UNION_WORDS
+
+    try:
+        return float(await _get(vehicle, FENCE_OPTIONS))
+    except Exception:
+        raise ParamError(
+            f"the fence has {inclusions} inclusion areas and ArduPilot reads them as one "
+            f"(their intersection) unless {UNION_WORDS} is set, but this vehicle has no "
+            "FENCE_OPTIONS (its firmware predates it): upload one keep-in area, or update the "
+            "firmware; nothing was sent"
+        ) from None
+
+
+async def set_union(vehicle, options) -> ParamReport:
+    """Set ``FENCE_OPTIONS``'s union bit (its other bits kept from ``options``) and read it
+    back."""
+    from alphafence.mavlink.inclusions import FENCE_OPTIONS, options_with_union
+
+    return await apply_params(vehicle, {FENCE_OPTIONS: options_with_union(options)})

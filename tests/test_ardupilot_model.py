@@ -1,0 +1,129 @@
+"""The model of ArduPilot's fence (tests/ardupilot_model.py) against cases worked by hand from
+ArduPilot's source (``AC_PolyFence_loader::breached``, ``Location::get_distance``,
+``Polygon_outside``), and the kit's own reading of a vehicle's fence against the model.
+SITL's own verdicts are compared in tests/test_inclusions_sitl.py."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from alphafence.mavlink.items import FenceItem
+from alphafence.onboard.decode import breached as kit_breached
+from alphafence.onboard.decode import decode_fence
+
+from .ardupilot_model import LATLON_TO_M, breached, location_distance_m, polygon_outside
+
+
+def square(command, lon0, lat0, size):
+    corners = ((0, 0), (size, 0), (size, size), (0, size))
+    return [FenceItem(command, 4.0, lon0 + x, lat0 + y) for x, y in corners]
+
+
+def test_distance_scales_longitude_at_the_mean_latitude():
+    # Location::get_distance: dlat = 1e6, dlng = 1e6 * cos((600000000 + 601000000) / 2 * 1e-7 deg)
+    expected = math.hypot(1e6, 1e6 * math.cos(math.radians(60.05))) * 0.011131884502145034
+    got = float(location_distance_m(60.1, 0.1, 60.0, 0.0)[()])
+    assert got == pytest.approx(expected, abs=1e-6)
+    at_centre = float(location_distance_m(60.1, 0.1, 60.0, 0.0, mean=False)[()])
+    assert at_centre - got > 3.0  # cos(60.0) > cos(60.05): the centre's scale reads longer
+
+
+def test_distance_mean_latitude_is_an_integer_division():
+    # (lat + loc2.lat) / 2 on int32 truncates toward zero: -1 and -2 (1e-7 deg) average to -1
+    a = float(location_distance_m(-1e-7, 1.0, -2e-7, 0.0)[()])
+    scale = math.cos(math.radians(-1e-7))
+    assert a == pytest.approx(math.hypot(1.0, 1e7 * scale) * LATLON_TO_M, rel=1e-12)
+
+
+def test_distance_constant_is_a_6378100_m_sphere():
+    assert LATLON_TO_M * 1e7 == pytest.approx(6_378_100 * math.pi / 180, rel=1e-9)
+    assert float(location_distance_m(0.001, 0.0, 0.0, 0.0)[()]) == pytest.approx(111.3188450, abs=1e-6)
+
+
+def test_polygon_edges_south_inside_north_outside():
+    # Polygon_outside with P.x = lat, P.y = lng, worked by hand for the square lat, lng in
+    # [0, 1e7]: an edge counts where it straddles P.y; on the south edge the crossing of the
+    # north edge flips (dx1 * dy2 > dx2 * dy1 with dy2 < 0), on the north edge nothing does
+    ring_lat, ring_lon = [0.0, 0.0, 1.0, 1.0], [0.0, 1.0, 1.0, 0.0]
+    lat = np.array([0.0, 1.0, 0.5, 0.5, 1.0000001, -0.0000001])
+    lon = np.array([0.5, 0.5, 0.5, 1.5, 0.5, 0.5])
+    assert polygon_outside(lat, lon, ring_lat, ring_lon).tolist() == [
+        False, True, False, True, True, True,
+    ]  # fmt: skip
+
+
+def test_inclusions_intersect_unless_union():
+    west = square(5001, 0.0, 0.0, 0.01)
+    east = square(5001, 0.005, 0.0, 0.01)  # overlapping west's eastern half
+    items = west + east
+    lon = np.array([0.002, 0.007, 0.012, 0.02])
+    lat = np.full(4, 0.005)
+    assert breached(items, lon, lat).tolist() == [True, False, True, True]
+    assert breached(items, lon, lat, union=True).tolist() == [False, False, False, True]
+
+
+def test_exclusions_breach_under_either_rule():
+    items = square(5001, 0.0, 0.0, 0.01) + [FenceItem(5004, 100.0, 0.005, 0.005)]
+    lon, lat = np.array([0.005, 0.0005]), np.array([0.005, 0.0005])
+    for union in (False, True):
+        assert breached(items, lon, lat, union).tolist() == [True, False]
+
+
+def test_circle_edges_as_compared():
+    # an inclusion circle is left above its radius, an exclusion entered below it
+    r = float(location_distance_m(0.001, 0.0, 0.0, 0.0)[()])
+    on_rim = (np.array([0.0]), np.array([0.001]))
+    assert not breached([FenceItem(5003, r, 0.0, 0.0)], *on_rim)[0]
+    assert not breached([FenceItem(5004, r, 0.0, 0.0)], *on_rim)[0]
+    assert breached([FenceItem(5003, r - 0.001, 0.0, 0.0)], *on_rim)[0]
+    assert breached([FenceItem(5004, r + 0.001, 0.0, 0.0)], *on_rim)[0]
+
+
+def test_no_inclusion_under_union_is_no_breach():
+    items = [FenceItem(5004, 50.0, 1.0, 1.0)]
+    assert not breached(items, [0.0], [0.0], union=True)[0]
+
+
+def test_broken_model_is_seen():
+    """The hand-worked cases fail on a model that reads inclusions as "inside any" without
+    the option (the tests' old model, which hid the kit's two-area fence)."""
+    west, east = square(5001, 0.0, 0.0, 0.01), square(5001, 0.05, 0.0, 0.01)
+    wrong = breached(west + east, [0.005], [0.005], union=True)  # what "any" says
+    assert wrong.tolist() != breached(west + east, [0.005], [0.005]).tolist()
+
+
+shapes = st.lists(
+    st.tuples(
+        st.sampled_from([5001, 5002, 5003, 5004]),
+        st.floats(-0.02, 0.02),
+        st.floats(-0.02, 0.02),
+        st.floats(0.001, 0.02),
+    ),
+    min_size=1,
+    max_size=5,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(shapes, st.booleans(), st.floats(-60.0, 60.0))
+def test_kit_reads_a_fence_as_the_model(parts, union, lat0):
+    """The monitor's and upload's reading (``alphafence.onboard.decode.breached``) gives the
+    model's verdict at every sampled position."""
+    items = []
+    for cmd, x, y, size in parts:
+        if cmd in (5003, 5004):
+            items.append(FenceItem(cmd, size * 1e5, x, lat0 + y))
+        else:
+            items += square(cmd, x, lat0 + y, size)
+    fences = decode_fence(items)
+    rng = np.random.default_rng(len(items))
+    lon = rng.uniform(-0.03, 0.05, 40)
+    lat = lat0 + rng.uniform(-0.03, 0.05, 40)
+    want = breached(items, lon, lat, union)
+    got = [kit_breached(fences, a, b, union) for a, b in zip(lon, lat)]
+    assert got == want.tolist()
