@@ -82,7 +82,9 @@ def plain_check(fs, x, y, alt, vx, vy, lookahead_m, vertical_m):
     inside = [k for k in range(n) if in_band[k] and fs.local[k].intersects(p)]
     inside_out = [k for k in inside if fs.kind[k] == KEEP_OUT]
     inside_warn = [k for k in inside if fs.kind[k] == WARNING]
-    outside_in = [k for k in range(n) if fs.kind[k] == KEEP_IN and in_force[k] and k not in inside]
+    keep_ins = [k for k in range(n) if fs.kind[k] == KEEP_IN and in_force[k]]
+    # the kit's keep-in fences are areas to fly in: inside any one is inside
+    outside_in = [] if any(k in inside for k in keep_ins) else keep_ins
     keep_outs = [k for k in range(n) if fs.kind[k] == KEEP_OUT and in_force[k]]
     dist = {k: float(shapely.distance(p, fs.local[k])) for k in keep_outs}
     nearest = min(((dist[k], k) for k in keep_outs), default=None)

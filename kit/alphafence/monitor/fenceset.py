@@ -65,10 +65,8 @@ class FenceSet:
     frame : LocalFrame, optional
         The metric frame; centred on the fences if omitted.
     keep_in_union : bool
-        How keep-in fences combine: a position is inside when inside any keep-in fence in
-        force at its altitude (True, the kit's own fences: each keep-in fence is an area the
-        vehicle may fly in), or only when inside every one (False: ArduPilot's inclusions
-        without ``FENCE_OPTIONS`` bit 1, :mod:`alphafence.mavlink.inclusions`).
+        Inside any keep-in in force is inside (the kit's fences: areas one may fly in), or
+        only inside every one (False: ArduPilot's default, :mod:`~alphafence.mavlink.inclusions`).
 
     Raises
     ------
@@ -77,8 +75,7 @@ class FenceSet:
     """
 
     def __init__(self, records, frame: LocalFrame | None = None, keep_in_union: bool = True):
-        self.records = list(records)
-        self.keep_in_union = keep_in_union
+        self.records, self.keep_in_union = list(records), keep_in_union
         if not self.records:
             raise ValueError("no fences")
         geoms = np.array([r.geometry for r in self.records], dtype=object)
@@ -362,18 +359,14 @@ class FenceSet:
                 return int(k)
             if self.kind[k] == KEEP_IN and shapely.distance(p, self.boundary[k]) <= tol_m:
                 return int(k)
-        inside_in = {k for k in self._keep_in if self._in_alt(k, alt) and self.local[k].contains(p)}
-        left = self._left(inside_in)
+        left = self._left({k for k in self._keep_in if self.local[k].contains(p)} & set(near))
         return left[0] if left else None
 
     def _left(self, inside_in) -> list:
-        """The keep-in fences in force that a position inside ``inside_in`` (those it is in,
-        at its altitude) has left, by :attr:`keep_in_union`'s rule: under the union, none when
-        it is in any, else every one."""
+        """The keep-ins in force a position in ``inside_in`` has left, by ``keep_in_union``."""
         live = [k for k in self._keep_in if self.active[k]]
-        if self.keep_in_union:
-            return [] if any(k in inside_in for k in live) else live
-        return [k for k in live if k not in inside_in]
+        return ([] if inside_in & set(live) else live) if self.keep_in_union else [
+            k for k in live if k not in inside_in]  # fmt: skip
 
     def _ahead(self, x, y, ux, uy, lookahead_m, skip, reach=None, near=None, holding=()):
         """The first keep-out in force along the ray (those in ``skip`` left out; with
