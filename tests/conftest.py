@@ -13,6 +13,50 @@ settings.register_profile("ci", derandomize=True, deadline=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
+# A checkout with ../shared beside it (CI's layout) has a prebuilt copter SITL there: the SITL
+# tests use it when no other binary is found ($ARDUPILOT_SITL, $ARDUPILOT_HOME, ~/ardupilot,
+# PATH), by the same search the kit makes ($ALPHAFENCE_SHARED_SITL moves it, for the test that
+# hides it).
+SHARED_SITL = Path(
+    os.environ.get("ALPHAFENCE_SHARED_SITL")
+    or Path(__file__).resolve().parents[2] / "shared" / "ardupilot-sitl"
+)
+
+
+def _use_shared_sitl():
+    from alphafence.sitl.find import find_sitl_binary
+
+    if find_sitl_binary() is None and (SHARED_SITL / "build/sitl/bin/arducopter").is_file():
+        os.environ["ARDUPILOT_HOME"] = str(SHARED_SITL)
+
+
+_use_shared_sitl()
+
+
+def _real_parts():
+    """The skip reasons of tests whose real part is missing (SITL, Chromium, socat): under
+    ``CI=true`` each is a failure, so CI cannot pass by skipping them."""
+    from alphafence.sitl.find import NOT_FOUND_HELP
+
+    from .browser import MISSING
+    from .serial_fixtures import NO_SOCAT
+
+    return (NOT_FOUND_HELP, MISSING, NO_SOCAT)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    if not (os.environ.get("CI", "").lower() in ("1", "true", "yes") and report.skipped):
+        return
+    reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+    reason = reason.removeprefix("Skipped: ")
+    if any(reason.startswith(part) for part in _real_parts()):
+        report.outcome = "failed"
+        report.longrepr = f"CI=true and a real part is missing, so this test cannot run: {reason}"
+
+
 # pyproject's timeout (900 s) bounds every test; one that drives SITL (start-up, flights at
 # speedup 1) gets this instead, unless it sets its own @pytest.mark.timeout
 SITL_TIMEOUT_S = 1800
