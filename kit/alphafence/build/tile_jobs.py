@@ -175,14 +175,63 @@ def start_pool(workers: int):
     concurrent.futures.ProcessPoolExecutor
     """
     import multiprocessing
+    import signal
+    import threading
     from concurrent.futures import ProcessPoolExecutor
+
+    from multiprocessing import forkserver
 
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
-    for _ in range(workers):
-        pool.submit(int)  # a task that starts a worker
+    # Ctrl-C is the main process's: it cancels the jobs not started (:func:`stop_pool`), and
+    # the workers, which ignore it (else each printed a traceback), finish the one they hold
+    # (a job is about a second) and leave. The forkserver is started ignoring it, which it
+    # keeps through Python's start and its imports, and its workers inherit.
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        forkserver.ensure_running()
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=signal.signal,
+        initargs=(signal.SIGINT, signal.SIG_IGN),
+    )
+    try:
+        for _ in range(workers):
+            pool.submit(int)  # a task that starts a worker (it waits for the server's preload)
+    except BaseException:
+        stop_pool(pool, server=True)
+        raise
     return pool
+
+
+def stop_pool(pool, server: bool = False) -> None:
+    """Stop a :func:`start_pool` pool: jobs not started are cancelled, those under way end
+    (about a second), the workers leave. With ``server`` (interrupted while the pool was
+    starting), the forkserver is stopped too: a worker it had yet to fork would start after
+    this process is gone and fail loudly (the next pool starts a new server)."""
+    import os
+    import signal
+    from multiprocessing import forkserver
+
+    pid = getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
+    if server and pid:
+        try:  # stopped first, so that it forks no more; then its workers, then itself
+            os.kill(pid, signal.SIGSTOP)
+            with open(f"/proc/{pid}/task/{pid}/children") as fh:
+                for child in fh.read().split():
+                    os.kill(int(child), signal.SIGKILL)
+        except OSError:
+            pass  # gone already, or no /proc (not Linux)
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def run_processes(jobs, workers: int, pool=None):
@@ -201,10 +250,14 @@ def run_processes(jobs, workers: int, pool=None):
     JobOutput
     """
     pool = pool or start_pool(workers)
-    with pool:
+    try:
         yield from _in_order(
             lambda job: pool.submit(run_job, job), lambda fut: fut.result(), jobs, 2 * workers
         )
+    except BaseException:  # Ctrl-C, an error, or the consumer stopped: no more jobs
+        stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
 
 
 def run_dask(jobs, address: str, connect_timeout: float = 10.0):

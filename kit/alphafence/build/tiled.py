@@ -20,7 +20,14 @@ import numpy as np
 from alphafence.build.read_jobs import sequence_reader
 from alphafence.build.sites import feature_widths, site_class
 from alphafence.build.spool import Spool
-from alphafence.build.tile_jobs import JobInput, run_dask, run_local, run_processes, start_pool
+from alphafence.build.tile_jobs import (
+    JobInput,
+    run_dask,
+    run_local,
+    run_processes,
+    start_pool,
+    stop_pool,
+)
 from alphafence.build.tiles import TARGET_FEATURES, TILE_DEG, plan_jobs
 from alphafence.formats.geojson_stream import BATCH
 from alphafence.mavlink.items import MAX_POLYGON_VERTICES
@@ -256,7 +263,7 @@ def build_tiled(
         pool = None
         if not dask and jobs > 1 and nbytes > WARM_POOL_BYTES:
             pool = start_pool(jobs)  # its imports overlap the reading
-            stack.callback(pool.shutdown, wait=False, cancel_futures=True)
+            stack.callback(stop_pool, pool)
         with Spool(spool_dir) as spool:
             # the workers read text sequences too (the main process would read them alone)
             reader = sequence_reader(pool, 2 * jobs, READ_BATCH) if pool is not None else None

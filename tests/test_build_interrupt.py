@@ -1,0 +1,57 @@
+"""Ctrl-C during a parallel build: exit 130, nothing written, and one line on the terminal (no
+traceback from the forkserver or any worker: they leave Ctrl-C to the main process, which
+cancels the jobs not started), whether it comes while the forkserver is still importing or
+while the workers fence. The build and its processes get SIGINT as a terminal
+sends it, to the whole process group; each moment is an event seen in the process table."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bench.synth_db import main as synth_main
+
+
+def children(pid):
+    """The command lines of ``pid``'s descendants."""
+    out = subprocess.run(["ps", "-e", "-o", "pid=,ppid=,args="], capture_output=True, text=True)
+    rows = [line.split(None, 2) for line in out.stdout.splitlines()]
+    tree, found = {str(pid)}, []
+    for _ in range(3):
+        for p, pp, args in (r for r in rows if len(r) == 3):
+            if pp in tree and p not in tree:
+                tree.add(p)
+                found.append(args)
+    return found
+
+
+@pytest.fixture(scope="module")
+def database(tmp_path_factory, malta):
+    path = tmp_path_factory.mktemp("db") / "db.geojsonl"
+    synth_main(["20000", str(path), "--extract", str(malta)])
+    return path
+
+
+@pytest.mark.parametrize("moment", ["importing", "fencing"])
+def test_ctrl_c_stops_a_parallel_build_with_one_line(database, tmp_path, moment):
+    out = tmp_path / "f.geojson"
+    argv = [sys.executable, "-m", "alphafence", "build", str(database), "-o", str(out), "--jobs", "2"]
+    build = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)  # fmt: skip
+    # the moment: the forkserver exists (still importing), or it has forked its workers
+    want = 1 if moment == "importing" else 3
+    deadline = time.monotonic() + 120
+    while sum("forkserver" in c for c in children(build.pid)) < want:
+        assert build.poll() is None and time.monotonic() < deadline, "no worker processes"
+        time.sleep(0.01)
+    os.killpg(build.pid, signal.SIGINT)
+    stdout, stderr = build.communicate(timeout=60)
+    assert build.returncode == 130, stderr
+    assert [line for line in stderr.splitlines() if line.strip()] == ["alphafence: interrupted"]
+    assert not out.exists() and not list(Path(tmp_path).iterdir())
