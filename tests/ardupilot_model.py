@@ -153,6 +153,25 @@ def _xyz(lon, lat):
     return np.column_stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)])
 
 
+CHUNK = 100_000  # zone samples measured at a time: memory stays bounded for any zone
+
+
+def spacing_for(margin_m):
+    """The sample spacing whose slack is at most a tenth of the margin: a distance measured
+    at samples ``s`` apart can dip by at most ``s / 2`` between them (distance to a set is
+    1-Lipschitz), so ``s = margin / 5`` (at least 0.5 m, at most 50 m)."""
+    return min(max(margin_m / 5.0, 0.5), 50.0)
+
+
+def covers_as_read(rings, zone):
+    """Exact: whether the polygons ``rings`` (lon/lat vertices, each taken to the vehicle's
+    1e-7 degrees), read as straight lon/lat lines as ArduPilot reads them, cover the zone
+    (its edges straight lon/lat lines as GeoJSON means them)."""
+    parts = [shapely.Polygon(np.rint(np.asarray(r, float) * 1e7) / 1e7) for r in rings]
+    parts = [shapely.make_valid(p) for p in parts]
+    return bool(parts) and bool(shapely.covers(shapely.union_all(parts), zone))
+
+
 def clearance(zone, rings, spacing_m=None, margin_m=0.0, reach_m=None):
     """How a zone sits in a fence made of lon/lat ``rings``, as ArduPilot reads them.
 
@@ -164,8 +183,7 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0, reach_m=None):
         Each a polygon's (n, 2) lon/lat vertices: the fence's parts (a point is inside the
         fence when it is inside any part).
     spacing_m : float, optional
-        Sample spacing along the zone's boundary (default: a tenth of the margin, at most
-        50 m, at least 0.5 m).
+        Sample spacing along the zone's boundary (default :func:`spacing_for` the margin).
     margin_m : float
     reach_m : float, optional
         Distances beyond this are not measured (inf); default twice the margin plus a
@@ -177,15 +195,15 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0, reach_m=None):
         Zone samples ArduPilot would call outside every part.
     distance : float
         The least geodesic distance (metres) from a zone sample to a part's boundary (inf
-        when none is within twice the margin plus a kilometre); the parts' shared edges
-        along the antimeridian are not boundary.
+        when none is within reach); the parts' shared edges along the antimeridian are not
+        boundary. Between samples it may be up to half the spacing less.
     each : ndarray
         That distance for every sample.
     inside : ndarray of bool
         Whether ArduPilot calls each sample inside.
     """
     if spacing_m is None:
-        spacing_m = min(max(margin_m / 10.0, 0.5), 50.0)
+        spacing_m = spacing_for(margin_m)
     lon, lat = boundary_samples(zone, spacing_m)
     # a zone split at the antimeridian: its cut is no boundary (and on it, every reader's
     # inside test is a tie)
@@ -219,13 +237,24 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0, reach_m=None):
     tree = cKDTree(_xyz(slon, slat))
     if reach_m is None:
         reach_m = 2.0 * margin_m + 2.0 * fine + 1000.0  # farther: clear enough
-    reach = reach_m / 6_371_000.0
-    _, near = tree.query(_xyz(lon, lat), k=min(4, len(slon)), distance_upper_bound=reach)
+    best = np.full(len(lon), np.inf)
+    for start in range(0, len(lon), CHUNK):
+        part = slice(start, start + CHUNK)
+        best[part] = _nearest_edges(lon[part], lat[part], tree, a, b, seg_of, reach_m)
+    return int((~inside).sum()), float(best.min()) if len(best) else math.inf, best, inside
+
+
+def _nearest_edges(lon, lat, tree, a, b, seg_of, reach_m):
+    """Geodesic distance from each position to the nearest of the candidate fence segments
+    (those of the four nearest fence samples within ``reach_m``), inf beyond."""
+    n_samples = tree.n
+    _, near = tree.query(_xyz(lon, lat), k=min(4, n_samples),
+                         distance_upper_bound=reach_m / 6_371_000.0)  # fmt: skip
     near = near.reshape(len(lon), -1)
     best = np.full(len(lon), np.inf)
     for column in near.T:
         # the nearest point of each candidate segment, found in a plane tangent at the sample
-        found = column < len(slon)
+        found = column < n_samples
         s = seg_of[np.where(found, column, 0)]
         cos = np.cos(np.radians(lat))
         ax = ((a[s, 0] - lon + 180.0) % 360.0 - 180.0) * cos
@@ -239,7 +268,7 @@ def clearance(zone, rings, spacing_m=None, margin_m=0.0, reach_m=None):
         qlat = a[s, 1] + (b[s, 1] - a[s, 1]) * u
         _, _, dist = GEOD.inv(lon, lat, (qlon + 180.0) % 360.0 - 180.0, qlat)
         best = np.minimum(best, np.where(found, dist, np.inf))
-    return int((~inside).sum()), float(best.min()) if len(best) else math.inf, best, inside
+    return best
 
 
 def excursion_m(zone, rings, margin_m, spacing_m=None, reach_m=None):

@@ -42,7 +42,9 @@ def test_distance_mean_latitude_is_an_integer_division():
 
 def test_distance_constant_is_a_6378100_m_sphere():
     assert LATLON_TO_M * 1e7 == pytest.approx(6_378_100 * math.pi / 180, rel=1e-9)
-    assert float(location_distance_m(0.001, 0.0, 0.0, 0.0)[()]) == pytest.approx(111.3188450, abs=1e-6)
+    assert float(location_distance_m(0.001, 0.0, 0.0, 0.0)[()]) == pytest.approx(
+        111.3188450, abs=1e-6
+    )
 
 
 def test_polygon_edges_south_inside_north_outside():

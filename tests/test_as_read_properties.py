@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 import shapely
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
@@ -35,7 +36,20 @@ from alphafence.mavlink.items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, POLYGO
 from alphafence.mavlink.storage import PROFILES
 from alphafence.onboard.compile import compile_fences
 
-from .ardupilot_model import GEOD, clearance, excursion_m, location_distance_m, zone_features
+from .ardupilot_model import (
+    CHUNK,
+    GEOD,
+    boundary_samples,
+    breached,
+    circle_rim,
+    clearance,
+    covers_as_read,
+    excursion_m,
+    location_distance_m,
+    polygon_outside,
+    spacing_for,
+    zone_features,
+)
 
 KM = 1000.0
 
@@ -93,21 +107,23 @@ def _split_at_180(zone):
 
 
 @st.composite
-def long_zones(draw):
+def long_zones(draw, size_km):
+    """A zone ``size_km`` long (a strip along a parallel, a diagonal, a meander, an
+    overlapping pair, or one across the antimeridian) anywhere up to 80 degrees."""
     shape = draw(
         st.sampled_from(["parallel", "diagonal", "meander", "overlapping", "antimeridian"])
     )
     lat = draw(st.floats(-80.0, 80.0))
     lon = draw(st.floats(-170.0, 170.0))
+    length = size_km * KM
+    width = draw(st.floats(0.5, 20.0)) * KM
     if shape == "antimeridian":
-        length = draw(st.sampled_from([10, 50, 200])) * KM
         start = _walk(180.0, lat, 270.0, length / 2)
         az = draw(st.sampled_from([90.0, 70.0, 110.0]))
-        zone = _strip(*start, az, length, draw(st.floats(0.5, 20.0)) * KM)
-        if zone.bounds[3] <= 84.0 and zone.bounds[1] >= -84.0:
+        zone = _strip(*start, az, length, width)
+        if zone.bounds[3] <= 84.0 and zone.bounds[1] >= -84.0 and size_km <= 200:
             return shape, [_split_at_180(zone)]
-    length = draw(st.sampled_from([10, 50, 200, 1000])) * KM
-    width = draw(st.floats(0.5, 20.0)) * KM
+        shape = "parallel"
     seed = draw(st.integers(0, 2**16))
     if shape == "parallel":
         az = draw(st.sampled_from([90.0, 270.0]))
@@ -141,40 +157,35 @@ def _members(fence_sources, zones):
 
 def _holds(zone, rings, circles, margin, what):
     """ArduPilot's reading of ``rings`` (polygons) and ``circles`` ((lon, lat, r)) holds the
-    zone plus margin."""
+    zone plus margin: the polygons cover the zone exactly (lon/lat lines, 1e-7 degrees), and
+    no zone sample lies nearer than the margin to their boundary (samples
+    ``spacing_for(margin)`` apart: between them the distance dips by at most a tenth of the
+    margin); a circle holds every sample pushed out by the margin, measured as ArduPilot
+    measures."""
     if circles:
-        az = np.arange(0.0, 360.0, 0.5)
+        zl, zt = boundary_samples(zone, spacing_for(margin))
         for lon, lat, r in circles:
-            # every sample of the zone's boundary, pushed out by the margin every way
-            from .ardupilot_model import boundary_samples
-
-            zl, zt = boundary_samples(zone, max(margin / 4, 5.0))
-            n = len(zl)
-            plon, plat, _ = GEOD.fwd(np.repeat(zl, az.size), np.repeat(zt, az.size),
-                                     np.tile(az, n), np.full(n * az.size, margin))  # fmt: skip
-            d = location_distance_m(plat, plon, lat, lon)
-            assert d.max() < r, f"{what}: the zone reaches {d.max() - r:.2f} m out of the circle"
+            worst = -np.inf
+            for start in range(0, len(zl), CHUNK):  # bounded memory for any zone
+                pl, pt = zl[start : start + CHUNK], zt[start : start + CHUNK]
+                az = GEOD.inv(np.full(pl.size, lon), np.full(pl.size, lat), pl, pt)[0]
+                for turn in (-10.0, -5.0, 0.0, 5.0, 10.0):  # outward, and either side of it
+                    ql, qt, _ = GEOD.fwd(pl, pt, az + turn, np.full(pl.size, margin))
+                    worst = max(worst, float(location_distance_m(qt, ql, lat, lon).max()))
+            assert worst < r, f"{what}: the zone reaches {worst - r:.2f} m out of the circle"
         return
-    out = excursion_m(zone, rings, margin, spacing_m=max(margin / 4, 50.0))
-    assert out <= 0.01, f"{what}: the zone plus {margin} m reaches {out:.2f} m out of the fence"
+    assert covers_as_read(rings, zone), f"{what}: the zone is not inside the fence as read"
+    if margin > 0:
+        out = excursion_m(zone, rings, margin)
+        assert out <= 0.01, f"{what}: the zone plus {margin} m reaches {out:.2f} m out of the fence"
 
 
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
-    zone=long_zones(),
-    method=st.sampled_from(METHODS),
-    margin=st.sampled_from([0.0, 10.0, 100.0]),
-    max_vertices=st.sampled_from([8, 32]),
-)
-def test_keep_out_fences_hold_as_ardupilot_reads_them_in_every_format(
-    zone, method, margin, max_vertices
-):
-    shape, zones = zone
-    rules = _rules("keep_out", margin)
-    features = _features(zones, rules)
-    opts = BuildOptions(method=method, max_vertices=max_vertices, warn_distance_m=30.0)
-    result = build_fences(features, rules, opts)
-    event(f"checked: {shape}")
+def _e7(items):
+    return [(i.command, i.param1, round(i.lon * 1e7), round(i.lat * 1e7)) for i in items]
+
+
+def _keep_out_outputs(result, zones):
+    """Every output of a keep-out build checked as read, and every zone fenced."""
     with tempfile.TemporaryDirectory() as tmp:
         names = ("f.geojson", "f.plan", "f.waypoints")
         paths = [str(Path(tmp) / n) for n in names]
@@ -189,27 +200,53 @@ def test_keep_out_fences_hold_as_ardupilot_reads_them_in_every_format(
         plan_items = read_plan_fence(paths[1])
         wpl_items = read_waypoints_fence(paths[2])
         parquet = _parquet_fences(result.fences, Path(tmp) / "f.parquet")
-    for fence in result.fences:
-        members = _members(fence.sources, zones)
-        m = fence.margin_m
-        circles = [fence.circle_wgs84] if fence.circle is not None else []
-        for zone_k in members:
-            # the in-memory fence and GeoJSON: polygons (circles as their polygons)
-            _holds(zone_k, _rings(fence.geometry), [], m, f"{method} {fence.kind} fence")
-            _holds(zone_k, _rings(geojson[(fence.site_id, fence.kind)]), [], m, "GeoJSON")
-            if parquet is not None:
-                _holds(zone_k, _rings(parquet[(fence.site_id, fence.kind)]), [], m, "GeoParquet")
+    keep_out = [f for f in result.fences if f.kind == "keep_out"]
+    fenced = {int(s.rsplit("/", 1)[-1]) for f in keep_out for s in f.sources}
+    assert fenced == set(range(len(zones))), (
+        f"zones without a fence: {set(range(len(zones))) - fenced}"
+    )
+    # the files carry the in-memory fence's vertices to 1e-8 degrees (a millimetre): each
+    # covers its zones exactly as read; the margin, measured on the fence, holds for them to
+    # the millimetre
+    for fence in keep_out:
+        key = (fence.site_id, fence.kind)
+        for copy in (geojson[key], *([parquet[key]] if parquet is not None else [])):
+            assert shapely.hausdorff_distance(copy, fence.geometry) < 1e-8
+            for zone_k in _members(fence.sources, zones):
+                assert covers_as_read(_rings(copy), zone_k), f"{fence.site_id}: a file's copy"
+    for fence in keep_out:
+        for zone_k in _members(fence.sources, zones):
+            _holds(zone_k, _rings(fence.geometry), [], fence.margin_m, f"{fence.site_id} in memory")
     for items, what in ((plan_items, ".plan"), (wpl_items, ".waypoints")):
         polygons, circles = group_polygons(items)
         rings = [np.asarray(p) for cmd, p in polygons if cmd == POLYGON_EXCLUSION]
         discs = [(c.lon, c.lat, c.param1) for c in circles if c.command == CIRCLE_EXCLUSION]
-        for fence in (f for f in result.fences if f.kind == "keep_out"):
+        for fence in keep_out:
             for zone_k in _members(fence.sources, zones):
                 if fence.circle is not None:
                     mine = [d for d in discs if abs(d[0] - fence.circle_wgs84[0]) < 1e-6]
-                    _holds(zone_k, [], mine[:1], fence.margin_m, what)
+                    _holds(zone_k, [], mine[:1], fence.margin_m, f"{what} circle")
                 else:
                     _holds(zone_k, rings, [], fence.margin_m, what)
+
+
+SIZES = [10, 50, 200, 1000]  # km: every method meets every size class in every run
+
+
+@settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data(), margin=st.sampled_from([0.0, 10.0, 100.0]),
+       max_vertices=st.sampled_from([8, 32]))  # fmt: skip
+@pytest.mark.parametrize("size_km", SIZES)
+@pytest.mark.parametrize("method", METHODS)
+def test_keep_out_fences_hold_as_ardupilot_reads_them_in_every_format(
+    method, size_km, data, margin, max_vertices
+):
+    shape, zones = data.draw(long_zones(size_km))
+    rules = _rules("keep_out", margin)
+    opts = BuildOptions(method=method, max_vertices=max_vertices, warn_distance_m=30.0)
+    result = build_fences(_features(zones, rules), rules, opts)
+    event(f"checked: {method} {size_km} km {shape} margin {margin:g}")
+    _keep_out_outputs(result, zones)
 
 
 def _parquet_fences(fences, path):
@@ -225,37 +262,72 @@ def _parquet_fences(fences, path):
     return {(r.site_id, r.kind): r.geometry for r in read_fence_file(str(path))}
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(zone=long_zones(), margin=st.sampled_from([0.0, 100.0]))
-def test_keep_in_fences_lie_inside_their_zone_less_margin_as_read(zone, margin):
-    shape, zones = zone
-    zones = zones[:1]
+def _inside_less_margin(shape, zone, margin, what):
+    """A keep-in shape (lon/lat polygon, as read) lies inside its zone, at least the margin
+    (less a tenth of it, between samples) from the zone's boundary."""
+    assert covers_as_read(_rings(zone), shape), f"{what}: it reaches out of its zone"
+    outside, dist, _, _ = clearance(shape, _rings(zone), margin_m=margin)
+    assert outside == 0, f"{what}: {outside} samples lie outside its zone"
+    assert dist >= margin - 0.01, f"{what}: it comes {dist:.2f} m from its zone"
+
+
+def _keep_in_outputs(result, zone, margin):
+    """Every output of a one-zone keep-in build, read as the vehicle reads it: each
+    inclusion inside the zone less the margin, and the inclusions one area (more than one
+    is marked as needing FENCE_OPTIONS' union, which the upload sets)."""
+    fences = [f for f in result.fences if f.kind == "keep_in"]
+    assert fences, "the zone has no keep-in fence"
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = [str(Path(tmp) / n) for n in ("f.geojson", "f.plan", "f.waypoints")]
+        write_all(render(result.fences, {}, *paths))
+        records = read_fence_file(paths[0])
+        plan = json.loads(Path(paths[1]).read_text())
+        items = read_plan_fence(paths[1])
+        wpl = read_waypoints_fence(paths[2])
+        assert np.abs(np.subtract(_e7(items), _e7(wpl))).max(initial=0) <= 1  # 8 decimals
+    for rec in records:
+        _inside_less_margin(rec.geometry, zone, margin, f"GeoJSON {rec.site_id}")
+    polygons, circles = group_polygons(items)
+    inclusions = [p for cmd, p in polygons if cmd == POLYGON_INCLUSION]
+    for ring in inclusions:
+        _inside_less_margin(shapely.Polygon(ring), zone, margin, ".plan inclusion polygon")
+    for c in circles:
+        rim = np.column_stack(circle_rim(c.lon, c.lat, c.param1))
+        _inside_less_margin(shapely.Polygon(rim), zone, margin, ".plan inclusion circle")
+    union = "alphafence" in plan["geoFence"]  # the upload sets FENCE_OPTIONS' union then
+    assert (len(inclusions) + len(circles) > 1) == union
+    # inside the fence is no breach by the vehicle's own rule
+    for rec in records:
+        p = shapely.get_parts(rec.geometry)[0].representative_point()
+        assert not breached(items, [p.x], [p.y], union)[0], "inside the keep-in, yet a breach"
+
+
+@settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data(), margin=st.sampled_from([0.0, 10.0, 100.0]))
+@pytest.mark.parametrize("size_km", SIZES)
+@pytest.mark.parametrize("method", METHODS)
+def test_keep_in_fences_lie_inside_their_zone_less_margin_as_read(method, size_km, data, margin):
+    shape, zones = data.draw(long_zones(size_km))
     rules = _rules("keep_in", margin)
-    features = _features(zones, rules)
     try:
-        result = build_fences(features, rules, BuildOptions(method="alpha", max_vertices=32))
+        result = build_fences(_features(zones[:1], rules), rules,
+                              BuildOptions(method=method, max_vertices=32))  # fmt: skip
     except ValueError:  # a zone narrower than twice its margin has no keep-in fence
         event("vanishes inside its margin")
         return
-    event(f"checked: {shape}")
-    for fence in result.fences:
-        # the fence's boundary, read in lon/lat, lies inside the zone (ArduPilot's reading of
-        # the zone's vertices) and at least the margin from its boundary
-        outside, dist, _, _ = clearance(
-            fence.geometry, _rings(zones[0]), spacing_m=max(margin / 4, 50.0), margin_m=margin
-        )
-        assert outside == 0, f"{outside} samples of the keep-in fence lie outside its zone"
-        assert dist >= margin - 0.01, f"the keep-in fence comes {dist:.2f} m from its zone"
+    event(f"checked: {method} {size_km} km {shape} margin {margin:g}")
+    _keep_in_outputs(result, zones[0], margin)
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(zone=long_zones(), profile=st.sampled_from(["copter", "sd-fence"]))
-def test_onboard_fences_contain_the_fences_they_stand_for_as_read(zone, profile):
-    shape, zones = zone
+@settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+@pytest.mark.parametrize("size_km", SIZES)
+@pytest.mark.parametrize("profile", ["copter", "sd-fence"])
+def test_onboard_fences_contain_the_fences_they_stand_for_as_read(profile, size_km, data):
+    shape, zones = data.draw(long_zones(size_km))
     rules = _rules("keep_out", 10.0)
     result = build_fences(_features(zones, rules), rules, BuildOptions(method="alpha"))
-    fences = [f for f in result.fences if f.kind == "keep_out"]
-    records = read_back(fences)
+    records = read_back([f for f in result.fences if f.kind == "keep_out"])
     area = shapely.box(*shapely.union_all([r.geometry for r in records]).bounds)
     try:
         onboard = compile_fences(records, area, PROFILES[profile])
@@ -263,26 +335,28 @@ def test_onboard_fences_contain_the_fences_they_stand_for_as_read(zone, profile)
         assert "fit" in str(err)
         event("does not fit")
         return
-    event(f"checked: {shape}")
-    polygons, circles = group_polygons(onboard.items)
+    event(f"checked: {profile} {size_km} km {shape}")
+    _onboard_holds(records, onboard.items)
+
+
+def _onboard_holds(records, items):
+    """Every fence lies inside the onboard exclusions as ArduPilot reads them: each sample of
+    its boundary (and its interior, exactly, for polygons alone) is excluded by a polygon
+    or a circle."""
+    polygons, circles = group_polygons(items)
     rings = [np.asarray(p) for cmd, p in polygons if cmd == POLYGON_EXCLUSION]
     discs = [(c.lon, c.lat, c.param1) for c in circles if c.command == CIRCLE_EXCLUSION]
     assert not [p for cmd, p in polygons if cmd == POLYGON_INCLUSION]
     for rec in records:
-        # every fence stands inside some onboard exclusion as ArduPilot reads it
-        outside = clearance(rec.geometry, rings, spacing_m=50.0)[0]
-        in_disc = not discs or _in_circles(rec.geometry, discs)
-        assert outside == 0 or in_disc, f"{outside} samples of {rec.site_id} stand outside"
-
-
-def _in_circles(geom, discs):
-    from .ardupilot_model import boundary_samples
-
-    lon, lat = boundary_samples(geom, 50.0)
-    inside = np.zeros(lon.shape, bool)
-    for clon, clat, r in discs:
-        inside |= location_distance_m(lat, lon, clat, clon) < r
-    return bool(inside.all())
+        lon, lat = boundary_samples(rec.geometry, 50.0)
+        inside = np.zeros(lon.shape, bool)
+        for ring in rings:
+            inside |= ~polygon_outside(lat, lon, ring[:, 1], ring[:, 0])
+        for clon, clat, r in discs:
+            inside |= location_distance_m(lat, lon, clat, clon) < r
+        assert inside.all(), f"{(~inside).sum()} samples of {rec.site_id} stand outside"
+        if not discs:
+            assert covers_as_read(rings, rec.geometry), f"{rec.site_id} is not covered"
 
 
 def read_back(fences):

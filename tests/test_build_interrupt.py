@@ -41,7 +41,17 @@ def database(tmp_path_factory, malta):
 @pytest.mark.parametrize("moment", ["importing", "fencing"])
 def test_ctrl_c_stops_a_parallel_build_with_one_line(database, tmp_path, moment):
     out = tmp_path / "f.geojson"
-    argv = [sys.executable, "-m", "alphafence", "build", str(database), "-o", str(out), "--jobs", "2"]
+    argv = [
+        sys.executable,
+        "-m",
+        "alphafence",
+        "build",
+        str(database),
+        "-o",
+        str(out),
+        "--jobs",
+        "2",
+    ]
     build = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                              start_new_session=True)  # fmt: skip
     # the moment: the forkserver exists (still importing), or it has forked its workers

@@ -131,4 +131,5 @@ def test_build_note_for_two_keep_in_areas(tmp_path, capsys):
     out = tmp_path / "f.geojson"
     assert main(["build", str(src), "-o", str(out), "--plan", str(tmp_path / "f.plan"), "-q"]) == 0
     assert "2 inclusion areas: ArduPilot needs FENCE_OPTIONS" in capsys.readouterr().err.replace(
-        "\n", " ")
+        "\n", " "
+    )

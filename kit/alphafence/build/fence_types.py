@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from alphafence.geo.lonlat import frame_scale
+
 
 @dataclass
 class FenceOptions:
@@ -138,8 +140,13 @@ class Fence:
 
     @property
     def circle_wgs84(self):
-        """(lon, lat, radius_m) of a circle fence, else None."""
+        """(lon, lat, radius_m) of a circle fence, else None: the geodesic circle that holds
+        the frame's circle (keep-out) or lies inside it (keep-in). The frame reads distances
+        across its radius up to :func:`~alphafence.geo.lonlat.frame_scale` times too long,
+        so a keep-out's radius grows by that scale and a keep-in's shrinks by it."""
         if self.circle is None:
             return None
-        lon, lat = self.frame.to_wgs84(self.circle[0], self.circle[1])
-        return float(lon), float(lat), float(self.circle[2])
+        x, y, r = self.circle[:3]
+        lon, lat = self.frame.to_wgs84(x, y)
+        k = frame_scale(math.hypot(x, y) + r)
+        return float(lon), float(lat), float(r / k if self.kind == "keep_in" else r * k)

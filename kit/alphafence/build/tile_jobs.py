@@ -178,7 +178,6 @@ def start_pool(workers: int):
     import signal
     import threading
     from concurrent.futures import ProcessPoolExecutor
-
     from multiprocessing import forkserver
 
     ctx = multiprocessing.get_context("forkserver")

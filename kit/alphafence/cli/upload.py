@@ -24,7 +24,6 @@ from alphafence.cli.common import (
     check_trust,
     out_console,
     signing_key,
-    union_hint,
     unsigned_hint,
 )
 from alphafence.cli.maps import add_map_options, check_map_args

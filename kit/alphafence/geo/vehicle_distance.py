@@ -115,10 +115,10 @@ def vehicle_radius(lon, lat, radius_m, outward=True):
     return float(max(d.min() * (1 - 1e-6) - 0.01, 0.0))
 
 
-def vehicle_circle_rim(lon, lat, radius_m, n=64, iterations=3):
+def vehicle_circle_rim(lon, lat, radius_m, n=64):
     """Positions (lon, lat arrays) at ArduPilot's distance ``radius_m`` from a circle's
-    centre, at ``n`` bearings: its mean-latitude distance inverted by fixed-point steps
-    (the scale of each point's mean latitude, from the centre's first).
+    centre, at ``n`` bearings: its mean-latitude distance inverted (the latitude step fixes
+    the mean latitude, which scales the longitude step).
 
     Examples
     --------
@@ -129,10 +129,9 @@ def vehicle_circle_rim(lon, lat, radius_m, n=64, iterations=3):
     ang = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
     dlat = radius_m / LATLON_TO_M * np.cos(ang)
     clat = float(np.round(lat * E7) / E7)
-    scale = np.full(n, max(math.cos(math.radians(clat)), 0.01))
-    for _ in range(iterations):
-        dlon = radius_m / LATLON_TO_M * np.sin(ang) / scale
-        scale = np.maximum(np.cos(np.radians(clat + dlat / 2.0)), 0.01)
+    # the point's mean latitude with the centre is clat + dlat / 2 whatever its longitude:
+    # one step is exact but for the integer rounding
+    scale = np.maximum(np.cos(np.radians(clat + dlat / 2.0)), 0.01)
     return lon + radius_m / LATLON_TO_M * np.sin(ang) / scale, lat + dlat
 
 

@@ -3,13 +3,11 @@ and waypoint writers (and, later, the uploader)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import shapely
 
-from alphafence.geo.lonlat import frame_scale
 from alphafence.geo.vehicle_distance import vehicle_radius
 from alphafence.mavlink import ids
 
@@ -119,9 +117,8 @@ def fence_items(fences):
             continue
         inclusion = f.kind == "keep_in"
         if f.circle is not None:
-            lon, lat, r = f.circle_wgs84
-            x, y = f.circle[:2]  # the site frame's metres read a little long off its origin
-            r = vehicle_radius(lon, lat, r * frame_scale(math.hypot(x, y) + r), not inclusion)
+            lon, lat, r = f.circle_wgs84  # on the ground, the frame's scale allowed for
+            r = vehicle_radius(lon, lat, r, not inclusion)
             items.append(
                 FenceItem(CIRCLE_INCLUSION if inclusion else CIRCLE_EXCLUSION, r, lon, lat)
             )

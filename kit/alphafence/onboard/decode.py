@@ -132,8 +132,11 @@ class OnboardFence:
             if self.radius_m < LATLON_TO_M * 1e-7:  # within one step of the vehicle's degrees
                 return shapely.Polygon()
             # a millimetre and a millionth for the inverse's rounding, on the safe side
-            r = self.radius_m * (1 - 1e-6) - 0.001 if self.inclusion else (
-                (self.radius_m * (1 + 1e-6) + 0.001) / math.cos(math.pi / segments))
+            r = (
+                self.radius_m * (1 - 1e-6) - 0.001
+                if self.inclusion
+                else ((self.radius_m * (1 + 1e-6) + 0.001) / math.cos(math.pi / segments))
+            )
             rlon, rlat = vehicle_circle_rim(lon, lat, max(r, 0.0), segments)
             disc = shapely.Polygon(np.column_stack([rlon, rlat])[::-1])
             # a circle too small for degrees to tell its vertices apart has no area
