@@ -19,8 +19,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/alphafence demo -o demo-out
 
+# the suite on every core (pytest-xdist; each SITL on its own ports and folder); the SITL
+# comes from ../shared/ardupilot-sitl when no other is found
 test: $(STAMP)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n auto
 
 # the whole suite at the oldest versions the kit supports (pyproject.toml's floors, mostly
 # Debian bookworm's): .venv-oldest from .ci/oldest-constraints.txt (needs Python 3.11, as
@@ -39,7 +41,8 @@ $(OLDEST_STAMP): pyproject.toml .ci/oldest-constraints.txt
 test-oldest: $(OLDEST_STAMP)
 	$(OLDEST)/bin/python -c "import numpy, scipy, shapely; print('oldest versions: numpy', \
 		numpy.__version__, 'scipy', scipy.__version__, 'shapely', shapely.__version__)"
-	$(OLDEST)/bin/pytest -q
+	@echo "oldest versions: the suite without the tests that drive only external parts (SITL, the browser), which make test runs"
+	$(OLDEST)/bin/pytest -q -n auto -m "not sitl and not browser"
 
 sitl-test: $(STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary

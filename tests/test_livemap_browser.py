@@ -17,6 +17,8 @@ import pytest
 
 from tests.browser import start
 
+pytestmark = pytest.mark.browser
+
 pytest.importorskip("aiohttp", reason="needs aiohttp (the map extra)")
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -14,6 +14,8 @@ import shapely
 from alphafence.cli import main
 from tests.browser import browser, layer_counts, open_map, requests_made  # noqa: F401
 
+pytestmark = pytest.mark.browser
+
 FENCE_LAYERS = {"keep_out": "keep-out fences", "warning": "warning layers", "keep_in": "keep-in fences"}  # fmt: skip
 
 
