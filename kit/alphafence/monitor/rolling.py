@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from alphafence.mavlink.inclusions import inclusion_count, needs_union
 from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.fenceset import KEEP_IN, KEEP_OUT
 
@@ -285,6 +286,8 @@ class RollingFence:
         self.coverage, self.held = target, list(items)
         self.uploads += 1
         self._uncovered = False
+        if needs_union(items):  # more than one inclusion: ArduPilot must read their union
+            fields["inclusions"] = await self._union(items)
         self.handle(
             new_event(
                 "onboard_upload",
@@ -298,6 +301,20 @@ class RollingFence:
             )
         )
         return True
+
+    async def _union(self, items) -> str:
+        """Set FENCE_OPTIONS' union bit for a fence of several inclusions: ``"union"``, or
+        what failed (the vehicle then intersects them: the reload's event warns)."""
+        from alphafence.vehicle.params import check_union_supported, set_union
+
+        try:
+            options = await check_union_supported(self.vehicle, inclusion_count(items))
+            await set_union(self.vehicle, options)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # an event, never a crash
+            return f"intersection: {exc}"
+        return "union"
 
     def _failed(self, t0, stage, error, holds, fields) -> bool:
         if stage == "upload":
