@@ -227,8 +227,9 @@ def summary(db, result, opts, written):
     out_console.print(table)
     notes = list(db.notes)
     for zone in db.invalid:
-        name = f"airspace {zone['airspace']!r}, " if zone["airspace"] else ""
-        where = f"{zone['file']}: {name}line {zone['line']}"
+        name = f"airspace {zone['airspace']!r}" if zone["airspace"] else ""
+        name += ", " if name and zone["line"] else ""
+        where = f"{zone['file']}: {name}" + (f"line {zone['line']}" if zone["line"] else "")
         notes.append(f"left out (--skip-invalid): {where}: {zone['problem']}")
     if db.repaired:
         shown = ", ".join(db.repaired[:5]) + (" ..." if len(db.repaired) > 5 else "")

@@ -80,7 +80,7 @@ def read_file(path, rules, repaired, skipped, notes=None, invalid=None):
 
         features = read_osm(path, rules, repaired, skipped)
     elif name.endswith(kml.SUFFIXES):
-        features = kml.read_kml(path, rules, repaired, skipped)
+        features = kml.read_kml(path, rules, repaired, skipped, invalid)
     elif is_openair(path):
         features = openair.read_openair(path, rules, repaired, skipped, notes, invalid)
     elif should_stream(path):
@@ -167,7 +167,9 @@ def read_database(
     invalid = [] if skip_invalid else None
     ahead = read_openair_files(paths, rules, repaired, skipped, notes, invalid)
     for i, path in enumerate(paths):
-        features.extend(ahead[i] if i in ahead else read_file(path, rules, repaired, skipped))
+        features.extend(
+            ahead[i] if i in ahead else read_file(path, rules, repaired, skipped, notes, invalid)
+        )
     selected = select_bbox(features, bbox)
     if not selected:
         swapped = swapped_box(bbox) if bbox else None
@@ -298,7 +300,8 @@ class DatabaseStream:
             from alphafence.formats.osm import iter_osm  # pyosmium, only when OSM is read
 
             return iter_osm(path, self.rules, self.repaired, self.skipped)
-        return [read_file(path, self.rules, self.repaired, self.skipped)]
+        invalid = self.invalid if self.skip_invalid else None
+        return [read_file(path, self.rules, self.repaired, self.skipped, self.notes, invalid)]
 
     def database(self, features=()) -> Database:
         """What was read, as a :class:`Database` (holding ``features``)."""

@@ -161,13 +161,12 @@ def flag_invalid(geoms, sources, repaired):
 
 
 def make_valid_polygonal(geoms):
-    """Valid geometries (vectorised). Repair may leave a collection of polygons plus the
-    lines or points a degenerate ring collapsed to; all of it stays restricted."""
-    geoms = np.asarray(geoms, dtype=object).copy()
-    invalid = np.flatnonzero(~shapely.is_valid(geoms))
-    if invalid.size:
-        geoms[invalid] = shapely.make_valid(geoms[invalid])
-    return geoms
+    """Valid geometries (vectorised). Repair never shrinks: it may leave a collection of
+    polygons plus the lines a spike or a collapsed ring draws
+    (:func:`alphafence.geo.lonlat.repair_keeping_all`); all of it stays restricted."""
+    from alphafence.geo.lonlat import repair_keeping_all
+
+    return repair_keeping_all(np.asarray(geoms, dtype=object))
 
 
 def select_bbox(features, bbox):

@@ -39,7 +39,7 @@ import numpy as np
 import shapely
 from shapely.errors import ShapelyError
 
-from alphafence.errors import InputError, need
+from alphafence.errors import InputError, InputErrors, need
 from alphafence.formats.airspace import features_from_volumes, fences_from_volumes
 from alphafence.formats.jsonfile import max_json_bytes, read_limited
 from alphafence.formats.kml_geodesic import both_readings, geodesic_reading
@@ -169,12 +169,17 @@ def _coordinates(path, label, el):
 
 
 def _ring(path, label, el):
-    """The coordinates of the LinearRing inside ``el`` (or of ``el`` itself)."""
+    """The coordinates of the LinearRing inside ``el`` (or of ``el`` itself). A ring of
+    fewer than four coordinates (a face drawn edge-on: two points and back) is kept as a face
+    without area, its last point repeated: a volume takes its footprint from its other faces."""
     ring = el if _local(el) == "LinearRing" else next(iter(_children(el, "LinearRing")), None)
     coords = None if ring is None else next(iter(_children(ring, "coordinates")), None)
     if coords is None:
         raise InputError(path, "a ring without coordinates", label)
-    return _coordinates(path, label, coords)
+    rows = _coordinates(path, label, coords)
+    if len(rows) < 4:
+        rows = np.vstack([rows, np.repeat(rows[-1:], 4 - len(rows), axis=0)])
+    return rows
 
 
 def _primitives(path, label, el, out):
@@ -282,7 +287,7 @@ def _placemark(path, index, pm, folder, skipped):
     return Placemark(index, label, name, folder, ident, tags, prims, radius)
 
 
-def read_volumes(path, skipped=None):
+def read_volumes(path, skipped=None, invalid=None):
     """The placemarks of a KML or KMZ file as volumes (see :mod:`alphafence.formats.airspace`),
     their polygons' edges straight in lon/lat, and how each is held read both ways.
 
@@ -291,6 +296,9 @@ def read_volumes(path, skipped=None):
     path : str or Path
     skipped : collections.Counter, optional
         Placemarks without a geometry read here are counted.
+    invalid : list, optional
+        When given, malformed placemarks are left out and described here (``file``,
+        ``airspace``: the placemark, ``problem``); when None, all of them are raised at once.
 
     Returns
     -------
@@ -305,21 +313,31 @@ def read_volumes(path, skipped=None):
         One line naming the placemark that is malformed.
     """
     root = read_document(path)
-    marks = [
-        _placemark(path, k, pm, folder, skipped) for k, (pm, folder) in enumerate(placemarks(root))
-    ]
+    marks, faults = [], []
+    for k, (pm, folder) in enumerate(placemarks(root)):
+        try:
+            marks.append(_placemark(path, k, pm, folder, skipped))
+        except InputError as exc:  # every placemark's fault, not only the first
+            faults.append(exc)
     marks = [m for m in marks if m is not None]
-    straight = volumes(path, marks)
+    straight = volumes(path, marks, faults=faults)
+    if faults and invalid is None:  # one fault is its own line; several, each on its own
+        if len(faults) == 1:
+            raise faults[0]
+        raise InputErrors(path, faults, "build --skip-invalid leaves them out, naming each")
+    for exc in faults:
+        invalid.append({"file": str(path), "airspace": exc.feature, "line": None,
+                        "problem": exc.message})  # fmt: skip
     areas = [p[1] for pm in marks for p in pm.prims if p[0] == "area"]
     geodesic = {id(g): geodesic_reading(g) for g in areas}
     if all(geodesic[id(g)] is g for g in areas):
         return straight, [None] * len(straight)
-    read = volumes(path, marks, lambda g: geodesic[id(g)])
+    read = volumes(path, marks, lambda g: geodesic[id(g)], faults=[])  # the same faults
     readings = [None if a[0] is b[0] else both_readings(a[0], b[0]) for a, b in zip(straight, read)]
     return straight, readings
 
 
-def read_kml(path, rules, repaired, skipped):
+def read_kml(path, rules, repaired, skipped, invalid=None):
     """The restricted features of a KML or KMZ file, matched against ``rules`` by the
     pseudo-tags above (by default every zone is a keep-out ``airspace``).
 
@@ -334,7 +352,7 @@ def read_kml(path, rules, repaired, skipped):
     MissingDependency
         lxml is not installed.
     """
-    volumes, readings = read_volumes(path, skipped)
+    volumes, readings = read_volumes(path, skipped, invalid)
     what = "KML placemark"
     return features_from_volumes(path, volumes, rules, repaired, skipped, what, readings)
 

@@ -124,6 +124,12 @@ def is_wall(prim) -> bool:
     return zs.size > 0 and float(zs.max()) > float(zs.min())
 
 
+def _faceless(prim) -> bool:
+    """A polygon, not extruded, without area of its own: a vertical wall, or a floor or
+    ceiling drawn edge-on (a ring of two points and back)."""
+    return prim[0] == "area" and not prim[4] and _no_area(prim[1])
+
+
 def _as_written(geom):
     return geom
 
@@ -203,7 +209,7 @@ def _placemark_volumes(path, pm, reading):
 def _zone_volume(path, members, reading):
     """One volume of a zone drawn as several placemarks (floor, ceiling, walls)."""
     prims = [p for pm in members for p in pm.prims]
-    walls = next(pm for pm in members if pm.prims and all(is_wall(p) for p in pm.prims))
+    walls = next(pm for pm in members if pm.prims and all(_faceless(p) for p in pm.prims))
     lower, upper, ref = band(prims)
     geom = footprint(path, walls.label, prims, reading)
     tags = {}
@@ -213,7 +219,7 @@ def _zone_volume(path, members, reading):
     return geom, tags, members[0].ident, lower, upper, props
 
 
-def volumes(path, marks, reading=None):
+def volumes(path, marks, reading=None, faults=None):
     """The volumes of a document's placemarks, in document order.
 
     Parameters
@@ -223,6 +229,9 @@ def volumes(path, marks, reading=None):
     reading : callable, optional
         The 2-D polygon each polygon is read as (by default as written): with or without it
         the same volumes come back, in the same order.
+    faults : list, optional
+        When given, a placemark whose polygons have no area is left out and its InputError
+        appended here, instead of raised.
 
     Returns
     -------
@@ -243,15 +252,20 @@ def volumes(path, marks, reading=None):
         return bool(pm.prims) and all(p[0] == "area" and not p[4] for p in pm.prims)
 
     reading = reading or _as_written
-    zones = {key(pm): [] for pm in marks if pm.prims and all(is_wall(p) for p in pm.prims)}
+    zones = {key(pm): [] for pm in marks if pm.prims and all(_faceless(p) for p in pm.prims)}
     for pm in marks:
         if key(pm) in zones and areas(pm):
             zones[key(pm)].append(pm)
     out = []
     for pm in marks:
         members = zones.get(key(pm)) if areas(pm) else None
-        if not members:
-            out.extend(_placemark_volumes(path, pm, reading))
-        elif members[0] is pm:
-            out.append(_zone_volume(path, members, reading))
+        try:
+            if not members:
+                out.extend(_placemark_volumes(path, pm, reading))
+            elif members[0] is pm:
+                out.append(_zone_volume(path, members, reading))
+        except InputError as exc:
+            if faults is None:
+                raise
+            faults.append(exc)
     return out

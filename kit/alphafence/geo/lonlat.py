@@ -124,11 +124,41 @@ def densify_lonlat(geoms, tolerance_m=ZONE_TOLERANCE_M):
         if b[i, 2] - b[i, 0] > 180.0:
             geom = shapely.transform(geom, _unwrapped)
         # segmentize measures in degrees: a degree spans at most _METRES_PER_DEGREE metres
-        dense = shapely.segmentize(geom, step_m[i] / _METRES_PER_DEGREE)
-        if dense.is_empty:  # GEOS empties a polygon without area: densify what it is
-            dense = shapely.segmentize(shapely.make_valid(geom), step_m[i] / _METRES_PER_DEGREE)
-        out[i] = dense
+        # GEOS's densifier repairs an invalid polygon by buffer(0), which drops a bow-tie's
+        # lobe and a spike: repaired first, keeping every point the outline draws
+        out[i] = shapely.segmentize(repair_keeping_all(geom), step_m[i] / _METRES_PER_DEGREE)
     return out
+
+
+def repair_keeping_all(geoms):
+    """Invalid polygons made valid without losing any point their outlines draw: the valid
+    area (``make_valid``: both lobes of a bow-tie) and the outline's own lines, so a spike out
+    to a vertex and back, or a lobe an arc draws across the outline, stays restricted (as a
+    line). Valid geometries are returned as they are (vectorised).
+
+    Examples
+    --------
+    >>> spike = shapely.Polygon([(0, 0), (2, 0), (2, 1), (3, 1), (2, 1), (2, 2), (0, 2)])
+    >>> bool(repair_keeping_all(spike).covers(shapely.Point(3, 1)))
+    True
+    >>> bow = shapely.Polygon([(0, 0), (2, 2), (2, 0), (0, 2)])
+    >>> round(float(shapely.area(repair_keeping_all(bow))), 6)
+    2.0
+    """
+    array = np.asarray(geoms, dtype=object)
+    one = array.ndim == 0
+    array = array.reshape(-1).copy()
+    bad = np.flatnonzero(~shapely.is_valid(array))
+    if bad.size:
+        valid = shapely.make_valid(array[bad])
+        # the outline's lines beyond the valid area (beyond rounding: a billionth of the
+        # geometry's extent): a spike, the part of a collapsed ring
+        b = shapely.bounds(array[bad])
+        tiny = 1e-9 * np.fmax(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1])
+        beyond = shapely.difference(shapely.boundary(array[bad]), shapely.buffer(valid, tiny))
+        keep = ~shapely.is_empty(beyond)
+        array[bad] = np.where(keep, shapely.union(valid, beyond), valid)
+    return array[0] if one else array
 
 
 def _edge_samples(frame, lon, lat, samples):
