@@ -129,3 +129,30 @@ def test_kit_reads_a_fence_as_the_model(parts, union, lat0):
     want = breached(items, lon, lat, union)
     got = [kit_breached(fences, a, b, union) for a, b in zip(lon, lat)]
     assert got == want.tolist()
+
+
+@pytest.mark.parametrize("lat", [0.0, 35.9, 64.0, 78.0])
+@pytest.mark.parametrize("radius", [150.0, 5_000.0, 100_000.0])
+def test_circle_items_hold_under_either_distance_reading(lat, radius):
+    """An exclusion item contains the geodesic circle and an inclusion item lies inside it,
+    read by current ArduPilot (mean latitude) and by firmware scaling at the centre; an
+    inclusion a metre larger, or sized by the centre's reading alone, is seen to reach out."""
+    from alphafence.geo.vehicle_distance import vehicle_radius
+
+    from .ardupilot_model import GEOD
+
+    az = np.arange(0.0, 360.0, 0.25)
+    n = az.size
+    plon, plat, _ = GEOD.fwd(np.full(n, 14.5), np.full(n, lat), az, np.full(n, radius))
+    out = vehicle_radius(14.5, lat, radius, outward=True)
+    inward = vehicle_radius(14.5, lat, radius, outward=False)
+    for mean in (True, False):
+        d = location_distance_m(plat, plon, lat, 14.5, mean=mean)
+        assert d.max() < out and d.min() > inward
+    # sized as the kit sized it before (the centre's latitude, a 6,378,137 m sphere), a large
+    # inclusion reaches past its geodesic circle as current ArduPilot measures
+    if radius >= 100_000.0 and lat == 0.0:  # where the constants differ most, unscaled
+        from alphafence.geo.vehicle_distance import LEGACY_LATLON_TO_M, vehicle_distance_m
+
+        before = vehicle_distance_m(plon, plat, 14.5, lat, False, LEGACY_LATLON_TO_M).min()
+        assert location_distance_m(plat, plon, lat, 14.5).min() < before * (1 - 1e-6) - 0.01
