@@ -133,3 +133,32 @@ def test_build_note_for_two_keep_in_areas(tmp_path, capsys):
     assert "2 inclusion areas: ArduPilot needs FENCE_OPTIONS" in capsys.readouterr().err.replace(
         "\n", " "
     )
+
+
+def test_upload_warns_of_mission_positions_outside_the_fence(tmp_path, capsys):
+    """Home in the west area, a waypoint between the areas: the upload says so (by the
+    vehicle's reading, the two areas united)."""
+    src = tmp_path / "areas.geojson"
+    records = [FenceRecord(f"area/{k}", "keep_in", FRAME.geom_to_wgs84(b), 0.0)
+               for k, b in enumerate((WEST, EAST))]  # fmt: skip
+    doc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": shapely.geometry.mapping(r.geometry),
+         "properties": {"site_id": r.site_id, "kind": "keep_in", "margin_m": 0.0}}
+        for r in records]}  # fmt: skip
+    src.write_text(json.dumps(doc))
+
+    def waypoint(k, x, y):
+        lon, lat = FRAME.to_wgs84(x, y)
+        return {"type": "SimpleItem", "command": 16, "frame": 3, "doJumpId": k,
+                "autoContinue": True, "params": [0, 0, 0, None, float(lat), float(lon), 30]}  # fmt: skip
+
+    home = tuple(float(v) for v in FRAME.to_wgs84(0.0, 0.0))
+    mission = plan_document([], home, [waypoint(1, 100.0, 0.0), waypoint(2, 2500.0, 0.0),
+                                       waypoint(3, 5000.0, 0.0)])  # fmt: skip
+    plan = tmp_path / "mission.plan"
+    plan.write_text(dumps(mission))
+    argv = ["upload", str(src), "--area", str(plan), "--dry-run", "--allow-unsigned"]
+    assert main(argv) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "position 2 breach the fence as the vehicle reads it" in err
+    assert "home" not in err.split("position 2")[0].split("warning:")[-1]

@@ -114,3 +114,40 @@ def compile_report(result) -> None:
     for m in result.merges:
         named = ", ".join(result.label(site) for site in m)
         err_console.print(f"[yellow]note:[/] merged {named} to fit the storage", soft_wrap=True)
+
+
+def items_report(items, fences, profile, sites=None) -> None:
+    """Print the items an upload sends: one row per polygon or circle (with the sites it
+    stands for, ``sites[k]`` for ``fences[k]``, when the plan says), and the return point."""
+    from alphafence.mavlink.items import RETURN_POINT
+    from alphafence.mavlink.storage import CIRCLE_BYTES, RETURN_BYTES, polygon_bytes, storage_bytes
+
+    t = Table(
+        title=f"{len(items)} items, {storage_bytes(items)} of {profile.bytes} bytes "
+        f"({profile.name}), at most {profile.items} items"
+    )
+    cols = ("sent as", "fence", "stands for", "size", "bytes", "first position (lat, lon)")
+    for col in cols:
+        t.add_column(col, justify="right" if col == "bytes" else "left")
+    for k, it in enumerate(items):
+        if it.command == RETURN_POINT:
+            pos = f"{it.lat:.7f}, {it.lon:.7f}"
+            t.add_row(f"item {k}", "return point", "", "", str(RETURN_BYTES), pos)
+    sites = list(sites or []) + [[]] * len(fences)
+    for f, stands_for in zip(fences, sites):
+        lon, lat = f.lonlat[0]
+        polygon = f.shape == "polygon"
+        t.add_row(
+            f.items,
+            f"{f.kind} {f.shape} {f.number}",
+            ", ".join(_site(x) for x in stands_for),
+            f"{len(f.lonlat)} vertices" if polygon else f"radius {f.radius_m:g} m",
+            str(polygon_bytes(len(f.lonlat)) if polygon else CIRCLE_BYTES),
+            f"{lat:.7f}, {lon:.7f}",
+        )
+    out_console.print(t)
+
+
+def _site(site) -> str:
+    """A site as tables name it: ``hospital/way/1 (St Mary's)``, or its id alone."""
+    return f"{site['id']} ({site['name']})" if site.get("name") else site["id"]

@@ -35,7 +35,7 @@ from alphafence.cli.options import (
     figure_wants,
     storage_profile,
 )
-from alphafence.cli.tables import compile_report
+from alphafence.cli.tables import compile_report, items_report
 from alphafence.errors import InputError, VehicleError, need
 from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
 from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
@@ -233,43 +233,6 @@ def check_items(path, items, profile, max_items=None):
     return fences
 
 
-def items_report(items, fences, profile, sites=None) -> None:
-    """Print the items an upload sends: one row per polygon or circle (with the sites it
-    stands for, ``sites[k]`` for ``fences[k]``, when the plan says), and the return point."""
-    from alphafence.mavlink.items import RETURN_POINT
-    from alphafence.mavlink.storage import CIRCLE_BYTES, RETURN_BYTES, polygon_bytes, storage_bytes
-
-    t = Table(
-        title=f"{len(items)} items, {storage_bytes(items)} of {profile.bytes} bytes "
-        f"({profile.name}), at most {profile.items} items"
-    )
-    cols = ("sent as", "fence", "stands for", "size", "bytes", "first position (lat, lon)")
-    for col in cols:
-        t.add_column(col, justify="right" if col == "bytes" else "left")
-    for k, it in enumerate(items):
-        if it.command == RETURN_POINT:
-            pos = f"{it.lat:.7f}, {it.lon:.7f}"
-            t.add_row(f"item {k}", "return point", "", "", str(RETURN_BYTES), pos)
-    sites = list(sites or []) + [[]] * len(fences)
-    for f, stands_for in zip(fences, sites):
-        lon, lat = f.lonlat[0]
-        polygon = f.shape == "polygon"
-        t.add_row(
-            f.items,
-            f"{f.kind} {f.shape} {f.number}",
-            ", ".join(_site(x) for x in stands_for),
-            f"{len(f.lonlat)} vertices" if polygon else f"radius {f.radius_m:g} m",
-            str(polygon_bytes(len(f.lonlat)) if polygon else CIRCLE_BYTES),
-            f"{lat:.7f}, {lon:.7f}",
-        )
-    out_console.print(t)
-
-
-def _site(site) -> str:
-    """A site as tables name it: ``hospital/way/1 (St Mary's)``, or its id alone."""
-    return f"{site['id']} ({site['name']})" if site.get("name") else site["id"]
-
-
 def run(args) -> int:
     """Check the fences' signature, compile if needed (or check a plan's or waypoint file's
     items against the storage), upload, read back, set parameters.
@@ -312,6 +275,8 @@ def run(args) -> int:
         ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
         title = f"{args.fences}: {len(items)} fence items ({profile.name})"
         out_console.print(f"wrote {write_map_page(args, title, onboard_layers(fences, ret))}")
+    if getattr(args, "area", None):
+        _mission_outside(args.area, items)
     if args.dry_run:
         union = inclusion_count(items) > 1
         out_console.print(
@@ -357,6 +322,21 @@ async def _upload(args, items, profile) -> int:
                     + ", ".join(f"{k}={v:g}" for k, v in got.values.items())
                 )
     return 0
+
+
+def _mission_outside(plan, items) -> None:
+    """Warn when home or a position of the mission breaches the fence as the vehicle will
+    read it (:func:`alphafence.onboard.decode.path_breaches`)."""
+    from alphafence.cli.common import err_console
+    from alphafence.onboard.corridor import flight_path_from_plan
+    from alphafence.onboard.decode import path_breaches
+
+    bad = path_breaches(items, flight_path_from_plan(plan))
+    if bad:
+        where = ", ".join("home" if k == 0 else f"position {k}" for k in bad[:8])
+        err_console.print(f"[yellow]warning:[/] {plan}: {where} breach the fence as the vehicle "
+                          "reads it (it would refuse to arm there, or act on its fence in flight)",
+                          soft_wrap=True)  # fmt: skip
 
 
 async def _union(vehicle, options, inclusions):

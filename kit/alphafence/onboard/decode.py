@@ -321,3 +321,22 @@ def breached(fences, lon, lat, union=False) -> bool:
     if union:
         return inclusions > 0 and outside == inclusions
     return outside > 0
+
+
+def path_breaches(items, path) -> list:
+    """The vertices of a flight path (home first) where a vehicle holding ``items`` breaches
+    them by its own rule (:func:`breached`; several inclusions read as their union, as
+    ``upload`` sets ``FENCE_OPTIONS``), by index.
+
+    Examples
+    --------
+    >>> from alphafence.mavlink.items import FenceItem
+    >>> square = [FenceItem(5001, 4.0, x, y) for x, y in ((0, 0), (1, 0), (1, 1), (0, 1))]
+    >>> path_breaches(square, shapely.LineString([(0.5, 0.5), (2.0, 0.5), (0.5, 0.6)]))
+    [1]
+    """
+    from alphafence.mavlink.inclusions import needs_union
+
+    fences, union = decode_fence(items), needs_union(items)
+    pts = shapely.get_coordinates(path)
+    return [k for k, (lon, lat) in enumerate(pts) if breached(fences, lon, lat, union)]
