@@ -128,3 +128,50 @@ def link(request, monkeypatch):
         pytest.skip(str(exc))
     monkeypatch.setenv("ALPHAFENCE_LINK", request.param)
     return request.param
+
+
+# How many examples reached each as-read assertion, per method (or profile) and size class:
+# the property tests call ``checked(...)``; each worker appends to one file, and the run's
+# summary counts them (a class never reached shows as 0).
+COUNTS_ENV = "ALPHAFENCE_CHECK_COUNTS"
+
+
+def pytest_configure(config):
+    if not hasattr(config, "workerinput") and COUNTS_ENV not in os.environ:
+        import tempfile
+
+        fd, path = tempfile.mkstemp(prefix="alphafence-checks-", suffix=".txt")
+        os.close(fd)
+        os.environ[COUNTS_ENV] = path
+        config._alphafence_counts = path
+
+
+def checked(test, kind, size_km):
+    """Count one example that reached ``test``'s assertions for ``kind`` and size class."""
+    path = os.environ.get(COUNTS_ENV)
+    if path:
+        with open(path, "a", encoding="utf-8") as fh:
+            fh.write(f"{test}\t{kind}\t{size_km}\n")
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    path = getattr(config, "_alphafence_counts", None)
+    if not path or not os.path.exists(path):
+        return
+    import collections
+
+    with open(path, encoding="utf-8") as fh:
+        rows = collections.Counter(
+            tuple(line.rstrip("\n").split("\t")) for line in fh if line.strip()
+        )
+    os.unlink(path)
+    if not rows:
+        return
+    terminalreporter.section("as-read examples checked (per method or profile, size class)")
+    for test in sorted({r[0] for r in rows}):
+        kinds = sorted({r[1] for r in rows if r[0] == test})
+        sizes = sorted({r[2] for r in rows if r[0] == test}, key=float)
+        cells = "  ".join(
+            f"{k}: " + "/".join(str(rows[(test, k, z)]) for z in sizes) for k in kinds
+        )
+        terminalreporter.write_line(f"{test} (km {'/'.join(sizes)}): {cells}")

@@ -51,6 +51,7 @@ from .ardupilot_model import (
     spacing_for,
     zone_features,
 )
+from .conftest import checked
 
 KM = 1000.0
 
@@ -248,6 +249,7 @@ def test_keep_out_fences_hold_as_ardupilot_reads_them_in_every_format(
     result = build_fences(_features(zones, rules), rules, opts)
     event(f"checked: {method} {size_km} km {shape} margin {margin:g}")
     _keep_out_outputs(result, zones)
+    checked("keep-out", method, size_km)
 
 
 def _parquet_fences(fences, path):
@@ -318,6 +320,7 @@ def test_keep_in_fences_lie_inside_their_zone_less_margin_as_read(method, size_k
         return
     event(f"checked: {method} {size_km} km {shape} margin {margin:g}")
     _keep_in_outputs(result, zones[0], margin)
+    checked("keep-in", method, size_km)
 
 
 @settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -337,6 +340,7 @@ def test_onboard_fences_contain_the_fences_they_stand_for_as_read(profile, size_
         return
     event(f"checked: {profile} {size_km} km {shape}")
     _onboard_holds(records, onboard.items)
+    checked("onboard", profile, size_km)
 
 
 def _onboard_holds(records, items):
