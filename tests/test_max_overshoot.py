@@ -13,7 +13,7 @@ import shapely
 
 from alphafence.cli import main
 
-from .ardupilot_model import excursion_m
+from .ardupilot_model import covers_as_read, excursion_m
 
 STRIPS = [
     shapely.Polygon([(12.0, 60.1), (24.0, 66.2), (24.2, 66.1), (12.2, 60.0)]),
@@ -65,7 +65,8 @@ def test_a_vertex_cap_that_makes_a_fence_far_larger_is_said_and_max_overshoot_bo
     for fence in (capped, bounded):
         rings = [np.asarray(p.exterior.coords)[:-1] for p in shapely.get_parts(fence)]
         for strip in STRIPS:
-            assert excursion_m(strip, rings, margin, spacing_m=200.0) == 0.0
+            assert covers_as_read(rings, strip)  # exactly, and the margin to a tenth of it
+            assert excursion_m(strip, rings, margin) == 0.0
     strips = shapely.union_all(STRIPS)
     assert shapely.area(bounded) < 0.6 * shapely.area(capped)
     assert shapely.area(bounded) < 1.3 * shapely.area(strips)
