@@ -324,7 +324,7 @@ def read_volumes(path, skipped=None, invalid=None):
     if faults and invalid is None:  # one fault is its own line; several, each on its own
         if len(faults) == 1:
             raise faults[0]
-        raise InputErrors(path, faults, "build --skip-invalid leaves them out, naming each")
+        raise InputErrors(path, faults)
     for exc in faults:
         invalid.append({"file": str(path), "airspace": exc.feature, "line": None,
                         "problem": exc.message})  # fmt: skip
