@@ -22,7 +22,7 @@ demo: $(STAMP)
 # the suite on every core (pytest-xdist; each SITL on its own ports and folder); the SITL
 # comes from ../shared/ardupilot-sitl when no other is found
 test: $(STAMP)
-	$(BIN)/pytest -q -n auto
+	$(BIN)/pytest -q -n auto --dist worksteal
 
 # the whole suite at the oldest versions the kit supports (pyproject.toml's floors, mostly
 # Debian bookworm's): .venv-oldest from .ci/oldest-constraints.txt (needs Python 3.11, as
@@ -42,11 +42,11 @@ test-oldest: $(OLDEST_STAMP)
 	$(OLDEST)/bin/python -c "import numpy, scipy, shapely; print('oldest versions: numpy', \
 		numpy.__version__, 'scipy', scipy.__version__, 'shapely', shapely.__version__)"
 	@echo "oldest versions: the suite without the tests that drive only external parts (SITL, the browser), which make test runs"
-	$(OLDEST)/bin/pytest -q -n auto -m "not sitl and not browser"
+	$(OLDEST)/bin/pytest -q -n auto --dist worksteal -m "not sitl and not browser"
 
 sitl-test: $(STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
-	$(BIN)/pytest -q -m sitl
+	$(BIN)/pytest -q -n auto --dist worksteal -m sitl
 
 # a Navio2's OS (Debian armhf) under qemu-user, as root: the install in docs/onboard.md, the companion's
 # unit tests and a flight against x86 SITL; not part of `make test` (see tests/navio2/run.sh)
