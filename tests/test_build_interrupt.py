@@ -20,14 +20,16 @@ from bench.synth_db import main as synth_main
 
 def children(pid):
     """The command lines of ``pid``'s descendants."""
-    out = subprocess.run(["ps", "-e", "-o", "pid=,ppid=,args="], capture_output=True, text=True)
+    out = subprocess.run(["ps", "-eww", "-o", "pid=,ppid=,args="], capture_output=True, text=True)
     rows = [line.split(None, 2) for line in out.stdout.splitlines()]
-    tree, found = {str(pid)}, []
-    for _ in range(3):
+    tree, found, grew = {str(pid)}, [], True
+    while grew:  # any depth (an interpreter started through a wrapper is one more level)
+        grew = False
         for p, pp, args in (r for r in rows if len(r) == 3):
             if pp in tree and p not in tree:
                 tree.add(p)
                 found.append(args)
+                grew = True
     return found
 
 
