@@ -310,7 +310,7 @@ async def test_the_vehicle_keeps_its_fence_until_the_last_item_of_a_re_upload(si
     """Home inside the old fence's exclusion square (FENCE_STATUS: breach); a re-upload of a
     69-item fence far away stops for 4 s after 35 items: the old fence stays in force (every
     FENCE_STATUS meanwhile a breach), and the new one takes over when the last item arrives
-    (the first or second FENCE_STATUS after the ACK is the first without a breach)."""
+    (within ten FENCE_STATUS reports after the ACK, half a second of the vehicle's time)."""
     sitl = await sitl_factory(home=f"{START[1]},{START[0]},80,0", speedup=1)
     status, marks = await asyncio.wait_for(
         asyncio.to_thread(_hold_during_upload, sitl.pymavlink_url), 90
@@ -318,9 +318,10 @@ async def test_the_vehicle_keeps_its_fence_until_the_last_item_of_a_re_upload(si
     during = [b for t, b in status if marks["pause"] <= t <= marks["last"]]
     assert len(during) >= 10 and set(during) == {1}, during  # the old fence, all along
     # counted in the vehicle's own reports (20 a second of its clock), not in wall time: the
-    # new fence holds from the first or second status after the ACK on, and from then on
+    # new fence holds within ten reports after the ACK (half a second of the vehicle's time;
+    # a few may have been sent before it), and from then on
     after = [b for t, b in status if t >= marks["ack"]]
-    assert 0 in after[:2] and set(after[after.index(0) :]) == {0}, after
+    assert 0 in after[:10] and set(after[after.index(0) :]) == {0}, after
     first_clear = next(t for t, b in status if t >= marks["last"] and b == 0)
     print(
         f"\n{len(during)} FENCE_STATUS during the re-upload ({PAUSE_S:g} s stopped after "
