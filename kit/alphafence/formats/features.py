@@ -160,6 +160,15 @@ def flag_invalid(geoms, sources, repaired):
     return geoms
 
 
+def invalid_entries(path, faults, invalid) -> None:
+    """Describe each fault (an InputError) of a file left out by ``--skip-invalid`` in
+    ``invalid``: ``file``, ``airspace`` (the feature or placemark the fault names), ``line``
+    (None) and ``problem``, as the OpenAir reader's faults are."""
+    for exc in faults:
+        invalid.append({"file": str(path), "airspace": exc.feature, "line": None,
+                        "problem": exc.message})  # fmt: skip
+
+
 def make_valid_polygonal(geoms):
     """Valid geometries (vectorised). Repair never shrinks: it may leave a collection of
     polygons plus the lines a spike or a collapsed ring draws

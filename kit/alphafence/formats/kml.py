@@ -41,6 +41,7 @@ from shapely.errors import ShapelyError
 
 from alphafence.errors import InputError, InputErrors, need
 from alphafence.formats.airspace import features_from_volumes, fences_from_volumes
+from alphafence.formats.features import invalid_entries
 from alphafence.formats.jsonfile import max_json_bytes, read_limited
 from alphafence.formats.kml_geodesic import both_readings, geodesic_reading
 from alphafence.formats.kml_volumes import Placemark, volumes
@@ -325,9 +326,7 @@ def read_volumes(path, skipped=None, invalid=None):
         if len(faults) == 1:
             raise faults[0]
         raise InputErrors(path, faults)
-    for exc in faults:
-        invalid.append({"file": str(path), "airspace": exc.feature, "line": None,
-                        "problem": exc.message})  # fmt: skip
+    invalid_entries(path, faults, invalid)
     areas = [p[1] for pm in marks for p in pm.prims if p[0] == "area"]
     geodesic = {id(g): geodesic_reading(g) for g in areas}
     if all(geodesic[id(g)] is g for g in areas):
