@@ -179,3 +179,19 @@ def test_every_malformed_placemark_is_named_at_once_or_left_out(tmp_path, capsys
     assert main(["build", str(path), "-o", str(out), "--skip-invalid"]) == 0
     said = " ".join(capsys.readouterr().err.split())
     assert said.count("left out (--skip-invalid)") == 2 and out.exists()
+
+
+def test_skip_invalid_leaves_out_malformed_geojson_features_naming_each(tmp_path, capsys):
+    good = {"type": "Feature", "properties": {"amenity": "hospital", "osm_id": "1"},
+            "geometry": shapely.geometry.mapping(shapely.box(14.50, 35.90, 14.51, 35.91))}  # fmt: skip
+    bad = {"type": "Feature", "properties": {"amenity": "hospital"},
+           "geometry": {"type": "LineString", "coordinates": [[14.5, 35.9]]}}  # fmt: skip
+    path = tmp_path / "zones.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": [good, bad, bad]}))
+    out = tmp_path / "f.geojson"
+    assert main(["build", str(path), "-o", str(out), "-q"]) == 2
+    assert "feature 1: malformed LineString" in capsys.readouterr().err and not out.exists()
+    assert main(["build", str(path), "-o", str(out), "--skip-invalid"]) == 0
+    said = " ".join(capsys.readouterr().err.split())
+    assert said.count("left out (--skip-invalid)") == 2 and "feature 2" in said
+    assert out.exists()

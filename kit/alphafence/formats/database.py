@@ -90,7 +90,7 @@ def read_file(path, rules, repaired, skipped, notes=None, invalid=None):
         if looks_like_ed269(doc):
             features = read_ed269_doc(path, doc, rules, repaired, skipped)
         else:
-            features = read_geojson_doc(path, doc, rules, repaired, skipped)
+            features = read_geojson_doc(path, doc, rules, repaired, skipped, invalid)
     else:
         raise InputError(
             path,

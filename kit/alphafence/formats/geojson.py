@@ -14,7 +14,13 @@ import shapely
 from shapely.errors import GeometryTypeError, ShapelyError
 
 from alphafence.errors import InputError
-from alphafence.formats.features import Feature, check_coordinates, flag_invalid, geomtype_of
+from alphafence.formats.features import (
+    Feature,
+    check_coordinates,
+    flag_invalid,
+    geomtype_of,
+    invalid_entries,
+)
 
 _HSTORE = re.compile(r'"((?:[^"\\]|\\.)*)"\s*=>\s*(?:"((?:[^"\\]|\\.)*)"|NULL)')
 _ID_KEYS = ("osm_id", "osm_way_id", "osm_type", "fid", "id", "@id")
@@ -91,7 +97,7 @@ def source_of(feature: dict, props: dict, gtype: str, index: int) -> str:
     return f"feature/{index}"
 
 
-def read_geojson_doc(path, doc, rules, repaired, skipped):
+def read_geojson_doc(path, doc, rules, repaired, skipped, invalid=None):
     """The restricted features of a parsed GeoJSON FeatureCollection.
 
     Parameters
@@ -106,6 +112,9 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
         Sources of invalid polygons are appended (they are repaired later).
     skipped : collections.Counter
         Reasons for features left out are counted.
+    invalid : list, optional
+        When given (``--skip-invalid``), malformed features are left out and described here
+        (:func:`~alphafence.formats.features.invalid_entries`); when None, the first raises.
 
     Returns
     -------
@@ -121,10 +130,10 @@ def read_geojson_doc(path, doc, rules, repaired, skipped):
     raw = doc.get("features")
     if not isinstance(raw, list):
         raise InputError(path, "FeatureCollection has no 'features' list")
-    return features_of(path, enumerate(raw), rules, repaired, skipped)
+    return features_of(path, enumerate(raw), rules, repaired, skipped, invalid=invalid)
 
 
-def features_of(path, numbered, rules, repaired, skipped, parsed=None):
+def features_of(path, numbered, rules, repaired, skipped, parsed=None, invalid=None):
     """The restricted features among GeoJSON Feature objects.
 
     Parameters
@@ -139,6 +148,8 @@ def features_of(path, numbered, rules, repaired, skipped, parsed=None):
         Each Feature's geometry as GEOS read it from the text (``shapely.from_geojson``, in
         one vectorised call), or None where it could not: those are read from the parsed
         object, which also gives their error message.
+    invalid : list, optional
+        As for :func:`read_geojson_doc`.
 
     Returns
     -------
@@ -146,7 +157,15 @@ def features_of(path, numbered, rules, repaired, skipped, parsed=None):
     """
     geoms, tags_list, sources, rule_list = [], [], [], []
     for k, (i, feat) in enumerate(numbered):
-        found = _restricted(path, i, feat, rules, skipped, None if parsed is None else parsed[k])
+        try:
+            found = _restricted(
+                path, i, feat, rules, skipped, None if parsed is None else parsed[k]
+            )
+        except InputError as exc:
+            if invalid is None:
+                raise
+            invalid_entries(path, [exc], invalid)  # --skip-invalid: left out, named
+            continue
         if found is not None:
             geoms.append(found[0])
             tags_list.append(found[1])
