@@ -303,6 +303,7 @@ class FakeVehicle:
         self._mav = mav.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self._wire = _Wire(self)  # parses and encodes with self._mav
         self.dropped = 0  # messages that did not decode, or were not signed with the key
+        self.rejected: list[bytes] = []  # the bytes of each, as pymavlink cut them
         self.signing_setups: list[bytes] = []  # keys received in SETUP_SIGNING
         self._set_key(signing_key)
         # per direction: mission messages numbered so far, and the seeded random loss
@@ -430,6 +431,7 @@ class FakeVehicle:
     def _rejected(self, msg, addr):
         if msg is not None:  # garbled, or (signing on) not signed with the key
             self.dropped += 1
+            self.rejected.append(bytes(msg.get_msgbuf()))
 
     def _received(self, msg, addr):
         if self.disconnected:  # a handler went silent: nothing more of this datagram
