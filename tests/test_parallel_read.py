@@ -1,7 +1,8 @@
 """A GeoJSON text sequence read in worker processes (build/read_jobs.py) reads exactly what the
 main process reads alone: the same spool (records, extents, widths, classes, tables), the
 same repaired and skipped notes in the same order, the same first error with the same line
-number, and a build writes the same bytes. Cut into chunks of a few records to read many."""
+number, the same malformed features all at once (or left out with ``--skip-invalid``), and a
+build writes the same bytes. Cut into chunks of a few records to read many."""
 
 from __future__ import annotations
 
@@ -268,6 +269,35 @@ def test_a_malformed_line_in_the_third_chunk(tmp_path, pool):
     assert f"{path}: malformed JSON at line 20 column" in message
     assert _parallel(path, batch=8, pool=pool) == message
     assert pool.submit(int, 3).result() == 3  # the pool still serves
+
+
+def _malformed(tmp_path):
+    """A sequence with a malformed feature in three chunks of 8 records."""
+    lines = _lines(40)
+    bad = '{"type": "Feature", "properties": {"amenity": "school"}, "geometry": ' \
+          '{"type": "LineString", "coordinates": [[14.5, 35.9]]}}'  # fmt: skip
+    for i in (3, 21, 37):
+        lines[i] = bad
+    return _write(tmp_path / "db.geojsonl", lines)
+
+
+def test_malformed_features_in_several_chunks_are_named_at_once(tmp_path, pool):
+    path = _malformed(tmp_path)
+    message = _serial(path, batch=8)
+    assert message.startswith(f"{path}: 3 problems") and message.count("malformed LineString") == 3
+    assert _parallel(path, batch=8, pool=pool) == message
+    assert _parallel(path, batch=8) == message  # read here while the workers start
+
+
+def test_skip_invalid_leaves_them_out_alike(tmp_path, pool):
+    path = _malformed(tmp_path)
+    streams = [DatabaseStream([path], RULES, skip_invalid=True) for _ in range(2)]
+    serial = _spool_of(streams[0].batches())
+    parallel = _spool_of(streams[1].batches(sequence_reader(pool, 3, 8)))
+    assert_same_read((serial, [], Counter()), (parallel, [], Counter()))
+    assert len(streams[0].invalid) == 3 and streams[0].invalid == streams[1].invalid
+    assert len({k["airspace"] for k in streams[0].invalid}) == 3
+    assert all("malformed LineString" in k["problem"] for k in streams[0].invalid)
 
 
 def _build(path, out, jobs, monkeypatch, batch=None, stream=None):

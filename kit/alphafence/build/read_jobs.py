@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from alphafence.build.sites import feature_widths, site_class
 from alphafence.build.spool import Spool
 from alphafence.errors import InputError
-from alphafence.formats.features import select_bbox
+from alphafence.formats.features import select_bbox, settle_faults
 from alphafence.formats.geojson_stream import (
     BATCH,
     Unchunkable,
@@ -48,6 +48,9 @@ class ReadChunk:
         Sources of invalid polygons in the chunk, inside the box or not.
     skipped : collections.Counter
         Features the chunk left out, by reason.
+    faults : list of tuple
+        ``(path, message, feature)`` of each malformed feature (an InputError's parts: the
+        exception itself does not survive pickling).
     """
 
     data: bytes = b""
@@ -59,6 +62,7 @@ class ReadChunk:
     rules: tuple = ((), ())
     repaired: list = field(default_factory=list)
     skipped: Counter = field(default_factory=Counter)
+    faults: list = field(default_factory=list)
 
     def __len__(self):
         return len(self.lengths)
@@ -121,13 +125,14 @@ def _read_job(path, chunk, rules, bbox):
     import numpy as np
     import shapely
 
-    out = ReadChunk()
+    out, faults = ReadChunk(), []
     try:
-        features = read_chunk(path, chunk, rules, out.repaired, out.skipped)
+        features = read_chunk(path, chunk, rules, out.repaired, out.skipped, faults)
     except InputError as exc:
         return ("error", exc.path, exc.message, exc.feature)
     except Unchunkable:
         return ("unchunkable",)
+    out.faults = [(e.path, e.message, e.feature) for e in faults]
     features = select_bbox(features, bbox)
     if not features:
         return out
@@ -157,25 +162,27 @@ def sequence_reader(pool, window, batch=BATCH):
     Returns
     -------
     callable
-        ``read(path, rules, bbox, repaired, skipped)`` -> an iterator of :class:`ReadChunk`
-        (and, for a file's end that must be read serially, lists of Feature), in file order,
-        each inside ``bbox``; ``repaired`` and ``skipped`` extended chunk by chunk, in order.
-        None when the file cannot be opened (the serial reader says why).
+        ``read(path, rules, bbox, repaired, skipped, invalid)`` -> an iterator of
+        :class:`ReadChunk` (and, for a file's end that must be read serially, lists of
+        Feature), in file order, each inside ``bbox``; ``repaired`` and ``skipped`` extended
+        chunk by chunk, in order; malformed features described in ``invalid``, or (None)
+        raised at the file's end, as the serial reader raises them. None when the file cannot
+        be opened (the serial reader says why).
     """
 
-    def read(path, rules, bbox, repaired, skipped):
+    def read(path, rules, bbox, repaired, skipped, invalid=None):
         try:
             open(path, "rb").close()
         except OSError:
             return None
-        return _read(pool, window, batch, str(path), rules, bbox, repaired, skipped)
+        return _read(pool, window, batch, str(path), rules, bbox, repaired, skipped, invalid)
 
     return read
 
 
-def _read(pool, window, batch, path, rules, bbox, repaired, skipped):
+def _read(pool, window, batch, path, rules, bbox, repaired, skipped, invalid):
     chunks = sequence_chunks(path, batch)
-    pending, rest = deque(), []
+    pending, rest, faults = deque(), [], []
 
     def fill():  # keep the workers busy while this process spools what they returned
         while not rest and len(pending) < window:
@@ -203,6 +210,7 @@ def _read(pool, window, batch, path, rules, bbox, repaired, skipped):
                 break
             repaired.extend(out.repaired)
             skipped.update(out.skipped)
+            faults.extend(InputError(*fault) for fault in out.faults)
             fill()
             yield out
     finally:
@@ -212,5 +220,6 @@ def _read(pool, window, batch, path, rules, bbox, repaired, skipped):
         chunks.close()
     for chunk in rest:
         skip = (chunk.line - 1, chunk.index)
-        for part in iter_geojson(path, rules, repaired, skipped, batch, skip):
+        for part in iter_geojson(path, rules, repaired, skipped, batch, skip, faults=faults):
             yield select_bbox(part, bbox)
+    settle_faults(path, faults, invalid)

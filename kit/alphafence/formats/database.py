@@ -84,7 +84,8 @@ def read_file(path, rules, repaired, skipped, notes=None, invalid=None):
     elif is_openair(path):
         features = openair.read_openair(path, rules, repaired, skipped, notes, invalid)
     elif should_stream(path):
-        features = [f for batch in iter_geojson(path, rules, repaired, skipped) for f in batch]
+        batches = iter_geojson(path, rules, repaired, skipped, invalid=invalid)
+        features = [f for batch in batches for f in batch]
     elif name.endswith((".geojson", ".json")):
         doc = read_json(path)
         if looks_like_ed269(doc):
@@ -253,10 +254,11 @@ class DatabaseStream:
         Parameters
         ----------
         sequences : callable, optional
-            ``sequences(path, rules, bbox, repaired, skipped)`` -> the parts of a GeoJSON
-            text sequence, each inside ``bbox`` and of some length (lists of Feature or
-            another reader's parts, yielded as they come), ``repaired`` and ``skipped``
-            extended as they are read; or None to read the file here
+            ``sequences(path, rules, bbox, repaired, skipped, invalid)`` -> the parts of a
+            GeoJSON text sequence, each inside ``bbox`` and of some length (lists of Feature
+            or another reader's parts, yielded as they come), ``repaired`` and ``skipped``
+            extended as they are read, malformed features described in ``invalid`` (or, None,
+            raised at the file's end); or None to read the file here
             (:func:`alphafence.build.read_jobs.sequence_reader` reads in worker processes).
 
         Raises
@@ -271,7 +273,10 @@ class DatabaseStream:
             if i in self._ahead:
                 parts = [self._ahead.pop(i)]  # read whole, selected by the bbox below
             elif sequences is not None and is_sequence(path):
-                parts = sequences(path, self.rules, self.bbox, self.repaired, self.skipped)
+                invalid = self.invalid if self.skip_invalid else None
+                parts = sequences(
+                    path, self.rules, self.bbox, self.repaired, self.skipped, invalid
+                )
                 inside = parts is not None
             if parts is None:
                 parts = self._parts(path)
@@ -294,7 +299,8 @@ class DatabaseStream:
     def _parts(self, path):
         """The file's features, as they come: batch by batch, or in one list."""
         if should_stream(path) and str(path).lower().endswith((".json", ".geojson", *SEQ_SUFFIXES)):
-            return iter_geojson(path, self.rules, self.repaired, self.skipped)
+            invalid = self.invalid if self.skip_invalid else None
+            return iter_geojson(path, self.rules, self.repaired, self.skipped, invalid=invalid)
         if str(path).lower().endswith(OSM_SUFFIXES):
             need(*osm_wants([path]))
             from alphafence.formats.osm import iter_osm  # pyosmium, only when OSM is read

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from alphafence.errors import InputError
+from alphafence.errors import InputError, InputErrors
 from alphafence.geo.coords import check_lonlat_array
 
 GEOMTYPES = {
@@ -129,25 +129,43 @@ def geomtype_of(geom) -> str | None:
 
 
 def check_coordinates(path, geoms, label):
-    """Raise a one-line InputError for the first geometry with a coordinate out of range.
+    """Raise a one-line InputError for the first geometry with a coordinate out of range, or
+    empty.
+
+    ``label(i)`` names feature i for the message.
+    """
+    faults = coordinate_faults(path, geoms, label)
+    if faults:
+        raise faults[min(faults)]
+
+
+def coordinate_faults(path, geoms, label) -> dict:
+    """``{i: InputError}`` for each geometry i with a coordinate out of range (its first
+    one named), or empty (vectorised).
 
     ``label(i)`` names feature i for the message.
     """
     geoms = np.asarray(geoms, dtype=object)
     if geoms.size == 0:
-        return
+        return {}
     coords, index = shapely.get_coordinates(geoms, return_index=True)
-    bad = check_lonlat_array(coords)
-    if bad is not None:
-        lon, lat = coords[bad]
-        raise InputError(
-            path,
-            f"coordinate ({lon}, {lat}) out of range (lon -180..180, lat -90..90)",
-            label(int(index[bad])),
-        )
-    empty = np.flatnonzero(shapely.is_empty(geoms))
-    if empty.size:
-        raise InputError(path, "empty geometry", label(int(empty[0])))
+    bad = ~(
+        np.isfinite(coords).all(axis=1)
+        & (np.abs(coords[:, 0]) <= 180.0)
+        & (np.abs(coords[:, 1]) <= 90.0)
+    )
+    faults = {}
+    for row in np.flatnonzero(bad):
+        i = int(index[row])
+        if i not in faults:
+            lon, lat = coords[row]
+            faults[i] = InputError(
+                path, f"coordinate ({lon}, {lat}) out of range (lon -180..180, lat -90..90)",
+                label(i),
+            )  # fmt: skip
+    for i in np.flatnonzero(shapely.is_empty(geoms)):
+        faults.setdefault(int(i), InputError(path, "empty geometry", label(int(i))))
+    return faults
 
 
 def flag_invalid(geoms, sources, repaired):
@@ -167,6 +185,17 @@ def invalid_entries(path, faults, invalid) -> None:
     for exc in faults:
         invalid.append({"file": str(path), "airspace": exc.feature, "line": None,
                         "problem": exc.message})  # fmt: skip
+
+
+def settle_faults(path, faults, invalid) -> None:
+    """The end of reading a file: each fault found (InputErrors, in order) is left out and
+    described in ``invalid`` (``--skip-invalid``), or, when ``invalid`` is None, raised: one
+    as its own line, several at once (:class:`~alphafence.errors.InputErrors`)."""
+    if not faults:
+        return
+    if invalid is None:
+        raise faults[0] if len(faults) == 1 else InputErrors(path, faults)
+    invalid_entries(path, faults, invalid)
 
 
 def make_valid_polygonal(geoms):

@@ -16,10 +16,10 @@ from shapely.errors import GeometryTypeError, ShapelyError
 from alphafence.errors import InputError
 from alphafence.formats.features import (
     Feature,
-    check_coordinates,
+    coordinate_faults,
     flag_invalid,
     geomtype_of,
-    invalid_entries,
+    settle_faults,
 )
 
 _HSTORE = re.compile(r'"((?:[^"\\]|\\.)*)"\s*=>\s*(?:"((?:[^"\\]|\\.)*)"|NULL)')
@@ -114,7 +114,7 @@ def read_geojson_doc(path, doc, rules, repaired, skipped, invalid=None):
         Reasons for features left out are counted.
     invalid : list, optional
         When given (``--skip-invalid``), malformed features are left out and described here
-        (:func:`~alphafence.formats.features.invalid_entries`); when None, the first raises.
+        (:func:`~alphafence.formats.features.invalid_entries`); when None, they are raised.
 
     Returns
     -------
@@ -123,7 +123,8 @@ def read_geojson_doc(path, doc, rules, repaired, skipped, invalid=None):
     Raises
     ------
     InputError
-        A one-line message naming the feature that is malformed.
+        Every malformed feature at once: one, in a line naming it; several, one line each
+        (:class:`~alphafence.errors.InputErrors`).
     """
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
         raise InputError(path, "not a GeoJSON FeatureCollection")
@@ -133,7 +134,7 @@ def read_geojson_doc(path, doc, rules, repaired, skipped, invalid=None):
     return features_of(path, enumerate(raw), rules, repaired, skipped, invalid=invalid)
 
 
-def features_of(path, numbered, rules, repaired, skipped, parsed=None, invalid=None):
+def features_of(path, numbered, rules, repaired, skipped, parsed=None, invalid=None, faults=None):
     """The restricted features among GeoJSON Feature objects.
 
     Parameters
@@ -150,35 +151,36 @@ def features_of(path, numbered, rules, repaired, skipped, parsed=None, invalid=N
         object, which also gives their error message.
     invalid : list, optional
         As for :func:`read_geojson_doc`.
+    faults : list, optional
+        Where a reader of many batches gathers the faults (InputErrors) of every batch, to
+        settle them at the file's end (:func:`~alphafence.formats.features.settle_faults`);
+        when None, this batch's are settled here, with ``invalid``.
 
     Returns
     -------
     list of Feature
     """
-    geoms, tags_list, sources, rule_list = [], [], [], []
+    found, settle = [], faults is None
+    faults = [] if faults is None else faults
     for k, (i, feat) in enumerate(numbered):
         try:
-            found = _restricted(
-                path, i, feat, rules, skipped, None if parsed is None else parsed[k]
-            )
-        except InputError as exc:
-            if invalid is None:
-                raise
-            invalid_entries(path, [exc], invalid)  # --skip-invalid: left out, named
+            one = _restricted(path, i, feat, rules, skipped, None if parsed is None else parsed[k])
+        except InputError as exc:  # every feature's fault, not only the first
+            faults.append(exc)
             continue
-        if found is not None:
-            geoms.append(found[0])
-            tags_list.append(found[1])
-            sources.append(found[2])
-            rule_list.append(found[3])
-    if not geoms:
+        if one is not None:
+            found.append(one)
+    bad = coordinate_faults(path, [f[0] for f in found], lambda k: found[k][2])
+    faults.extend(bad[k] for k in sorted(bad))
+    if settle:
+        settle_faults(path, faults, invalid)
+    found = [f for k, f in enumerate(found) if k not in bad]
+    if not found:
         return []
-    geoms = np.array(geoms, dtype=object)
-    check_coordinates(path, geoms, lambda i: f"{sources[i]}")
-    geoms = flag_invalid(geoms, sources, repaired)
+    geoms = flag_invalid([f[0] for f in found], [f[2] for f in found], repaired)
     return [
         Feature(g, t, s, str(path), r, r.alt_min_m, r.alt_max_m)
-        for g, t, s, r in zip(geoms, tags_list, sources, rule_list)
+        for g, (_, t, s, r) in zip(geoms, found)
         if not g.is_empty
     ]
 

@@ -14,6 +14,7 @@ import os
 from typing import NamedTuple
 
 from alphafence.errors import InputError, need
+from alphafence.formats.features import settle_faults
 from alphafence.formats.geojson import features_of
 from alphafence.formats.jsonfile import max_json_bytes
 
@@ -133,7 +134,9 @@ def collection_records(fh, path):
             raise InputError(path, "not a GeoJSON FeatureCollection")
 
 
-def iter_geojson(path, rules, repaired, skipped, batch=BATCH, skip=(0, 0)):
+def iter_geojson(
+    path, rules, repaired, skipped, batch=BATCH, skip=(0, 0), invalid=None, faults=None
+):
     """The restricted features of a large GeoJSON file, in batches (lists of Feature).
 
     Parameters
@@ -147,6 +150,12 @@ def iter_geojson(path, rules, repaired, skipped, batch=BATCH, skip=(0, 0)):
     skip : tuple of int
         ``(lines, records)`` of a text sequence already read (by :func:`read_chunk`): passed
         over unparsed, the records after them numbered from ``records`` on.
+    invalid : list, optional
+        As for :func:`alphafence.formats.geojson.read_geojson_doc`: malformed features are
+        left out and described here, or (None) raised at the file's end, all at once.
+    faults : list, optional
+        Where a reader of the file's other parts gathers the faults (InputErrors): appended
+        to, for that reader to settle.
 
     Yields
     ------
@@ -155,7 +164,8 @@ def iter_geojson(path, rules, repaired, skipped, batch=BATCH, skip=(0, 0)):
     Raises
     ------
     InputError
-        A one-line message naming the file and the feature.
+        Naming the file and the feature: malformed JSON at once; malformed features at the
+        end, all of them (one line each).
 
     Examples
     --------
@@ -181,18 +191,25 @@ def iter_geojson(path, rules, repaired, skipped, batch=BATCH, skip=(0, 0)):
             records = sequence_records(fh, path, index=skip[1], skip=skip[0])
         else:
             records = collection_records(fh, path)
-        chunk, texts = [], []
+        chunk, texts, settle = [], [], faults is None
+        faults = [] if faults is None else faults
         try:
             for item in records:
                 chunk.append(item[:2])
                 texts.append(item[2] if len(item) > 2 else None)
                 if len(chunk) >= batch:
-                    yield features_of(path, chunk, rules, repaired, skipped, _geometries(texts))
+                    yield features_of(
+                        path, chunk, rules, repaired, skipped, _geometries(texts), faults=faults
+                    )
                     chunk, texts = [], []
         except UnicodeDecodeError as exc:
             raise InputError(path, f"not UTF-8 text ({exc.reason})") from None
         if chunk:
-            yield features_of(path, chunk, rules, repaired, skipped, _geometries(texts))
+            yield features_of(
+                path, chunk, rules, repaired, skipped, _geometries(texts), faults=faults
+            )
+        if settle:
+            settle_faults(path, faults, invalid)
 
 
 def _geometries(texts):
@@ -307,7 +324,7 @@ line=4, index=2, records=1)]
             yield SeqChunk(start, base, line, index, records)
 
 
-def read_chunk(path, chunk, rules, repaired, skipped):
+def read_chunk(path, chunk, rules, repaired, skipped, faults):
     """The restricted features of one chunk of a GeoJSON text sequence, read as
     :func:`iter_geojson` reads the batch it is, messages naming the file's own line and
     feature numbers.
@@ -319,6 +336,8 @@ def read_chunk(path, chunk, rules, repaired, skipped):
         From :func:`sequence_chunks` (with a record count).
     rules, repaired, skipped
         As for :func:`iter_geojson`.
+    faults : list
+        The malformed features' InputErrors are appended (the file's reader settles them).
 
     Returns
     -------
@@ -327,7 +346,7 @@ def read_chunk(path, chunk, rules, repaired, skipped):
     Raises
     ------
     InputError
-        The error :func:`iter_geojson` raises reading this batch.
+        Malformed JSON, as :func:`iter_geojson` raises it reading this batch.
     Unchunkable
         The chunk must be read with the rest of the file, by :func:`iter_geojson`.
     """
@@ -349,4 +368,4 @@ def read_chunk(path, chunk, rules, repaired, skipped):
         texts.append(item[2])
     if len(numbered) != chunk.records:
         raise Unchunkable(path)
-    return features_of(path, numbered, rules, repaired, skipped, _geometries(texts))
+    return features_of(path, numbered, rules, repaired, skipped, _geometries(texts), faults=faults)

@@ -39,9 +39,9 @@ import numpy as np
 import shapely
 from shapely.errors import ShapelyError
 
-from alphafence.errors import InputError, InputErrors, need
+from alphafence.errors import InputError, need
 from alphafence.formats.airspace import features_from_volumes, fences_from_volumes
-from alphafence.formats.features import invalid_entries
+from alphafence.formats.features import settle_faults
 from alphafence.formats.jsonfile import max_json_bytes, read_limited
 from alphafence.formats.kml_geodesic import both_readings, geodesic_reading
 from alphafence.formats.kml_volumes import Placemark, volumes
@@ -322,11 +322,7 @@ def read_volumes(path, skipped=None, invalid=None):
             faults.append(exc)
     marks = [m for m in marks if m is not None]
     straight = volumes(path, marks, faults=faults)
-    if faults and invalid is None:  # one fault is its own line; several, each on its own
-        if len(faults) == 1:
-            raise faults[0]
-        raise InputErrors(path, faults)
-    invalid_entries(path, faults, invalid)
+    settle_faults(path, faults, invalid)  # one fault is its own line; several, each on its own
     areas = [p[1] for pm in marks for p in pm.prims if p[0] == "area"]
     geodesic = {id(g): geodesic_reading(g) for g in areas}
     if all(geodesic[id(g)] is g for g in areas):
