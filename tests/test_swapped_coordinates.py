@@ -141,9 +141,7 @@ def test_positions_as_typed_are_taken_when_no_swap_explains_them(fences, extent)
     assert distance > FAR_M and swapped == pytest.approx((lon, lat))
 
 
-def test_a_route_end_far_from_every_fence_is_refused_unless_asked(
-    fences, extent, tmp_path, capsys
-):
+def test_a_route_end_far_from_every_fence_is_refused_unless_asked(fences, extent, tmp_path, capsys):
     """``--to 40.0,7.43`` for Monaco's fences (a slip of a latitude, no swap): 414 km of
     ground the fences do not describe is refused; --beyond-fences routes it with a note."""
     lon, lat = _mid(extent)

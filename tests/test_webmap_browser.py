@@ -111,12 +111,16 @@ def test_a_click_on_a_fence_shows_its_properties(browser, malta_map):  # noqa: F
     ).click().perform()
     # the popup's text as the page lays it out (fading in, it is not yet "visible" to
     # WebDriver's own .text)
-    text = WebDriverWait(browser, 30).until(
-        lambda d: d.execute_script(
-            "var p = document.querySelector('.leaflet-popup-content');"
-            "return p && p.innerText.trim();"
+    text = (
+        WebDriverWait(browser, 30)
+        .until(
+            lambda d: d.execute_script(
+                "var p = document.querySelector('.leaflet-popup-content');"
+                "return p && p.innerText.trim();"
+            )
         )
-    ).replace("\t", " ")
+        .replace("\t", " ")
+    )
     assert props["name"] in text and props["site_id"] in text
     assert props["category"] in text and "keep-out" in text
     assert f"{props['margin_m']:g} m" in text

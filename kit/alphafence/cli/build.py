@@ -83,8 +83,9 @@ def register(sub):
     p.add_argument(
         "--skip-invalid",
         action="store_true",
-        help="leave out the OpenAir airspaces that cannot be read as areas (each is named in "
-        "the summary and the output's metadata) instead of failing with the list of them",
+        help="leave out the zones that cannot be read as areas (OpenAir airspaces, KML "
+        "placemarks, ED-269/ED-318 zones, GeoJSON features; each is named in the summary and "
+        "the output's metadata) instead of failing with the list of them",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=run)

@@ -89,7 +89,7 @@ def read_file(path, rules, repaired, skipped, notes=None, invalid=None):
     elif name.endswith((".geojson", ".json")):
         doc = read_json(path)
         if looks_like_ed269(doc):
-            features = read_ed269_doc(path, doc, rules, repaired, skipped)
+            features = read_ed269_doc(path, doc, rules, repaired, skipped, invalid)
         else:
             features = read_geojson_doc(path, doc, rules, repaired, skipped, invalid)
     else:
@@ -274,9 +274,7 @@ class DatabaseStream:
                 parts = [self._ahead.pop(i)]  # read whole, selected by the bbox below
             elif sequences is not None and is_sequence(path):
                 invalid = self.invalid if self.skip_invalid else None
-                parts = sequences(
-                    path, self.rules, self.bbox, self.repaired, self.skipped, invalid
-                )
+                parts = sequences(path, self.rules, self.bbox, self.repaired, self.skipped, invalid)
                 inside = parts is not None
             if parts is None:
                 parts = self._parts(path)

@@ -128,7 +128,8 @@ def _kind_of(path, props, label):
 
 def _refuse_zone_list(path, doc):
     """An ED-269 or ED-318 geozone list where fences belong: say to build fences of it."""
-    from alphafence.formats.ed269 import looks_like_ed269, looks_like_ed318
+    from alphafence.formats.ed269 import looks_like_ed269
+    from alphafence.formats.ed318 import looks_like_ed318
 
     if looks_like_ed269(doc) or looks_like_ed318(doc):
         raise InputError(path, database_message(path, "an ED-269/ED-318 geozone list", ".json"))

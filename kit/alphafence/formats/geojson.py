@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import re
 
-import numpy as np
 import shapely
 from shapely.errors import GeometryTypeError, ShapelyError
 

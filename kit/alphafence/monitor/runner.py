@@ -340,4 +340,3 @@ class Monitor:
         self.pending.add(task)
         task.add_done_callback(self.pending.discard)
         return task
-
