@@ -24,6 +24,7 @@ from alphafence.geo.lonlat import (
     frame_scale,
     unwrap_lon,
 )
+from alphafence.geo.rings import clear_of
 
 # what the lon/lat readings may leave: the zone's densified edges and the check's own
 READ_SLACK_M = ZONE_TOLERANCE_M + READ_TOLERANCE_M
@@ -176,7 +177,7 @@ def reads_covering(local, frame, geometry, margin_m) -> bool:
     read = shapely.make_valid(read) if not read.is_valid else read
     if not shapely.covers(read, geometry):
         return False
-    return bool(shapely.distance(geometry, shapely.boundary(read)) >= margin_m + READ_SLACK_M)
+    return clear_of(shapely.boundary(read), geometry, margin_m + READ_SLACK_M)
 
 
 def split_at_antimeridian(fences):

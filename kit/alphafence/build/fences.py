@@ -30,6 +30,7 @@ from alphafence.build.sites import circle_steps
 from alphafence.build.zone_circle import zone_circle
 from alphafence.geo.alpha import alpha_shape, fill_holes, outer_polygons
 from alphafence.geo.outward import simplify_polygon
+from alphafence.geo.rings import clear_of
 
 PAD_M = 0.1  # slack for coordinate rounding (1e-7 degrees is about 1 cm)
 QUAD_SEGS = 6
@@ -138,7 +139,7 @@ def contains_with_margin(fence_geom, circle, geometry, margin_m, slack=0.0) -> b
         return False
     if margin_m <= 0:
         return True
-    return bool(shapely.distance(geometry, shapely.boundary(fence_geom)) >= margin_m - slack)
+    return clear_of(shapely.boundary(fence_geom), geometry, margin_m - slack)
 
 
 def site_properties(site) -> dict:
@@ -297,11 +298,11 @@ def _covers_required(fences, circles, geoms, margins):
     fence, geom = _array([fences[i] for i in poly]), _array([geoms[i] for i in poly])
     covered = shapely.covers(fence, geom)
     far = [k for k, i in enumerate(poly) if covered[k] and margins[i] > 0]
-    distance = shapely.distance(geom[far], shapely.boundary(fence[far]))
+    clear = clear_of(shapely.boundary(fence[far]), geom[far], [margins[poly[k]] for k in far])
     for k, i in enumerate(poly):
         ok[i] = bool(covered[k])
-    for k, d in zip(far, distance.tolist()):
-        ok[poly[k]] = d >= margins[poly[k]]
+    for k, c in zip(far, clear.tolist()):
+        ok[poly[k]] = c
     return ok
 
 

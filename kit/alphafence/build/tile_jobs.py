@@ -208,11 +208,20 @@ def start_pool(workers: int):
     return pool
 
 
-def stop_pool(pool, server: bool = False) -> None:
-    """Stop a :func:`start_pool` pool: jobs not started are cancelled, those under way end
-    (about a second), the workers leave. With ``server`` (interrupted while the pool was
-    starting), the forkserver is stopped too: a worker it had yet to fork would start after
-    this process is gone and fail loudly (the next pool starts a new server)."""
+def stop_pool(pool, server: bool = False, now: bool = False) -> None:
+    """Stop a :func:`start_pool` pool: jobs not started are cancelled, the workers leave.
+
+    Parameters
+    ----------
+    pool : concurrent.futures.ProcessPoolExecutor
+    server : bool
+        Interrupted while the pool was starting: the forkserver is stopped too (a worker it
+        had yet to fork would start after this process is gone and fail loudly; the next pool
+        starts a new server).
+    now : bool
+        Interrupted (Ctrl-C): the workers are killed in their jobs, which write nothing of
+        their own, rather than waited for (a job is about a second).
+    """
     import os
     import signal
     from multiprocessing import forkserver
@@ -230,7 +239,23 @@ def stop_pool(pool, server: bool = False) -> None:
             os.kill(pid, signal.SIGKILL)
         except OSError:
             pass
+    if now or server:
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            try:
+                process.kill()
+            except (OSError, ValueError):  # gone already, or closed
+                pass
     pool.shutdown(wait=True, cancel_futures=True)
+
+
+def stop_on_exit(pool):
+    """An ``ExitStack.push`` callback that stops ``pool`` on leaving, at once when the way
+    out is Ctrl-C (:func:`stop_pool`)."""
+
+    def stop(kind, value, traceback):
+        stop_pool(pool, now=kind is not None and issubclass(kind, KeyboardInterrupt))
+
+    return stop
 
 
 def run_processes(jobs, workers: int, pool=None):
@@ -248,13 +273,17 @@ def run_processes(jobs, workers: int, pool=None):
     ------
     JobOutput
     """
-    pool = pool or start_pool(workers)
+    owned, pool = pool is None, pool or start_pool(workers)
     try:
         yield from _in_order(
             lambda job: pool.submit(run_job, job), lambda fut: fut.result(), jobs, 2 * workers
         )
-    except BaseException:  # Ctrl-C, an error, or the consumer stopped: no more jobs
-        stop_pool(pool)
+    except GeneratorExit:  # the consumer stopped: its owner stops the pool it gave, as it left
+        if owned:
+            stop_pool(pool)
+        raise
+    except BaseException as exc:  # Ctrl-C or an error: no more jobs
+        stop_pool(pool, now=isinstance(exc, KeyboardInterrupt))
         raise
     pool.shutdown(wait=True)
 

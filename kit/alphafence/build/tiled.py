@@ -26,7 +26,7 @@ from alphafence.build.tile_jobs import (
     run_local,
     run_processes,
     start_pool,
-    stop_pool,
+    stop_on_exit,
 )
 from alphafence.build.tiles import TARGET_FEATURES, TILE_DEG, plan_jobs
 from alphafence.formats.geojson_stream import BATCH
@@ -263,7 +263,7 @@ def build_tiled(
         pool = None
         if not dask and jobs > 1 and nbytes > WARM_POOL_BYTES:
             pool = start_pool(jobs)  # its imports overlap the reading
-            stack.callback(stop_pool, pool)
+            stack.push(stop_on_exit(pool))
         with Spool(spool_dir) as spool:
             # the workers read text sequences too (the main process would read them alone)
             reader = sequence_reader(pool, 2 * jobs, READ_BATCH) if pool is not None else None

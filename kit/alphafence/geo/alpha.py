@@ -30,12 +30,17 @@ def outer_polygons(geom):
     >>> holed = shapely.Polygon([(0, 0), (10, 0), (10, 10), (0, 10)], [[(2, 2), (4, 2), (4, 4)]])
     >>> outer_polygons(shapely.GeometryCollection([shapely.Point(0, 0), holed]))[0].area
     100.0
+    >>> nested = shapely.GeometryCollection([shapely.MultiPolygon([holed]), shapely.Point(0, 0)])
+    >>> [p.area for p in outer_polygons(nested)]  # a repaired zone's polygons, kept
+    [100.0]
     """
     if type(geom) is shapely.Polygon and not geom.is_empty and not geom.interiors:
         out = np.empty(1, dtype=object)  # the common case, without four array calls
         out[0] = geom
         return out
     parts = shapely.get_parts(geom)
+    while np.any(shapely.get_type_id(parts) >= 4):  # a collection's multi-parts, flattened
+        parts = shapely.get_parts(parts)
     parts = parts[shapely.get_type_id(parts) == 3]
     return shapely.polygons(shapely.get_exterior_ring(parts))
 

@@ -1,6 +1,7 @@
 """Rings as (n, 2) arrays of vertices (not closed): their vertices without repeats, signed
 area, validity and containment, as the simplifiers check them; long rings brought near a
-target size outward (shifted Douglas-Peucker) before the greedy simplification."""
+target size outward (shifted Douglas-Peucker) before the greedy simplification; whether a
+boundary keeps clear of what it holds."""
 
 from __future__ import annotations
 
@@ -295,3 +296,29 @@ def ring_polygons(rings) -> np.ndarray:
     sizes = np.fromiter(map(len, rings), int, len(rings))
     at = np.repeat(np.arange(len(rings)), sizes)
     return shapely.polygons(shapely.linearrings(np.concatenate(rings), indices=at))
+
+
+def clear_of(boundaries, geoms, distance_m):
+    """Whether each boundary keeps at least ``distance_m`` from its geometry (vectorised):
+    ``shapely.distance(boundary, geom) >= distance_m``.
+
+    The boundaries are prepared (indexed), and the distance is measured only where one comes
+    within reach: near a pole a fence's lon/lat reading has some 1e5 vertices, where a plain
+    distance takes seconds and this milliseconds.
+
+    Examples
+    --------
+    >>> fence, house = shapely.box(-50, -50, 50, 50), shapely.box(-10, -10, 10, 10)
+    >>> bool(clear_of(fence.boundary, house, 40.0)), bool(clear_of(fence.boundary, house, 40.1))
+    (True, False)
+    """
+    one = isinstance(boundaries, shapely.Geometry)
+    boundaries = np.atleast_1d(np.asarray(boundaries, dtype=object))
+    geoms = np.broadcast_to(np.asarray(geoms, dtype=object), boundaries.shape)
+    distance_m = np.broadcast_to(np.asarray(distance_m, dtype=float), boundaries.shape)
+    shapely.prepare(boundaries)
+    near = np.flatnonzero(shapely.dwithin(boundaries, geoms, distance_m))
+    clear = np.ones(boundaries.shape, dtype=bool)
+    if near.size:  # within reach, or exactly at it: measured
+        clear[near] = shapely.distance(boundaries[near], geoms[near]) >= distance_m[near]
+    return bool(clear[0]) if one else clear

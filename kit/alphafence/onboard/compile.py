@@ -232,8 +232,9 @@ def compile_fences(
         if rec.kind not in ("keep_out", "keep_in"):
             continue
         local = frame.read_geom(rec.geometry)  # its edges straight in lon/lat, as written
-        if not local.is_valid:
-            # a ring that projects to a self-touching one: keep all of it, spikes included
+        if not local.is_valid or shapely.get_type_id(local) == 7:
+            # a ring that projects to a self-touching one, or repaired into polygons and the
+            # spikes it drew out and back: keep all of it, spikes included
             local = shapely.buffer(shapely.make_valid(local), 1e-3, join_style="mitre")
         if shapely.distance(local, area_local) > distance_m:
             dropped.append(rec.site_id)
@@ -278,20 +279,31 @@ def compile_fences(
     budget_bytes = profile.bytes - fixed_bytes
     merges = []
     spare = 0
-    for _ in range(6):  # held as read, a hairpin or a part across 180° may take more items
+    for _ in range(8):  # held as read, a bowed edge or a part across 180° may take more items
         fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model)
         upgrade(pieces, budget_items, budget_bytes)
         merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, model=model)
-        items = emit_items(pieces, frame, return_point)
+        try:
+            items = emit_items(pieces, frame, return_point)
+        except InputError:  # a shape that cannot be held as read: choose again without it
+            items = None
+            if not _count_as_emitted(pieces, frame):
+                raise
+            for p in pieces:
+                p.choice = 0
+            continue
         over_items = len(items) - profile.items
         over_bytes = storage_bytes(items) - profile.bytes
         if over_items <= 0 and over_bytes <= 0:
             break
-        spare = max(2 * spare, over_items, -(-over_bytes // 8), 1)  # vertices to leave free
-        budget_items -= spare
-        budget_bytes -= 8 * spare
+        if not _count_as_emitted(pieces, frame):  # else the options now cost what they take
+            spare = max(2 * spare, over_items, -(-over_bytes // 8), 1)  # vertices to leave free
+            budget_items -= spare
+            budget_bytes -= 8 * spare
         for p in pieces:
             p.choice = 0
+    if items is None:  # the last choice could not be held either: said as emit says it
+        items = emit_items(pieces, frame, return_point)
     onboard = tuple(
         [p.chosen.local for p in pieces if p.inclusion == kind and not (kind and p.grows)]
         for kind in (False, True)
@@ -347,3 +359,38 @@ def require_fence(result: CompileResult, path, where) -> None:
         f"no keep-out or keep-in fence within {reach:g} m of {where}: the onboard fence would "
         "hold no polygon or circle, leaving the vehicle without a fence",
     )
+
+
+UNHELD = 1 << 30  # the cost of a shape that cannot be held as read: more than any storage
+
+
+def _count_as_emitted(pieces, frame) -> bool:
+    """Give the options of each piece whose choice took more when emitted, held as ArduPilot
+    reads it (a long edge bowed in lon/lat takes more vertices than the option counted), the
+    items and bytes each takes, so the next choice sees what they cost. Whether any rose."""
+    rose = False
+    for p in pieces:
+        if _emitted_cost(p, frame):
+            rose = True
+            chosen = p.choice
+            for k in range(len(p.options)):  # its other shapes bow alike
+                p.choice = k
+                _emitted_cost(p, frame)
+            p.choice = chosen
+    return rose
+
+
+def _emitted_cost(piece, frame) -> bool:
+    """Raise the chosen option's cost to what it takes emitted (past any storage when it
+    cannot be held as read); whether it rose."""
+    try:
+        own = emit_items([piece], frame)
+        n, nbytes = len(own), storage_bytes(own) - HEADER_BYTES - END_BYTES
+    except (InputError, shapely.errors.GEOSException):  # rounded, its reading would not hold
+        # (or not even split at 180°): never chosen again
+        n = nbytes = UNHELD
+    o = piece.chosen
+    if n <= o.items and nbytes <= o.bytes:
+        return False
+    o.items, o.bytes = max(n, o.items), max(nbytes, o.bytes)
+    return True
