@@ -34,9 +34,7 @@ def test_a_long_strip_fits_a_copter_and_holds_as_read(lat, width_km, monkeypatch
     area = shapely.box(*shapely.union_all([r.geometry for r in records]).bounds)
     recounted = []
     real = compiling._count_as_emitted
-    monkeypatch.setattr(
-        compiling, "_count_as_emitted", lambda *a: recounted.append(1) or real(*a)
-    )
+    monkeypatch.setattr(compiling, "_count_as_emitted", lambda *a: recounted.append(1) or real(*a))
     onboard = compile_fences(records, area, PROFILES["copter"])
     assert recounted  # the first choice took more than it counted: this is the case
     items = onboard.items
