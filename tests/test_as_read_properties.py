@@ -296,7 +296,14 @@ def _keep_in_outputs(result, zone, margin):
         _inside_less_margin(shapely.Polygon(ring), zone, margin, ".plan inclusion polygon")
     for c in circles:
         rim = np.column_stack(circle_rim(c.lon, c.lat, c.param1))
-        _inside_less_margin(shapely.Polygon(rim), zone, margin, ".plan inclusion circle")
+        where = zone
+        if np.abs(rim[:, 0]).max() > 180.0:
+            # ArduPilot's distance wraps at ±180°: rim and zone are turned half a world round
+            # (a turn in longitude changes no distance and no lon/lat line) and compared there
+            turn = lambda xy: np.column_stack([xy[:, 0] % 360.0 - 180.0, xy[:, 1]])  # noqa: E731
+            rim = turn(rim)
+            where = shapely.union_all(shapely.transform(shapely.get_parts(zone), turn))
+        _inside_less_margin(shapely.Polygon(rim), where, margin, ".plan inclusion circle")
     union = "alphafence" in plan["geoFence"]  # the upload sets FENCE_OPTIONS' union then
     assert (len(inclusions) + len(circles) > 1) == union
     # inside the fence is no breach by the vehicle's own rule
