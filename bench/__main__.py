@@ -201,7 +201,7 @@ def results(rows, argv=None, load_start=None) -> dict:
 
 def write_results(folder, rows, argv=None, load_start=None):
     """Write ``folder``/results.json atomically (all of it or nothing); returns its path."""
-    from alphafence.formats.atomic import write_all
+    from alphafence.fencefiles.atomic import write_all
 
     path = os.path.join(folder, "results.json")
     doc = results(rows, argv, load_start)

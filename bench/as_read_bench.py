@@ -20,9 +20,9 @@ import numpy as np
 import shapely
 from pyproj import Geod
 
-from alphafence.build import as_read, sites
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.rules import parse_rules
+from alphafence.fencing import as_read, sites
+from alphafence.fencing.pipeline import BuildOptions, build_fences
+from alphafence.zones.rules import parse_rules
 
 GEOD = Geod(ellps="WGS84")
 MARGIN_M = 100.0
@@ -117,7 +117,7 @@ def run(Row):
         stack.enter_context(mock.patch.object(sites, "densify_lonlat", lambda g: np.asarray(g)))
         stack.enter_context(
             mock.patch(
-                "alphafence.build.fences.hold_fences",
+                "alphafence.fencing.fences.hold_fences",
                 lambda locs, frames, outward=True, regions=None: (list(locs), [False] * len(locs)),
             )
         )

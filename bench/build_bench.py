@@ -9,13 +9,13 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from alphafence.build.compare import compare_methods
-from alphafence.build.fences import required_region
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.build.sites import group_sites
-from alphafence.formats.database import read_database
-from alphafence.formats.rules import load_rules
+from alphafence.fencing.compare import compare_methods
+from alphafence.fencing.fences import required_region
+from alphafence.fencing.pipeline import BuildOptions, build_fences
+from alphafence.fencing.sites import group_sites
 from alphafence.geo.alpha import alpha_shape, alpha_shape_points, outer_polygons
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import load_rules
 
 FIXED_ALPHA_M = 60.0
 

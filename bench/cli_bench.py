@@ -64,7 +64,7 @@ def peer_tags(rules):
 
 def build_rows(osm, Row):
     """``alphafence build`` of ``osm`` (default --jobs, and --jobs 1) against the peer."""
-    from alphafence.formats.rules import load_rules
+    from alphafence.zones.rules import load_rules
 
     peer_script = Path(__file__).with_name("peer_build.py")
     with tempfile.TemporaryDirectory(prefix="alphafence-cli-bench-") as tmp:

@@ -45,8 +45,8 @@ def stages(fences):
     position to the fences' metres)."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+    from alphafence.awareness.sample import Sample
     from alphafence.monitor.engine import Engine
-    from alphafence.monitor.sample import Sample
     from alphafence.sitl.homes import resolve_home
 
     home = resolve_home(HOME)

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import time
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.rules import load_rules
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.mavlink.storage import PROFILES, sd_fence_kb_needed, storage_bytes
 from alphafence.onboard.compile import compile_fences
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import load_rules
 
 AIRPORT = "way/23541031"
 

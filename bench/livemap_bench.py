@@ -68,8 +68,8 @@ async def _measure_one(url, fences, hz, way):
     checks = Checks()
     observers, server, page = [checks], None, None
     if way != "no map":
-        from alphafence.monitor.livemap import LiveMap
-        from alphafence.monitor.livemap_server import start_map_server
+        from alphafence.livemap.observer import LiveMap
+        from alphafence.livemap.server import start_map_server
 
         livemap = LiveMap(fences)
         observers.append(livemap)

@@ -8,12 +8,12 @@ import time
 import numpy as np
 import shapely
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.rules import load_rules
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fenceset import FenceSet
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import load_rules
 
 
 def _p99_us(fn, positions):

@@ -29,11 +29,11 @@ FLOOR_RATIO = {50.0: 1.3}  # the chosen link's monitor against the floor
 
 def malta_fences(osm):
     """The fences built from ``osm`` as the monitor loads them (with names, as a map shows)."""
-    from alphafence.build.pipeline import BuildOptions, build_fences
-    from alphafence.formats.database import read_database
-    from alphafence.formats.fence_geojson import FenceRecord
-    from alphafence.formats.rules import load_rules
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.fencefiles.fence_geojson import FenceRecord
+    from alphafence.fencing.pipeline import BuildOptions, build_fences
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     rules = load_rules()
     result = build_fences(read_database([osm], rules).features, rules, BuildOptions())

@@ -124,7 +124,7 @@ def main(argv=None) -> int:
     p.add_argument("--link", default="pymavlink", help="vehicle link (default pymavlink)")
     p.add_argument("--floor", action="store_true", help="measure the floor after each rate")
     args = p.parse_args(argv)
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
 
     fences = FenceSet.from_geojson(args.fences)
     fences.index()

@@ -22,17 +22,17 @@ import time
 import numpy as np
 import shapely
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.rules import load_rules
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import Braking
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import RollingOptions
-from alphafence.monitor.predict import Braking
 from alphafence.monitor.rolling import RADIUS_SLACK_M, RollingPlan
 from alphafence.onboard.compile import compile_fences
 from alphafence.sitl.find import find_sitl_binary
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import load_rules
 
 START = (14.53959, 35.89042)  # lon, lat: the SITL test's leg, east end
 END = (14.50638, 35.88964)

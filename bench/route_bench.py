@@ -18,11 +18,11 @@ import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.rules import load_rules
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.route import EPS_CLEAR, FenceRoadmap, NoRoute
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import load_rules
 
 CLEARANCE = 20.0
 PAIRS = 100

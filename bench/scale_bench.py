@@ -75,8 +75,8 @@ def build_flags():
 def reads_lines(extract):
     """Whether the database reader takes GeoJSON lines (probed on one copy of the areas)."""
     from alphafence.errors import InputError
-    from alphafence.formats.database import read_database
-    from alphafence.formats.rules import load_rules
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "probe.geojsonl"
@@ -324,7 +324,7 @@ def _fences(path):
     """The fences of a build's output as a Counter of (site_id, kind, normalised WKB)."""
     import shapely
 
-    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.fencefiles.fence_geojson import read_fences
 
     return Counter(
         (f.site_id, f.kind, shapely.to_wkb(shapely.normalize(f.geometry)))

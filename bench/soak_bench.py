@@ -444,13 +444,13 @@ class _Soak:
 
 
 async def _soak(osm, minutes, console):
-    from alphafence.build.pipeline import BuildOptions, build_fences
-    from alphafence.formats.database import read_database
-    from alphafence.formats.fence_geojson import FenceRecord
-    from alphafence.formats.rules import load_rules
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.fencefiles.fence_geojson import FenceRecord
+    from alphafence.fencing.pipeline import BuildOptions, build_fences
     from alphafence.sitl import launch_sitl
     from alphafence.vehicle.link import open_vehicle
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     rules = load_rules()
     result = build_fences(read_database([osm], rules).features, rules, BuildOptions())

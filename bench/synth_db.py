@@ -51,10 +51,10 @@ def keep_out_areas(extract):
 
     Returns
     -------
-    list of alphafence.formats.features.Feature
+    list of alphafence.zones.features.Feature
     """
-    from alphafence.formats.database import read_database
-    from alphafence.formats.rules import load_rules
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     db = read_database([extract], load_rules())
     feats = [f for f in db.features if f.kind == "keep_out" and f.geomtype == "area"]

@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def synthetic_fences(n, seed=1):
     """``n`` fence records: ``n // 2`` keep-out hexagons and their warning layers, in a
     4 x 3 degree box (about Switzerland's size)."""
-    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.fencefiles.fence_geojson import FenceRecord
 
     rng = np.random.default_rng(seed)
     sites = n // 2

@@ -308,7 +308,7 @@ def zone_features(zones, rules, name="zones.geojson"):
     with ``osm_id`` ``k`` (its source ends ``/k``), read with ``rules``."""
     import collections
 
-    from alphafence.formats.geojson import read_geojson_doc
+    from alphafence.zones.geojson import read_geojson_doc
 
     doc = {
         "type": "FeatureCollection",

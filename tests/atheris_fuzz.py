@@ -26,12 +26,12 @@ import atheris
 
 with atheris.instrument_imports(include=["alphafence"]):
     from alphafence.errors import InputError
-    from alphafence.formats.database import read_database
-    from alphafence.formats.fence_geojson import read_fences
-    from alphafence.formats.qgc_plan import read_plan_fence
-    from alphafence.formats.qgc_wpl import read_waypoints_fence
-    from alphafence.formats.rules import load_rules
+    from alphafence.fencefiles.fence_geojson import read_fences
+    from alphafence.fencefiles.qgc_plan import read_plan_fence
+    from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
     from alphafence.vehicle.bridge import VehicleLink
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
 RULES = load_rules()
 KEY = bytes(range(32))

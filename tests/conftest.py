@@ -94,14 +94,14 @@ def monaco():
 
 @pytest.fixture(scope="session")
 def rules():
-    from alphafence.formats.rules import load_rules
+    from alphafence.zones.rules import load_rules
 
     return load_rules()
 
 
 @pytest.fixture(scope="session")
 def malta_db(malta, rules):
-    from alphafence.formats.database import read_database
+    from alphafence.zones.database import read_database
 
     return read_database([malta], rules)
 

@@ -13,7 +13,7 @@ import shapely
 
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink import ids
-from alphafence.monitor.replay import speedup_options  # noqa: F401 (the flights' options)
+from alphafence.review.replay import speedup_options  # noqa: F401 (the flights' options)
 from alphafence.vehicle.values import ardupilot_mode
 
 # The exclusion square every fenced flight uses, metres east (x) / north (y) of home, and the

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import shapely
 
-from alphafence.build.outputs import render
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.atomic import write_all
-from alphafence.formats.fence_read import read_fence_file
-from alphafence.formats.qgc_plan import dumps, plan_document
+from alphafence.fencefiles.atomic import write_all
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.fencefiles.qgc_plan import dumps, plan_document
+from alphafence.fencing.outputs import render
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import POLYGON_EXCLUSION, POLYGON_INCLUSION, FenceItem
 from alphafence.mavlink.storage import PROFILES
@@ -111,8 +111,8 @@ def test_a_keep_in_area_split_without_the_union_fails(monkeypatch):
             items += [FenceItem(POLYGON_INCLUSION, float(len(ring)), x, y) for x, y in ring]
         return items
 
-    import alphafence.build.outputs as outputs
-    from alphafence.formats import qgc_plan
+    import alphafence.fencing.outputs as outputs
+    from alphafence.fencefiles import qgc_plan
 
     monkeypatch.setattr(outputs, "fence_items", halves)
     # the broken writer forgets the union: the plan says nothing of FENCE_OPTIONS

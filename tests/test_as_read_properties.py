@@ -22,20 +22,20 @@ import shapely
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from alphafence.build.fences import METHODS
-from alphafence.build.outputs import render
-from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.errors import InputError
-from alphafence.formats.atomic import write_all
-from alphafence.formats.fence_geojson import fences_geojson
-from alphafence.formats.fence_read import read_fence_file
-from alphafence.formats.fence_stream import open_writers
-from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
-from alphafence.formats.rules import parse_rules
+from alphafence.fencefiles.atomic import write_all
+from alphafence.fencefiles.fence_geojson import fences_geojson
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.fencefiles.fence_stream import open_writers
+from alphafence.fencefiles.qgc_plan import group_polygons, read_plan_fence
+from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+from alphafence.fencing.fences import METHODS
+from alphafence.fencing.outputs import render
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.mavlink.items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, POLYGON_INCLUSION
 from alphafence.mavlink.storage import PROFILES
 from alphafence.onboard.compile import compile_fences
+from alphafence.zones.rules import parse_rules
 
 from .ardupilot_model import (
     CHUNK,

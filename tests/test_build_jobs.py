@@ -5,9 +5,9 @@ from unittest import mock
 
 import pytest
 
-from alphafence.build import tiled
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
+from alphafence.fencing import tiled
 
 
 def _build(tmp_path, database, name, *extra):

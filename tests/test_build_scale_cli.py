@@ -15,7 +15,7 @@ import pytest
 import shapely
 
 from alphafence.cli import main
-from alphafence.formats.fence_read import read_fence_file
+from alphafence.fencefiles.fence_read import read_fence_file
 
 CLI = [sys.executable, "-m", "alphafence"]
 
@@ -192,7 +192,7 @@ def test_progress_shows_counts_and_rate(monkeypatch):
 
 def test_compile_and_the_monitor_take_the_streamed_formats(malta, one_process, tmp_path):
     pytest.importorskip("pyarrow")
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
 
     parquet, lines = tmp_path / "fences.parquet", tmp_path / "fences.geojsonl"
     assert main(["build", str(malta), "-o", str(parquet), "-q"]) == 0
@@ -238,7 +238,7 @@ def test_the_spool_sits_beside_the_output(tmp_path, monkeypatch):
     # /tmp is often memory (tmpfs): a country's spooled features go on the output's disk
     import tempfile
 
-    import alphafence.build.spool as spool
+    import alphafence.fencing.spool as spool
     from alphafence.cli.demo import scene_path
 
     dirs, original = [], tempfile.TemporaryFile

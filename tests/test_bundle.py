@@ -4,10 +4,10 @@ import json
 
 import pytest
 
-from alphafence.build.bundle import generate_key, sign, signature_path, verify
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
 from alphafence.errors import InputError
+from alphafence.fencing.bundle import generate_key, sign, signature_path, verify
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ import shapely
 
 from alphafence.cli import main
 from alphafence.errors import InputError
-from alphafence.formats.flight_log import CHUNK, FlightLog
+from alphafence.flights.flight_log import CHUNK, FlightLog
 from alphafence.geo.frame import LocalFrame
 from tests.helpers import VerifyFrame
 
@@ -552,8 +552,8 @@ def test_it_needs_pymavlink_alone_and_says_so_without_it(fences, tmp_path):
 def test_incursions_are_what_each_position_says(tmp_path, seed):
     """Random walks among fences of every kind: the incursions (after the walk's shortcuts far
     from the fences) are the runs of positions each full check finds inside (keep-in: outside)."""
-    from alphafence.monitor.fenceset import FenceSet
-    from alphafence.monitor.postflight import check_flight, load_fences
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.review.postflight import check_flight, load_fences
 
     rng = np.random.default_rng(seed)
     path = fence_file(

@@ -10,7 +10,7 @@ from datetime import datetime, timezone
 import numpy as np
 import pytest
 
-from alphafence.formats.flight_log import FlightLog
+from alphafence.flights.flight_log import FlightLog
 from tests.test_check_flight import WALL, as_json, feature, fence_file, first_inside, run, track
 
 pytest.importorskip("pymavlink")

@@ -23,12 +23,12 @@ from pathlib import Path
 import pytest
 import shapely
 
+from alphafence.awareness.fenceset import FenceSet
 from alphafence.cli import main
-from alphafence.formats.fence_read import read_fence_file
-from alphafence.formats.mission import load_mission
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.flights.mission import load_mission
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.mission_check import check_mission
+from alphafence.review.mission_check import check_mission
 
 DATA = Path(__file__).parent / "data" / "qgc"
 SURVEY = DATA / "survey-50m.plan"

@@ -11,8 +11,8 @@ import shapely
 
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
-from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
+from alphafence.fencefiles.qgc_plan import group_polygons, read_plan_fence
+from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
 from alphafence.mavlink.items import POLYGON_EXCLUSION
 
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.sitl.homes import resolve_home
 from bench import cold_bench
 

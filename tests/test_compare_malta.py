@@ -2,9 +2,9 @@
 
 import pytest
 
-from alphafence.build.compare import compare_methods
-from alphafence.build.fences import contains_with_margin
-from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.fencing.compare import compare_methods
+from alphafence.fencing.fences import contains_with_margin
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 
 
 @pytest.fixture(scope="module")

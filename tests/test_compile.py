@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from alphafence.errors import InputError
-from alphafence.formats.fence_geojson import FenceRecord, read_fences
-from alphafence.formats.qgc_plan import group_polygons
+from alphafence.fencefiles.fence_geojson import FenceRecord, read_fences
+from alphafence.fencefiles.qgc_plan import group_polygons
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
@@ -185,8 +185,8 @@ def test_far_fences_are_left_out_and_tiny_budget_merges():
 def test_compile_cli_on_the_demo(tmp_path):
     from alphafence.cli import main
     from alphafence.cli.demo import scene_path
-    from alphafence.formats.qgc_plan import read_plan_fence
-    from alphafence.formats.qgc_wpl import read_waypoints_fence
+    from alphafence.fencefiles.qgc_plan import read_plan_fence
+    from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 import shapely
 
-from alphafence.build.pipeline import BuildOptions, build_fences
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.mavlink.storage import storage_bytes
 from alphafence.onboard import compile as compiling
 
@@ -61,7 +61,7 @@ def test_a_fence_read_as_polygons_and_spikes_is_stored_whole():
     """A fence file's polygon whose outline crosses itself and runs out to vertices and
     straight back (read as a MultiPolygon and the spikes' lines) is stored, spikes and all: it
     was once left out, the onboard fence holding none of it."""
-    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.fencefiles.fence_geojson import FenceRecord
 
     record = FenceRecord("zone/spiked", "keep_out", shapely.from_wkt(SPIKED))
     onboard = compile_fences([record], shapely.Point(0.0, 51.9104733), PROFILES["copter"])

@@ -14,8 +14,8 @@ import shapely
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats.fence_geojson import FenceRecord, read_fences
+from alphafence.fencefiles import qgc_plan as plan
+from alphafence.fencefiles.fence_geojson import FenceRecord, read_fences
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.storage import PROFILES
 from alphafence.onboard.compile import compile_fences

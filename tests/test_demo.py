@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 import shapely
 
+from alphafence.awareness.fenceset import FenceSet
 from alphafence.cli import main
 from alphafence.cli.demo import HOME, trace_path
 from alphafence.errors import InputError
-from alphafence.formats.fence_geojson import read_fences
+from alphafence.fencefiles.fence_geojson import read_fences
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.demo_flight import CLEAR_M, plan_leg
 from alphafence.monitor.engine import Sample
 from alphafence.monitor.events import utc_seconds
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import OnboardLayer
-from alphafence.monitor.replay import Trace, replay, speedup_options
+from alphafence.review.demo_flight import CLEAR_M, plan_leg
+from alphafence.review.replay import Trace, replay, speedup_options
 
 PNG = b"\x89PNG\r\n\x1a\n"
 BUILD_OUTPUTS = ("fences.geojson", "fences.plan", "fences.waypoints", "fences.png", "compare.png")

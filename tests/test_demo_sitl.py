@@ -14,9 +14,9 @@ import shapely
 
 from alphafence.cli import main
 from alphafence.cli.demo import HOME
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.replay import Trace
+from alphafence.review.replay import Trace
 from tests.test_demo import PNG, keep_out_shapes
 
 pytestmark = pytest.mark.sitl

@@ -8,7 +8,7 @@ import pkgutil
 
 import pytest
 
-STAGES = ("geo", "mavlink", "formats", "build", "onboard", "route")
+STAGES = ("geo", "mavlink", "zones", "fencefiles", "fencing", "flights", "onboard", "route", "awareness")
 
 
 def _modules():
@@ -46,8 +46,8 @@ def test_docstring_examples_run(name):
         "alphafence.geo.alpha",
         "alphafence.geo.outward",
         "alphafence.geo.coords",
-        "alphafence.build.sites",
-        "alphafence.build.pipeline",
+        "alphafence.fencing.sites",
+        "alphafence.fencing.pipeline",
         "alphafence.onboard.compile",
         "alphafence.onboard.options",
         "alphafence.route.roadmap",

@@ -11,13 +11,13 @@ import pytest
 import shapely
 from pyproj import Geod
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.build.tiled import build_tiled
-from alphafence.formats.database import DatabaseStream, read_database
-from alphafence.formats.rules import parse_rules
+from alphafence.fencing.pipeline import BuildOptions, build_fences
+from alphafence.fencing.tiled import build_tiled
 from alphafence.mavlink.items import CIRCLE_EXCLUSION, CIRCLE_INCLUSION, fence_items
 from alphafence.mavlink.storage import CIRCLE_BYTES, END_BYTES, HEADER_BYTES, PROFILES
 from alphafence.onboard.compile import compile_fences
+from alphafence.zones.database import DatabaseStream, read_database
+from alphafence.zones.rules import parse_rules
 
 from .ardupilot_model import location_distance_m
 

@@ -13,7 +13,7 @@ import pytest
 
 from alphafence.cli import main
 from alphafence.errors import InputError, InputErrors
-from alphafence.formats.database import read_database
+from alphafence.zones.database import read_database
 
 DATA = Path(__file__).parent / "data" / "ed269"
 

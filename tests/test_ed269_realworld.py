@@ -12,12 +12,12 @@ import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from alphafence.build.pipeline import build_fences
 from alphafence.errors import InputError
-from alphafence.formats.database import read_database
-from alphafence.formats.ed269 import read_ed269_doc
-from alphafence.formats.rules import load_rules
+from alphafence.fencing.pipeline import build_fences
 from alphafence.geo.frame import LocalFrame
+from alphafence.zones.database import read_database
+from alphafence.zones.ed269 import read_ed269_doc
+from alphafence.zones.rules import load_rules
 
 DATA = Path(__file__).parent / "data" / "ed269"
 
@@ -178,7 +178,7 @@ def build(path, rules, tmp_path):
 
 
 def test_a_permanent_preserve_stays_in_force_beside_a_weekend_concert(rules, tmp_path):
-    from alphafence.monitor.applicability import is_active
+    from alphafence.awareness.applicability import is_active
 
     fences = [p for p in build(DATA / "preserve-concert.json", rules, tmp_path)]
     keep_out = {tuple(p["sources"]): p for p in fences if p["kind"] == "keep_out"}

@@ -36,9 +36,8 @@ import pyproj
 import pytest
 import shapely
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.features import Feature
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.coords import from_e7
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink import ids
@@ -47,6 +46,7 @@ from alphafence.mavlink.storage import PROFILES as STORAGE
 from alphafence.onboard.compile import compile_fences
 from alphafence.vehicle.link import open_vehicle
 from alphafence.vehicle.params import MARGIN_FOR_SPEED_M, STOP_OVERSHOOT_M
+from alphafence.zones.features import Feature
 from tests.sitl_flight import (
     ALTITUDE,
     FlightLog,

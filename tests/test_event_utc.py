@@ -13,7 +13,7 @@ import pytest
 from alphafence.cli.demo import trace_path
 from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.events import UtcClock, new_event, utc_seconds
-from alphafence.monitor.replay import Trace, replay, speedup_options
+from alphafence.review.replay import Trace, replay, speedup_options
 
 from .helpers import until
 
@@ -47,8 +47,8 @@ def demo_trace(clock=None) -> Trace:
 
 
 def test_a_replay_takes_utc_from_the_trace_when_it_has_a_clock(tmp_path):
+    from alphafence.awareness.fenceset import FenceSet
     from alphafence.cli import main
-    from alphafence.monitor.fenceset import FenceSet
 
     fences = tmp_path / "fences.geojson"
     from alphafence.cli.demo import scene_path

@@ -13,10 +13,10 @@ from pyproj import Geod
 
 from alphafence.cli import main
 from alphafence.errors import InputError
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.fence_read import read_fence_file
-from alphafence.formats.qgc_plan import read_plan_fence
-from alphafence.formats.qgc_wpl import waypoints_text
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.fencefiles.qgc_plan import read_plan_fence
+from alphafence.fencefiles.qgc_wpl import waypoints_text
 from alphafence.mavlink.items import FenceItem
 
 DATA = Path(__file__).parent / "data"
@@ -204,7 +204,7 @@ def test_check_mission_takes_plan_and_legacy_fences(capsys, mission, fences, cod
 
 
 def test_compile_and_the_monitor_take_a_plan_and_a_kml(tmp_path):
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
 
     out = tmp_path / "onboard.plan"
     args = ["compile", str(PLAN), "--bbox", "149.15,-35.375,149.18,-35.35", "-o", str(out)]

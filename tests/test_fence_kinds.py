@@ -4,9 +4,9 @@ import json
 
 import shapely
 
-from alphafence.build.fences import contains_with_margin
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.database import read_database
+from alphafence.fencing.fences import contains_with_margin
+from alphafence.fencing.pipeline import BuildOptions, build_fences
+from alphafence.zones.database import read_database
 
 AREA = {
     "type": "FeatureCollection",

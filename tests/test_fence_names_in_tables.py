@@ -10,8 +10,8 @@ import shapely
 
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.qgc_plan import read_plan_geofence
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.fencefiles.qgc_plan import read_plan_geofence
 
 BOX = "--bbox=-0.58,51.42,-0.52,51.44"
 

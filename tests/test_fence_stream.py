@@ -1,4 +1,4 @@
-"""Streamed fence outputs (formats/fence_stream.py): each format round-trips against an
+"""Streamed fence outputs (fencefiles/fence_stream.py): each format round-trips against an
 independent parse, the .geojson is byte for byte fence_geojson's, a failure leaves nothing
 half-written, and read_fence_file reads every format back as fence_geojson reads GeoJSON."""
 
@@ -17,14 +17,10 @@ import pytest
 import shapely
 
 import alphafence
-from alphafence.build.outputs import build_meta
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.build.tile_jobs import fence_rows
 from alphafence.errors import InputError, MissingDependency
-from alphafence.formats import fence_geojson
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_read import read_fence_file
-from alphafence.formats.fence_stream import (
+from alphafence.fencefiles import fence_geojson
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.fencefiles.fence_stream import (
     GeoJSONLinesWriter,
     GeoJSONSeqWriter,
     GeoJSONWriter,
@@ -32,8 +28,12 @@ from alphafence.formats.fence_stream import (
     open_writers,
     writer_for,
 )
-from alphafence.formats.fence_text import FenceFeatures, feature_texts
+from alphafence.fencefiles.fence_text import FenceFeatures, feature_texts
+from alphafence.fencing.outputs import build_meta
+from alphafence.fencing.pipeline import BuildOptions, build_fences
+from alphafence.fencing.tile_jobs import fence_rows
 from alphafence.mavlink.items import item_count, item_counts
+from alphafence.zones.database import read_database
 
 SCENE = Path(alphafence.__file__).parent / "data" / "demo-scene.geojson"
 SUFFIXES = (".geojson", ".json", ".geojsonl", ".geojsons", ".geojsonseq", ".parquet")

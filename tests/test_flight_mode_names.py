@@ -9,7 +9,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from alphafence.cli.demo import trace_path
 from alphafence.mavlink import ids
 from alphafence.monitor.feeds import latest_sample
-from alphafence.monitor.replay import Trace
+from alphafence.review.replay import Trace
 from alphafence.vehicle.values import Position, ardupilot_mode, custom_mode_of, flight_mode
 from tests.fake_vehicle import FakeVehicle
 

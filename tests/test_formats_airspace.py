@@ -13,10 +13,10 @@ import shapely
 from pyproj import Geod
 
 from alphafence.errors import InputError
-from alphafence.formats import kml, openair_alt
-from alphafence.formats.database import read_database
-from alphafence.formats.rules import parse_rules
 from alphafence.geo.frame import LocalFrame
+from alphafence.zones import kml, openair_alt
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import parse_rules
 from tests.test_kml_great_circles import FOLLOW_M, assert_held_both_ways
 
 DATA = Path(__file__).parent / "data"

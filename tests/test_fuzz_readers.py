@@ -12,12 +12,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from alphafence.errors import InputError, InputErrors
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.mission import read_mission
-from alphafence.formats.qgc_plan import read_plan_fence, read_plan_geofence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
-from alphafence.formats.rules import load_rules
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.fencefiles.qgc_plan import read_plan_fence, read_plan_geofence
+from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+from alphafence.flights.mission import read_mission
+from alphafence.zones.database import read_database
+from alphafence.zones.rules import load_rules
 
 N = int(os.environ.get("ALPHAFENCE_FUZZ_EXAMPLES", "60"))
 FUZZ = settings(max_examples=N, deadline=None, suppress_health_check=list(HealthCheck))
@@ -468,7 +468,7 @@ openair_records = st.lists(
 @FUZZ
 @given(openair_records, st.sampled_from([".openair", ".txt"]))
 def test_openair_reader(records, suffix):
-    from alphafence.formats.fence_read import read_fence_file
+    from alphafence.fencefiles.fence_read import read_fence_file
 
     text = "AC R\n" + "".join(f"{cmd} {arg}\n" for cmd, arg in records)
     for read in (lambda p: read_database([p], RULES), read_fence_file):
@@ -561,7 +561,7 @@ def test_kml_reader(doc, suffix):
     import io
     import zipfile
 
-    from alphafence.formats.fence_read import read_fence_file
+    from alphafence.fencefiles.fence_read import read_fence_file
 
     data = doc.encode("utf-8", "surrogatepass") if isinstance(doc, str) else doc
     if suffix == ".kmz" and isinstance(doc, str):
@@ -602,7 +602,7 @@ fence_item_rows = st.lists(
 def test_legacy_fence_and_fence_items_as_fences(lines, close, rows):
     """ArduPilot's legacy fence files, and fence .waypoints files read as fences (their
     polygon counts must be checked: a count of 0 would never advance)."""
-    from alphafence.formats.fence_read import read_fence_file
+    from alphafence.fencefiles.fence_read import read_fence_file
 
     if close and len(lines) > 1:
         lines = lines + [lines[1]]
@@ -634,8 +634,8 @@ DF_CHARS = "abBhHiIfdnNZcCeELMqQg"
 
 
 def _checked_flight(path):
-    from alphafence.formats.flight_log import FlightLog
-    from alphafence.monitor.postflight import check_flight, load_fences
+    from alphafence.flights.flight_log import FlightLog
+    from alphafence.review.postflight import check_flight, load_fences
 
     json.dumps(
         check_flight(FlightLog(path), load_fences(FLIGHT_LOGS[1])).to_json(), allow_nan=False

@@ -21,12 +21,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.qgc_plan import group_polygons
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencefiles.qgc_plan import group_polygons
 from alphafence.mavlink.items import POLYGON_EXCLUSION
 from alphafence.monitor.engine import Engine, MonitorOptions, Sample
 from alphafence.monitor.feeds import parse_adsb, parse_global_position
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.vehicle.bridge import VehicleLink, signature_matches
 from alphafence.vehicle.fence_transfer import FenceTransferError, download_fence, from_raw
 from alphafence.vehicle.link import open_vehicle

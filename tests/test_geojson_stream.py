@@ -1,4 +1,4 @@
-"""Large GeoJSON streamed (formats/geojson_stream.py): a GeoJSON text sequence and a streamed
+"""Large GeoJSON streamed (zones/geojson_stream.py): a GeoJSON text sequence and a streamed
 FeatureCollection give exactly the features the whole-document reader gives, for generated
 features of every geometry type, valid or not; what the whole reader refuses, the stream
 refuses too, naming the same malformed features, all of them at once."""
@@ -13,9 +13,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from alphafence.errors import InputError
-from alphafence.formats.geojson import read_geojson_doc
-from alphafence.formats.geojson_stream import RS, iter_geojson
-from alphafence.formats.rules import load_rules
+from alphafence.zones.geojson import read_geojson_doc
+from alphafence.zones.geojson_stream import RS, iter_geojson
+from alphafence.zones.rules import load_rules
 
 RULES = load_rules()
 num = st.floats(-200, 200, allow_nan=False, allow_infinity=False)

@@ -115,7 +115,7 @@ async def fly_to(vehicle, sitl, frame, log, x, y):
 @pytest.mark.parametrize("sitl", [EGHAM], indirect=True)
 async def test_vehicle_reads_inclusions_as_the_model_and_the_monitor(sitl, tmp_path):
     from alphafence.cli import main
-    from alphafence.formats.qgc_plan import dumps, plan_document
+    from alphafence.fencefiles.qgc_plan import dumps, plan_document
 
     frame = LocalFrame(sitl.home.lon, sitl.home.lat)
     items = fence_items(frame)

@@ -11,15 +11,15 @@ import json
 import pytest
 import shapely
 
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.sample import Sample
 from alphafence.cli import main
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.qgc_plan import dumps, plan_document
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencefiles.qgc_plan import dumps, plan_document
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.inclusions import inclusion_count
 from alphafence.mavlink.items import POLYGON_EXCLUSION, POLYGON_INCLUSION, FenceItem
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import OnboardLayer, load_layer
-from alphafence.monitor.sample import Sample
 from tests.fake_vehicle import FakeVehicle
 
 FRAME = LocalFrame(-0.55, 51.43)

@@ -15,8 +15,8 @@ import pyproj
 import pytest
 import shapely
 
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_read import read_fence_file
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.zones.database import read_database
 
 SAMPLE = Path(__file__).parent / "data" / "kml" / "great-circle-edges.kml"
 K = "{http://www.opengis.net/kml/2.2}"

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from alphafence.errors import InputError
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_read import read_fence_file
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.zones.database import read_database
 from tests.test_kml_great_circles import assert_held_both_ways
 
 SAMPLE = Path(__file__).parent / "data" / "kml" / "separate-placemark-volumes.kml"

@@ -21,16 +21,21 @@ RANK = {
     "errors": 0,
     "geo": 1,
     "mavlink": 2,
-    "formats": 3,
-    "build": 4,
-    "onboard": 5,
-    "route": 5,
-    "vehicle": 6,
-    "sitl": 7,
-    "monitor": 8,
-    "plots": 8,
-    "cli": 9,
-    "__main__": 10,
+    "zones": 3,
+    "fencefiles": 4,
+    "fencing": 5,
+    "flights": 5,
+    "onboard": 6,
+    "route": 6,
+    "awareness": 6,
+    "vehicle": 7,
+    "sitl": 8,
+    "monitor": 9,
+    "plots": 9,
+    "review": 10,
+    "livemap": 10,
+    "cli": 11,
+    "__main__": 12,
 }
 
 
@@ -59,7 +64,7 @@ def _imports(path, name):
                 mod = node.module or ""
             if mod.split(".")[0] != "alphafence":
                 continue
-            for a in node.names:  # `from alphafence.formats import qgc_plan` imports a module
+            for a in node.names:  # `from alphafence.fencefiles import qgc_plan` imports a module
                 sub = f"{mod}.{a.name}"
                 out.add(sub if sub in MODULES else mod)
     return {m for m in out if m != name}
@@ -123,7 +128,23 @@ def test_importing_the_package_loads_no_stage():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
-    assert alphafence.read_database.__module__ == "alphafence.formats.database"
+    assert alphafence.read_database.__module__ == "alphafence.zones.database"
+
+
+def test_no_room_holds_more_than_20_modules_or_15_percent_of_the_lines():
+    """A room that grows past this is a storeroom: split it by what flows through it."""
+    modules, lines = {}, {}
+    for name, path in MODULES.items():
+        n = len(path.read_text().splitlines())
+        stage = _stage(name) if path.parent != PACKAGE else None
+        if stage is not None and path.name != "__init__.py":
+            modules[stage] = modules.get(stage, 0) + 1
+            lines[stage] = lines.get(stage, 0) + n
+    total = sum(len(p.read_text().splitlines()) for p in MODULES.values())
+    big = {s: (modules[s], round(100 * lines[s] / total, 1)) for s in modules
+           if modules[s] > 20 or lines[s] > 0.15 * total}  # fmt: skip
+    assert not big, f"rooms over 20 modules or 15 % of the package's lines: {big}"
+    assert len(modules) >= 12  # the rooms are there to count
 
 
 def test_no_module_is_over_400_lines():

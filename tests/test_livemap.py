@@ -15,13 +15,13 @@ pytest.importorskip("aiohttp", reason="needs aiohttp (the map extra)")
 
 import aiohttp  # noqa: E402
 
+from alphafence.awareness.fenceset import FenceSet  # noqa: E402
 from alphafence.cli.demo import scene_path, trace_path  # noqa: E402
 from alphafence.errors import InputError  # noqa: E402
-from alphafence.monitor.fenceset import FenceSet  # noqa: E402
-from alphafence.monitor.live_replay import replay_live  # noqa: E402
-from alphafence.monitor.livemap import LiveMap  # noqa: E402
-from alphafence.monitor.livemap_server import parse_address, start_map_server  # noqa: E402
-from alphafence.monitor.replay import Trace, speedup_options  # noqa: E402
+from alphafence.livemap.observer import LiveMap  # noqa: E402
+from alphafence.livemap.server import parse_address, start_map_server  # noqa: E402
+from alphafence.review.live_replay import replay_live  # noqa: E402
+from alphafence.review.replay import Trace, speedup_options  # noqa: E402
 
 DEADLINE_S = 30.0
 
@@ -187,9 +187,9 @@ async def test_a_page_gets_the_vehicle_fences_near_it_its_own_fence_and_the_even
 async def test_a_page_gets_other_aircraft_in_their_cylinders_and_each_new_onboard_fence(
     demo_fences,
 ):
+    from alphafence.awareness.predict import dynamic_radius
     from alphafence.monitor.engine import Engine
     from alphafence.monitor.observe import Step
-    from alphafence.monitor.predict import dynamic_radius
 
     trace = Trace.read(trace_path())
     engine = Engine(demo_fences, speedup_options(trace.speedup))

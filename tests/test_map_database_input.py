@@ -8,7 +8,7 @@ import struct
 import pytest
 
 from alphafence.cli import main
-from alphafence.formats.mistakes import map_database_kind
+from alphafence.zones.mistakes import map_database_kind
 
 MISSION = "tests/data/ardupilot/clear.waypoints"
 

@@ -33,11 +33,11 @@ import time
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.events import alert_text
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.observe import Observer
 from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.runner import Monitor

@@ -8,12 +8,12 @@ import math
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import Engine, Sample
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
-from alphafence.monitor.replay import Trace, replay
+from alphafence.review.replay import Trace, replay
 
 FRAME = LocalFrame(14.5, 35.9)
 HOME_AMSL = 150.0

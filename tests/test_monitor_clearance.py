@@ -1,4 +1,4 @@
-"""The engine's shortcut for positions far from every fence (alphafence.monitor.clearance)
+"""The engine's shortcut for positions far from every fence (alphafence.awareness.clearance)
 decides exactly what the full check decides: property-tested over random fences (keep-out,
 warning layers, keep-in, altitude bands, a time window) and random flights, with the shortcut
 on and off, event for event and level for level."""
@@ -10,10 +10,10 @@ import shapely
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import Engine, Sample
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
 
 FRAME = LocalFrame(14.5, 35.9)

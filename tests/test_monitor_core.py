@@ -5,17 +5,17 @@ import math
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.predict import (
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import (
     Braking,
     closest_approach,
     dynamic_radius,
     stopping_distance,
     time_to_breach,
 )
-from alphafence.monitor.state import Level, StateMachine, assess
+from alphafence.awareness.state import Level, StateMachine, assess
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.geo.frame import LocalFrame
 
 FRAME = LocalFrame(-0.55, 51.43)
 

@@ -6,11 +6,11 @@ import math
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import Engine, Sample
 from alphafence.monitor.events import alert_text
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
 
 FRAME = LocalFrame(-0.55, 51.43)

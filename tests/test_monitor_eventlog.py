@@ -109,8 +109,8 @@ async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
 
     import shapely
 
-    from alphafence.formats.fence_geojson import FenceRecord
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.fencefiles.fence_geojson import FenceRecord
     from alphafence.monitor.options import MonitorOptions
     from alphafence.monitor.runner import Monitor
 

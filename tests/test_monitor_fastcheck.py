@@ -16,9 +16,9 @@ import shapely
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import KEEP_IN, KEEP_OUT, WARNING, Check, FenceSet, Hit
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.fenceset import KEEP_IN, KEEP_OUT, WARNING, Check, FenceSet, Hit
 
 FRAME = LocalFrame(14.5, 35.9)
 WINDOW = {"startDateTime": "2026-01-01T10:00:00Z", "endDateTime": "2026-01-01T11:00:00Z"}
@@ -202,7 +202,7 @@ def test_a_few_segments_in_plain_floats_meet_the_track_where_numpy_does(
     for many: the same arithmetic, the same metres to the last bit; and leaving out the
     segments whose boxes miss the track's (widened by the most slack) changes nothing, also
     for a track that ends on a fence's vertex (``aim``: which one) or grazes it."""
-    from alphafence.monitor.rays import FenceEdges
+    from alphafence.awareness.rays import FenceEdges
 
     local = np.array([geometry(spec) for _, spec, _, _ in specs], dtype=object)
     edges = FenceEdges(local)

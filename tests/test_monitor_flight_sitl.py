@@ -44,11 +44,11 @@ import time
 
 import pytest
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink import ids
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.observe import Observer
 from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.link import open_vehicle

@@ -7,11 +7,11 @@ from __future__ import annotations
 import asyncio
 from types import SimpleNamespace
 
+from alphafence.awareness.state import Level
 from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.observe import Observer
 from alphafence.monitor.options import MonitorOptions
 from alphafence.monitor.runner import Monitor
-from alphafence.monitor.state import Level
 from tests.test_monitor_replay import FRAME, fences
 
 NORTH = range(-100, 265, 5)  # metres north of home along x = 0; the square is 150-250 m north

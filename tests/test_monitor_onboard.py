@@ -11,7 +11,9 @@ import math
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import stopping_distance
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
@@ -23,9 +25,7 @@ from alphafence.mavlink.items import (
 )
 from alphafence.monitor.engine import Engine, Sample
 from alphafence.monitor.events import alert_text
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
-from alphafence.monitor.predict import stopping_distance
 from alphafence.onboard.decode import decode_fence
 
 FRAME = LocalFrame(14.486, 35.891)

@@ -192,7 +192,7 @@ def test_a_circle_is_drawn_to_the_safe_side(lon, lat, radius, inclusion):
 @FUZZ
 @given(st.lists(st.tuples(st.floats(-500, 500), st.floats(-500, 500)), min_size=1, max_size=6))
 def test_the_kits_own_items_decode_to_the_fences_they_came_from(centres):
-    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.fencefiles.fence_geojson import FenceRecord
 
     records = [
         FenceRecord(f"s/{i}", "keep_out", FRAME.geom_to_wgs84(shapely.Point(x, y).buffer(20, 2)))

@@ -42,11 +42,11 @@ import numpy as np
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import SAME_FENCE_M, OnboardLayer
 from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.fence_transfer import download_fence, same_items

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import Engine, Sample
-from alphafence.monitor.fenceset import FenceSet
 from tests.sitl_flight import speedup_options
 
 TRACE = Path(__file__).parent / "data" / "trace-egham-fence-x5.jsonl"
@@ -69,7 +69,7 @@ def test_a_trace_file_that_is_too_big_or_unreadable_is_one_line(tmp_path, monkey
     import pytest
 
     from alphafence.errors import InputError
-    from alphafence.monitor import replay
+    from alphafence.review import replay
 
     monkeypatch.setattr(replay, "MAX_TRACE_BYTES", 1000)
     big = tmp_path / "big.trace.jsonl"

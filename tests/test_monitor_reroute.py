@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 import shapely
 
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import Braking, stopping_distance
 from alphafence.cli import main
 from alphafence.errors import InputError
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor.engine import Engine, Sample
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
-from alphafence.monitor.predict import Braking, stopping_distance
 from alphafence.monitor.reroute import (
     Rerouter,
     leg_timeout_s,

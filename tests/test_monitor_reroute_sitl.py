@@ -54,7 +54,8 @@ import numpy as np
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.coords import to_e7
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.ids import (
@@ -69,7 +70,6 @@ from alphafence.mavlink.ids import (
 from alphafence.mavlink.ids import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT
 from alphafence.mavlink.ids import MAV_MISSION_TYPE_MISSION as MISSION_TYPE_MISSION
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.link import open_vehicle
 from tests.sitl_flight import (

@@ -17,17 +17,17 @@ from hypothesis import event, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import Braking
 from alphafence.cli import main
 from alphafence.errors import InputError
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.storage import PROFILES, Profile, storage_bytes
 from alphafence.monitor import rolling as rolling_module
 from alphafence.monitor.engine import Sample
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions, RollingOptions
-from alphafence.monitor.predict import Braking
 from alphafence.monitor.rolling import RollingPlan
 from alphafence.monitor.runner import Monitor
 from alphafence.onboard.compile import compile_fences

@@ -32,14 +32,14 @@ import numpy as np
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import read_fences
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import Braking
+from alphafence.fencefiles.fence_geojson import read_fences
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.storage import PROFILES
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.observe import Observer
 from alphafence.monitor.options import RollingOptions
-from alphafence.monitor.predict import Braking
 from alphafence.monitor.runner import Monitor
 from alphafence.vehicle.link import open_vehicle
 from tests.sitl_flight import (

@@ -6,10 +6,10 @@ import json
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.monitor import run, runner
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.options import MonitorOptions
 from tests.helpers import until
 

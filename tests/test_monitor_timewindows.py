@@ -5,10 +5,10 @@ from datetime import datetime, timezone
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.applicability import is_active, timed
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.applicability import is_active, timed
-from alphafence.monitor.fenceset import FenceSet
 
 UTC = timezone.utc
 WEEKDAYS_9_TO_17 = [

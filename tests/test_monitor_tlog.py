@@ -12,7 +12,7 @@ import shapely.geometry
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from alphafence.cli import main
-from alphafence.formats.flight_log import FlightLog
+from alphafence.flights.flight_log import FlightLog
 from alphafence.geo.coords import to_e7
 from alphafence.monitor.observe import Observer, UntilDisarmed
 from alphafence.monitor.options import MonitorOptions

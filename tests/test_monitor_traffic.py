@@ -2,7 +2,7 @@
 
 import pytest
 
-from alphafence.monitor.traffic import Aircraft, Traffic, TrafficOptions
+from alphafence.awareness.traffic import Aircraft, Traffic, TrafficOptions
 
 
 def test_head_on_traffic_is_a_conflict_with_its_time():
@@ -46,12 +46,12 @@ def test_engine_turns_adsb_reports_into_conflict_events():
 
     import shapely
 
-    from alphafence.formats.fence_geojson import FenceRecord
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.fencefiles.fence_geojson import FenceRecord
     from alphafence.geo.frame import LocalFrame
     from alphafence.monitor.engine import Engine, Sample
     from alphafence.monitor.events import alert_text
     from alphafence.monitor.feeds import parse_adsb
-    from alphafence.monitor.fenceset import FenceSet
 
     frame = LocalFrame(-0.55, 51.43)
     far = frame.geom_to_wgs84(shapely.box(5000, 5000, 5100, 5100))

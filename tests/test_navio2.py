@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from alphafence.cli import main
-from alphafence.formats import qgc_plan
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.qgc_plan import group_polygons
+from alphafence.fencefiles import qgc_plan
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencefiles.qgc_plan import group_polygons
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
 from alphafence.mavlink.storage import (
@@ -187,10 +187,10 @@ def test_a_fence_whose_edges_bow_goes_onboard_as_its_own_vertices():
 
 def test_demo_scene_at_full_resolution(tmp_path):
     """Every keep-out fence of the demo scene goes onboard as itself: no circle, no merge."""
-    from alphafence.build.pipeline import BuildOptions, build_fences
-    from alphafence.formats.database import read_database
-    from alphafence.formats.rules import load_rules
+    from alphafence.fencing.pipeline import BuildOptions, build_fences
     from alphafence.onboard.compile import compile_fences
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     rules = load_rules()
     scene = __import__("alphafence").__path__[0] + "/data/demo-scene.geojson"

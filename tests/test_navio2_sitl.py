@@ -14,8 +14,8 @@ import pytest
 import shapely
 
 from alphafence.cli import main
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from alphafence.mavlink.storage import PROFILES, file_storage_bytes, storage_bytes
 from alphafence.onboard.compile import compile_fences
 from alphafence.vehicle.fence_transfer import download_fence, same_items

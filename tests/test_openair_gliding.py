@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 
 from alphafence.errors import InputError, InputErrors
-from alphafence.formats import openair
-from alphafence.formats.database import read_database
-from alphafence.formats.fence_read import read_fence_file
-from alphafence.formats.openair_alt import Unreadable, read_altitude
-from alphafence.formats.rules import parse_rules
+from alphafence.fencefiles.fence_read import read_fence_file
+from alphafence.zones import openair
+from alphafence.zones.database import read_database
+from alphafence.zones.openair_alt import Unreadable, read_altitude
+from alphafence.zones.rules import parse_rules
 
 DATA = Path(__file__).parent / "data" / "openair"
 GLIDING = DATA / "gliding.openair"
@@ -222,10 +222,10 @@ def test_faults_of_several_files_are_reported_together(tmp_path, rules):
 
 
 def test_the_library_skips_invalid_zones_when_asked(rules):
-    from alphafence.build.outputs import build_meta
-    from alphafence.build.pipeline import BuildOptions
-    from alphafence.build.tiled import build_tiled
-    from alphafence.formats.database import DatabaseStream
+    from alphafence.fencing.outputs import build_meta
+    from alphafence.fencing.pipeline import BuildOptions
+    from alphafence.fencing.tiled import build_tiled
+    from alphafence.zones.database import DatabaseStream
 
     db = read_database([FAULTS, GLIDING], rules, skip_invalid=True)
     assert [(z["airspace"], z["line"]) for z in db.invalid] == list(

@@ -10,9 +10,9 @@ import pytest
 
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
-from alphafence.formats.mission import read_mission
-from alphafence.formats.qgc_plan import read_plan_fence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
+from alphafence.fencefiles.qgc_plan import read_plan_fence
+from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+from alphafence.flights.mission import read_mission
 from alphafence.mavlink.items import POLYGON_EXCLUSION
 from tests.fake_vehicle import FakeVehicle
 

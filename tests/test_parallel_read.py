@@ -1,4 +1,4 @@
-"""A GeoJSON text sequence read in worker processes (build/read_jobs.py) reads exactly what the
+"""A GeoJSON text sequence read in worker processes (fencing/read_jobs.py) reads exactly what the
 main process reads alone: the same spool (records, extents, widths, classes, tables), the
 same repaired and skipped notes in the same order, the same first error with the same line
 number, the same malformed features all at once (or left out with ``--skip-invalid``), and a
@@ -15,18 +15,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import alphafence.build.tiled as tiled
-from alphafence.build.pipeline import BuildOptions
-from alphafence.build.read_jobs import ReadChunk, sequence_reader
-from alphafence.build.sites import feature_widths, site_class
-from alphafence.build.spool import Spool
-from alphafence.build.tile_jobs import start_pool
+import alphafence.fencing.tiled as tiled
 from alphafence.errors import InputError
-from alphafence.formats.database import DatabaseStream
-from alphafence.formats.features import select_bbox
-from alphafence.formats.fence_stream import open_writers
-from alphafence.formats.geojson_stream import RS, TEXT_BLOCK, iter_geojson, sequence_chunks
-from alphafence.formats.rules import parse_rules
+from alphafence.fencefiles.fence_stream import open_writers
+from alphafence.fencing.pipeline import BuildOptions
+from alphafence.fencing.read_jobs import ReadChunk, sequence_reader
+from alphafence.fencing.sites import feature_widths, site_class
+from alphafence.fencing.spool import Spool
+from alphafence.fencing.tile_jobs import start_pool
+from alphafence.zones.database import DatabaseStream
+from alphafence.zones.features import select_bbox
+from alphafence.zones.geojson_stream import RS, TEXT_BLOCK, iter_geojson, sequence_chunks
+from alphafence.zones.rules import parse_rules
 
 RULES = parse_rules(
     {

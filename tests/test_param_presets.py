@@ -7,7 +7,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from alphafence.cli import main
-from alphafence.formats.qgc_wpl import waypoints_text
+from alphafence.fencefiles.qgc_wpl import waypoints_text
 from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
 from alphafence.vehicle.params import PROFILES, VEHICLE, vehicle_kind
 from tests.fake_vehicle import FakeVehicle

@@ -8,7 +8,7 @@ import pytest
 
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
-from alphafence.formats.qgc_plan import read_plan_geofence
+from alphafence.fencefiles.qgc_plan import read_plan_geofence
 from tests.fake_vehicle import FakeVehicle
 
 BOX = "--bbox=-0.58,51.42,-0.52,51.44"

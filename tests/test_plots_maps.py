@@ -17,8 +17,8 @@ import shapely
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from alphafence.cli import main
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import POLYGON_INCLUSION, RETURN_POINT
 from alphafence.plots import common

@@ -23,9 +23,9 @@ import pytest
 import shapely
 
 from alphafence.cli import main
-from alphafence.formats.mission import read_mission
-from alphafence.formats.qgc_plan import read_plan_fence, read_plan_geofence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
+from alphafence.fencefiles.qgc_plan import read_plan_fence, read_plan_geofence
+from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+from alphafence.flights.mission import read_mission
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
@@ -342,7 +342,7 @@ def test_waypoint_fence_files_still_carry_their_return_point():
 def test_a_jump_repeated_a_billion_times_is_bounded_and_then_passed(tmp_path):
     # the loop's legs are all flown once it has gone round; after MAX_POSITIONS positions
     # the jump is passed, so what follows it is still checked
-    from alphafence.formats.mission import MAX_POSITIONS
+    from alphafence.flights.mission import MAX_POSITIONS
 
     text = (
         (DATA / "jump-forever.waypoints")
@@ -360,7 +360,7 @@ def test_a_jump_repeated_a_billion_times_is_bounded_and_then_passed(tmp_path):
 
 def test_a_downloaded_fence_written_as_a_plan_keeps_its_return_point(tmp_path):
     # download writes what the vehicle holds: its return point item becomes the breachReturn
-    from alphafence.formats import qgc_plan
+    from alphafence.fencefiles import qgc_plan
 
     held = read_waypoints_fence(DATA / "fence-76-items.waypoints")
     path = tmp_path / "downloaded.plan"

@@ -7,9 +7,9 @@ import pytest
 import shapely
 
 from alphafence.errors import InputError
-from alphafence.formats.database import read_database
-from alphafence.formats.geojson import parse_hstore, tags_of
 from alphafence.geo.frame import LocalFrame
+from alphafence.zones.database import read_database
+from alphafence.zones.geojson import parse_hstore, tags_of
 
 
 def test_malta_has_its_known_restricted_places(malta_db):
@@ -374,7 +374,7 @@ def test_self_intersecting_polygon_is_reported_and_repaired(write_json, rules):
     }
     db = read_database([write_json("bowtie.geojson", bowtie)], rules)
     assert db.repaired == ["way/8"]
-    from alphafence.build.pipeline import build_fences
+    from alphafence.fencing.pipeline import build_fences
 
     result = build_fences(db.features, rules)
     site = result.sites[0]

@@ -1,4 +1,4 @@
-"""Many regions grouped into sites at once (build/sites.py ``regions_sites``) give, bit for bit,
+"""Many regions grouped into sites at once (fencing/sites.py ``regions_sites``) give, bit for bit,
 the sites of grouping them one region at a time: the same members, names, frames, and parts
 to the last coordinate. Property-tested on random regions of boxes, points, lines and
 invalid polygons, near the antimeridian, at high latitude, and regions wider than 20 km
@@ -13,14 +13,14 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from alphafence.build.sites import (
+from alphafence.fencing.sites import (
     _region_sites,
     feature_widths,
     group_sites,
     regions_sites,
 )
-from alphafence.formats.features import Feature
-from alphafence.formats.rules import parse_rules
+from alphafence.zones.features import Feature
+from alphafence.zones.rules import parse_rules
 
 RULES = parse_rules(
     {

@@ -16,9 +16,9 @@ import shapely
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from alphafence.build.fences import METHODS
-from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.cli import main
+from alphafence.fencing.fences import METHODS
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
 
 from .ardupilot_model import excursion_m, zone_features

@@ -19,11 +19,11 @@ import shapely
 from pyproj import Geod
 
 from alphafence.cli import main
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.qgc_plan import dumps, mission_items, plan_document
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencefiles.qgc_plan import dumps, mission_items, plan_document
 from alphafence.geo.frame import LocalFrame
-from alphafence.monitor.mission_check import check_mission
 from alphafence.monitor.reroute import Rerouter
+from alphafence.review.mission_check import check_mission
 from alphafence.route.roadmap import Roadmap
 from tests.ardupilot_model import boundary_samples, clearance, e7, polygon_outside
 from tests.test_route_corridor import (

@@ -7,8 +7,8 @@ import pytest
 import shapely
 
 from alphafence.cli import main
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.mission import read_mission
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.flights.mission import read_mission
 from alphafence.geo.frame import LocalFrame
 
 LON0, LAT0 = 14.45, 35.88

@@ -18,7 +18,7 @@ import shapely
 from pyproj import Geod
 
 from alphafence.cli import main
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.geo.frame import LocalFrame
 from alphafence.route import CorridorPlanner, NoRoute
 

@@ -39,8 +39,8 @@ import numpy as np
 import pytest
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.qgc_plan import mission_items
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencefiles.qgc_plan import mission_items
 from alphafence.geo.coords import to_e7
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.ids import (

@@ -1,7 +1,7 @@
 import pytest
 
 from alphafence.errors import InputError
-from alphafence.formats.rules import load_rules
+from alphafence.zones.rules import load_rules
 
 
 def test_default_rules_cover_the_issue_categories(rules):

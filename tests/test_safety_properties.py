@@ -15,20 +15,20 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
-from alphafence.build.fences import METHODS
-from alphafence.build.outputs import render
-from alphafence.build.pipeline import BuildOptions, build_fences
 from alphafence.errors import InputError
-from alphafence.formats.fence_geojson import FenceRecord
-from alphafence.formats.geojson import read_geojson_doc
-from alphafence.formats.qgc_plan import group_polygons, read_plan_fence
-from alphafence.formats.qgc_wpl import read_waypoints_fence
-from alphafence.formats.rules import parse_rules
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencefiles.qgc_plan import group_polygons, read_plan_fence
+from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+from alphafence.fencing.fences import METHODS
+from alphafence.fencing.outputs import render
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import POLYGON_INCLUSION
 from alphafence.mavlink.storage import PROFILES, storage_bytes
 from alphafence.onboard.compile import compile_fences
 from alphafence.onboard.corridor import flight_path
+from alphafence.zones.geojson import read_geojson_doc
+from alphafence.zones.rules import parse_rules
 
 from .ardupilot_model import circle_inradius_m
 from .helpers import VerifyFrame, geojson_fences, missing_area, restricted_in
@@ -230,7 +230,7 @@ def test_keep_out_fences_contain_site_plus_margin_in_every_format(
     # 2. every output format
     with tempfile.TemporaryDirectory() as tmp:
         paths = [str(Path(tmp) / n) for n in ("f.geojson", "f.plan", "f.waypoints")]
-        from alphafence.formats.atomic import write_all
+        from alphafence.fencefiles.atomic import write_all
 
         write_all(render(result.fences, {}, *paths))
         text = Path(paths[0]).read_text()
@@ -346,7 +346,7 @@ halfway = st.builds(
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.one_of(st.floats(-180, 180), halfway), min_size=1, max_size=40))
 def test_geojson_coordinates_are_rounded_as_round_rounds_them(values):
-    from alphafence.formats.fence_geojson import DECIMALS, _round_array
+    from alphafence.fencefiles.fence_geojson import DECIMALS, _round_array
 
     got = _round_array(np.array(values).reshape(-1, 2 if len(values) % 2 == 0 else 1))
     assert got.ravel().tolist() == [round(v, DECIMALS) for v in values]
@@ -357,8 +357,8 @@ def test_geojson_features_are_geos_geojson_rounded():
     polygons and multipolygons with holes, fences sharing a frame or not."""
     import json
 
-    from alphafence.build.fences import Fence
-    from alphafence.formats.fence_geojson import _round, fence_features
+    from alphafence.fencefiles.fence_geojson import _round, fence_features
+    from alphafence.fencing.fences import Fence
 
     holed = shapely.Polygon([(0, 0), (90, 0), (90, 90), (0, 90)], [[(10, 10), (20, 10), (20, 30)]])
     multi = shapely.MultiPolygon([holed, shapely.box(200, 0, 230, 40)])
@@ -460,7 +460,7 @@ def test_a_circle_zone_is_one_circle_fence_holding_it_plus_margin_in_every_forma
 ):
     from collections import Counter
 
-    from alphafence.formats.ed269 import read_ed269_doc
+    from alphafence.zones.ed269 import read_ed269_doc
 
     rules = parse_rules(
         {"rule": [{"category": "zone", "kind": "keep_out", "tags": {"ed269:restriction": "*"}}]}
@@ -484,7 +484,7 @@ def test_a_circle_zone_is_one_circle_fence_holding_it_plus_margin_in_every_forma
         assert float(np.min(shapely.distance(poly.exterior, pts))) >= fence.margin_m - 1e-6
     with tempfile.TemporaryDirectory() as tmp:
         paths = [str(Path(tmp) / n) for n in ("f.geojson", "f.plan", "f.waypoints")]
-        from alphafence.formats.atomic import write_all
+        from alphafence.fencefiles.atomic import write_all
 
         write_all(render(result.fences, {}, *paths))
         for props, _ in geojson_fences(Path(paths[0]).read_text()):
@@ -513,8 +513,8 @@ def test_fence_sites_all_at_once_equal_one_at_a_time(groups, margin, method):
     """fence_sites makes every stage for many sites at once (vectorised GEOS calls, the
     containment checks of many fences in one call): the fences must be those made site by
     site, to the last bit, for keep-out, warning and keep-in sites of every method."""
-    from alphafence.build.fences import fence_sites, site_fences
-    from alphafence.build.sites import group_sites
+    from alphafence.fencing.fences import fence_sites, site_fences
+    from alphafence.fencing.sites import group_sites
 
     kinds = {"restricted": "keep_out", "caution": "warning", "allowed": "keep_in"}
     rules = parse_rules(

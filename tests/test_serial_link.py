@@ -18,8 +18,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from alphafence.cli import main
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.fencefiles import qgc_plan as plan
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from alphafence.vehicle.bridge import BridgeError, VehicleLink
 from alphafence.vehicle.fence_transfer import download_fence, same_items, upload_fence
 from alphafence.vehicle.link import LinkError, open_vehicle

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import pytest
 
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.fencefiles import qgc_plan as plan
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from tests.serial_fixtures import NO_SOCAT, SOCAT, socat_pair
 from tests.test_signing_sitl import DEMO_SCENE, _fence, alphafence, monitor_checks
 

@@ -26,8 +26,8 @@ from importlib import resources
 
 import pytest
 
-from alphafence.formats import qgc_plan as plan
-from alphafence.formats.qgc_plan import read_plan_fence
+from alphafence.fencefiles import qgc_plan as plan
+from alphafence.fencefiles.qgc_plan import read_plan_fence
 from alphafence.mavlink.items import CIRCLE_EXCLUSION, POLYGON_EXCLUSION, FenceItem
 
 pytestmark = pytest.mark.sitl

@@ -11,7 +11,7 @@ import pytest
 
 from alphafence.cli import main
 from alphafence.errors import InputError
-from alphafence.formats.mission_items import mission_rows
+from alphafence.flights.mission_items import mission_rows
 from alphafence.mavlink import ids
 from alphafence.sitl.fly import NotSimulated, fly_mission, raw_items
 from alphafence.vehicle.link import open_vehicle
@@ -23,7 +23,7 @@ PATH = [(14.50, 35.90), (14.505, 35.905), (14.51, 35.903)]
 
 @pytest.fixture
 def route_files(tmp_path):
-    from alphafence.formats.qgc_plan import mission_items
+    from alphafence.fencefiles.qgc_plan import mission_items
 
     items = mission_items(__import__("numpy").array(PATH), 30.0)
     plan = {

@@ -11,8 +11,8 @@ import shapely
 
 from alphafence.cli import main
 from alphafence.cli.demo import scene_path
-from alphafence.formats.fence_geojson import read_fences
-from alphafence.formats.mistakes import FAR_M, point_swap
+from alphafence.fencefiles.fence_geojson import read_fences
+from alphafence.zones.mistakes import FAR_M, point_swap
 
 
 @pytest.fixture(scope="module")

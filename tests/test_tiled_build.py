@@ -1,4 +1,4 @@
-"""The build in tiles (build/tiled.py) gives exactly the untiled build: the same sites with the
+"""The build in tiles (fencing/tiled.py) gives exactly the untiled build: the same sites with the
 same features, the same fences to the last bit, whatever the tile size, the job size, the
 number of worker processes or a Dask cluster. Property-tested on random features placed
 across tile edges, and checked on Malta's OSM extract."""
@@ -14,11 +14,11 @@ import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.build.tiled import build_tiled
-from alphafence.build.tiles import plan_jobs
-from alphafence.formats.database import DatabaseStream, read_database
-from alphafence.formats.rules import load_rules, parse_rules
+from alphafence.fencing.pipeline import BuildOptions, build_fences
+from alphafence.fencing.tiled import build_tiled
+from alphafence.fencing.tiles import plan_jobs
+from alphafence.zones.database import DatabaseStream, read_database
+from alphafence.zones.rules import load_rules, parse_rules
 
 RULES = parse_rules(
     {
@@ -189,7 +189,7 @@ def test_small_graph_components_are_scipys(n, edges):
     from scipy.sparse import coo_array
     from scipy.sparse.csgraph import connected_components
 
-    from alphafence.build.sites import _components
+    from alphafence.fencing.sites import _components
 
     a = np.array([e[0] % n for e in edges], dtype=np.int64)
     b = np.array([e[1] % n for e in edges], dtype=np.int64)
@@ -205,8 +205,8 @@ def test_long_path_components_are_scipys(n, seed, chords):
     from scipy.sparse import coo_array
     from scipy.sparse.csgraph import connected_components
 
-    from alphafence.build.regions import SMALL_GRAPH
-    from alphafence.build.sites import _components
+    from alphafence.fencing.regions import SMALL_GRAPH
+    from alphafence.fencing.sites import _components
 
     rng = np.random.default_rng(seed)
     n = min(n, SMALL_GRAPH)

@@ -17,7 +17,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from alphafence.cli import main
-from alphafence.formats.qgc_wpl import waypoints_text
+from alphafence.fencefiles.qgc_wpl import waypoints_text
 from alphafence.geo.coords import to_e7
 from alphafence.mavlink.items import FenceItem
 from alphafence.vehicle import fence_transfer

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import shapely
 
-from alphafence.build.pipeline import BuildOptions, build_fences
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.fencefiles.fence_geojson import FenceRecord
+from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
 from alphafence.mavlink.items import POLYGON_EXCLUSION, FenceItem
 from alphafence.mavlink.storage import PROFILES, storage_bytes
@@ -83,7 +83,7 @@ async def test_cli_upload_then_download(sitl, tmp_path):
 
     from alphafence.cli import main
     from alphafence.cli.demo import scene_path
-    from alphafence.formats.qgc_plan import read_plan_fence
+    from alphafence.fencefiles.qgc_plan import read_plan_fence
 
     fences = tmp_path / "f.geojson"
     assert main(["build", str(scene_path()), "-o", str(fences), "-q"]) == 0

@@ -195,7 +195,7 @@ def test_an_mbtiles_basemap_is_drawn_from_the_page_itself(browser, tmp_path):  #
 
     from PIL import Image
 
-    from alphafence.formats.mbtiles import tile_range
+    from alphafence.plots.mbtiles import tile_range
     from tests.test_webmap_page import _mbtiles
 
     buf = io.BytesIO()

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from alphafence.formats.webmap_html import page
+from alphafence.plots.webmap_html import page
 
 URL = re.compile(r"https?://[^\s\"'<>)]+")
 # what Leaflet's own source holds: its licence comment and attribution prefix name its site
@@ -89,7 +89,7 @@ def _mbtiles(path, tiles, fmt="png"):
 
 def test_an_mbtiles_basemap_holds_the_tiles_around_the_data(tmp_path):
     from alphafence.errors import InputError
-    from alphafence.formats.mbtiles import tile_range, tiles_around
+    from alphafence.plots.mbtiles import tile_range, tiles_around
 
     bounds = [[35.88, 14.40], [35.92, 14.52]]
     z = 12

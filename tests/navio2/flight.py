@@ -73,7 +73,7 @@ def _fences(frame, square, path: Path) -> None:
 
 def _prepare(rootfs: Path, frame, square, out: Path) -> tuple[dict, list, tuple]:
     """Fences, key and state directory where the unit expects them; the monitor's argv."""
-    from alphafence.build.bundle import generate_key, sign
+    from alphafence.fencing.bundle import generate_key, sign
 
     unit = unit_settings(UNIT.read_text())
     env = dict(unit["Environment"])

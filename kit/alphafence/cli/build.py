@@ -6,7 +6,6 @@ import os
 
 from rich.table import Table
 
-from alphafence.build import METHODS
 from alphafence.cli.common import err_console, out_console, progress, union_hint
 from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import (
@@ -18,6 +17,7 @@ from alphafence.cli.options import (
     positive,
 )
 from alphafence.errors import need
+from alphafence.fencing import METHODS
 
 SKIP_HINT = "nothing was written; --skip-invalid leaves these zones out and builds the rest"
 
@@ -93,7 +93,7 @@ def register(sub):
 
 def jobs_count(text: str):
     """argparse type of ``--jobs``: ``auto`` (None: chosen by the database's size, see
-    :func:`alphafence.build.tiled.auto_jobs`) or an integer of at least 1.
+    :func:`alphafence.fencing.tiled.auto_jobs`) or an integer of at least 1.
 
     Examples
     --------
@@ -106,13 +106,13 @@ def jobs_count(text: str):
 def run(args) -> int:
     """Read the databases as a stream, fence them tile by tile, write the outputs as tiles
     complete (all or nothing); exit status 0."""
-    from alphafence.build.outputs import build_meta, render
-    from alphafence.build.tiled import build_tiled
     from alphafence.errors import InputError, InputErrors
-    from alphafence.formats.atomic import write_all
-    from alphafence.formats.database import DatabaseStream
-    from alphafence.formats.fence_stream import open_writers, writer_for
-    from alphafence.formats.rules import load_rules
+    from alphafence.fencefiles.atomic import write_all
+    from alphafence.fencefiles.fence_stream import open_writers, writer_for
+    from alphafence.fencing.outputs import build_meta, render
+    from alphafence.fencing.tiled import build_tiled
+    from alphafence.zones.database import DatabaseStream
+    from alphafence.zones.rules import load_rules
 
     wants = build_wants(args.databases, args.figure)
     if args.dask:
@@ -203,7 +203,7 @@ def summary(db, result, opts, written):
     and what does not fit a vehicle."""
     from rich.markup import escape
 
-    from alphafence.build.tiled import LOOSE, median_of
+    from alphafence.fencing.tiled import LOOSE, median_of
     from alphafence.mavlink.items import MAX_POLYGON_VERTICES
     from alphafence.mavlink.storage import PROFILES
 

@@ -54,7 +54,7 @@ def register(sub):
 
 def run(args) -> int:
     """Make a key pair, sign fences, or verify them (exit 2 when they do not verify)."""
-    from alphafence.build.bundle import generate_key, sign, verify
+    from alphafence.fencing.bundle import generate_key, sign, verify
 
     if args.bundle_verb == "keygen":
         generate_key(args.private, args.public)

@@ -164,8 +164,8 @@ def run(args) -> int:
     """Check the log against the fences; print the report (or JSON), draw the figure; exit 1
     when the flight entered a keep-out fence in force or left a keep-in fence, else 0."""
     from alphafence.errors import need
-    from alphafence.formats.flight_log import FlightLog
-    from alphafence.monitor.postflight import check_flight, load_fences
+    from alphafence.flights.flight_log import FlightLog
+    from alphafence.review.postflight import check_flight, load_fences
 
     need(("pymavlink", f"reading {args.log}"), *figure_wants(args.figure))
     check_map_args(args)

@@ -79,9 +79,9 @@ def _altitudes(leg) -> str:
 def run(args) -> int:
     """Print the legs near keep-out fences and keep-in fences' edges; exit 1 when any leg
     crosses a keep-out fence or leaves a keep-in fence, else 0."""
-    from alphafence.formats.fence_read import read_fence_file as read_fences
-    from alphafence.formats.mission import load_mission
-    from alphafence.monitor.mission_check import check_mission
+    from alphafence.fencefiles.fence_read import read_fence_file as read_fences
+    from alphafence.flights.mission import load_mission
+    from alphafence.review.mission_check import check_mission
 
     check_map_args(args)
     records = read_fences(args.fences)

@@ -124,8 +124,8 @@ def check_trust(args, path):
         ``path`` is a map database (an OSM extract: fences are built of it first), or the
         fences do not verify and ``--allow-unsigned`` was not given.
     """
-    from alphafence.build.bundle import verify
-    from alphafence.formats.mistakes import refuse_map_database
+    from alphafence.fencing.bundle import verify
+    from alphafence.zones.mistakes import refuse_map_database
 
     refuse_map_database(path)  # said before its signature is looked for
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import json
 
-from alphafence.build import METHODS
 from alphafence.cli.common import callback, out_console, progress
 from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import add_database_options, build_options, build_wants
 from alphafence.cli.tables import stats_table
 from alphafence.errors import InputError, need
+from alphafence.fencing import METHODS
 
 
 def register(sub):
@@ -55,10 +55,10 @@ def methods(text):
 
 def run(args) -> int:
     """Build fences with each method and print (or, with --json, dump) how they compare."""
-    from alphafence.build.compare import compare_methods, telling_sites
-    from alphafence.build.outputs import OSM_ATTRIBUTION
-    from alphafence.formats.database import read_database
-    from alphafence.formats.rules import load_rules
+    from alphafence.fencing.compare import compare_methods, telling_sites
+    from alphafence.fencing.outputs import OSM_ATTRIBUTION
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     need(*build_wants(args.databases, args.figure))
     check_map_args(args)

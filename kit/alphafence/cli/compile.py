@@ -60,16 +60,16 @@ def run(args) -> int:
     """Compile the fences for the flight path or box, write the onboard plan or waypoint file
     (``-o``'s suffix says which; ``--waypoints`` also); exit 0, or 2 on bad input (an unknown
     output suffix, a box typed lat,lon, no fence near the area)."""
-    from alphafence.formats import qgc_plan as plan
-    from alphafence.formats import qgc_wpl as waypoints
-    from alphafence.formats.atomic import write_all
-    from alphafence.formats.fence_read import read_fence_file as read_fences
-    from alphafence.formats.mistakes import output_format
+    from alphafence.fencefiles import qgc_plan as plan
+    from alphafence.fencefiles import qgc_wpl as waypoints
+    from alphafence.fencefiles.atomic import write_all
+    from alphafence.fencefiles.fence_read import read_fence_file as read_fences
+    from alphafence.zones.mistakes import output_format
 
     fmt = output_format(args.output, what="onboard fence output")  # before any work
     need(*figure_wants(args.figure))
     if args.sign_key:
-        from alphafence.build.bundle import check_private_key
+        from alphafence.fencing.bundle import check_private_key
 
         check_private_key(args.sign_key)
     check_map_args(args)
@@ -85,7 +85,7 @@ def run(args) -> int:
         out[args.waypoints] = waypoints.waypoints_text(result.items)
     write_all(out)
     if args.sign_key:
-        from alphafence.build.bundle import sign
+        from alphafence.fencing.bundle import sign
 
         out.update({sign(path, args.sign_key): None for path in list(out)})
     compile_report(result)

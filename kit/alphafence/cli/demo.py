@@ -12,10 +12,10 @@ import signal
 from importlib import resources
 from pathlib import Path
 
-from alphafence.build import METHODS
 from alphafence.cli.common import out_console
 from alphafence.cli.tables import stats_table
 from alphafence.errors import InputError, need
+from alphafence.fencing import METHODS
 
 NOTE = "Synthetic demo scene authored by the AlphaFence project (not real places)."
 HOME = (-0.5500, 51.4300)  # lon, lat: the scene's take-off point (the egham SITL home)
@@ -73,15 +73,15 @@ def register(sub):
 def run(args) -> int:
     """Build, draw and compare fences for the demo scene, compile them, and fly (or replay)
     the demo flight, all into ``--output-dir``; exit 0."""
-    from alphafence.formats import qgc_plan
-    from alphafence.formats.atomic import write_all
-    from alphafence.formats.fence_geojson import read_fences
+    from alphafence.fencefiles import qgc_plan
+    from alphafence.fencefiles.atomic import write_all
+    from alphafence.fencefiles.fence_geojson import read_fences
     from alphafence.mavlink.storage import PROFILES
     from alphafence.onboard.compile import compile_fences
 
     need(("scipy", "building the demo's fences"), ("matplotlib", "drawing the demo's figures"))
     if args.map_server:
-        from alphafence.monitor.livemap_server import parse_address
+        from alphafence.livemap.server import parse_address
 
         if not args.replay:
             raise InputError("--map-server", "shows the replayed flight: add --replay")
@@ -122,14 +122,14 @@ def run(args) -> int:
 
 
 def _build(out: Path) -> Path:
-    from alphafence.build.compare import compare_methods, telling_sites
-    from alphafence.build.outputs import build_meta, render
-    from alphafence.build.pipeline import BuildOptions, build_fences
-    from alphafence.formats.atomic import write_all
-    from alphafence.formats.database import read_database
-    from alphafence.formats.rules import load_rules
+    from alphafence.fencefiles.atomic import write_all
+    from alphafence.fencing.compare import compare_methods, telling_sites
+    from alphafence.fencing.outputs import build_meta, render
+    from alphafence.fencing.pipeline import BuildOptions, build_fences
     from alphafence.plots.compare import comparison_figure
     from alphafence.plots.fences import fence_map
+    from alphafence.zones.database import read_database
+    from alphafence.zones.rules import load_rules
 
     scene = scene_path()
     rules = load_rules()
@@ -170,7 +170,7 @@ def _area(records):
 
 
 def _fly(out, fences_path, records, items, binary, speedup) -> int:
-    from alphafence.monitor.demo_flight import fly_at_fence
+    from alphafence.review.demo_flight import fly_at_fence
 
     flight = asyncio.run(
         _stopped_by_sigterm(
@@ -214,8 +214,8 @@ async def _stopped_by_sigterm(flight):
 
 
 def _replay(out, fences_path, records, map_server=None) -> int:
-    from alphafence.monitor.fenceset import FenceSet
-    from alphafence.monitor.replay import Trace, replay, speedup_options
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.review.replay import Trace, replay, speedup_options
 
     trace = Trace.read(trace_path())
     options = speedup_options(trace.speedup, enforce=True)
@@ -241,8 +241,8 @@ async def _replay_on_map(trace, fences, options, address, clock):
     """The replay in real time with its live map served at ``address``: it starts when a
     page opens the map; the map stays up until Ctrl-C (or SIGTERM). The events, or None when
     stopped before a page opened the map."""
-    from alphafence.monitor.live_replay import replay_live
-    from alphafence.monitor.livemap_server import open_live_map
+    from alphafence.livemap.server import open_live_map
+    from alphafence.review.live_replay import replay_live
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -283,10 +283,10 @@ async def _replay_on_map(trace, fences, options, address, clock):
 def _write_flight(out, records, trace, events, title, what, clock, **fields):
     import json
 
-    from alphafence.formats.atomic import write_all
-    from alphafence.monitor.replay import trace_tlog
+    from alphafence.fencefiles.atomic import write_all
     from alphafence.onboard.decode import decode_fence
     from alphafence.plots.flight import flight_figure
+    from alphafence.review.replay import trace_tlog
 
     track = [(s.lon, s.lat) for s in trace.samples]
     flight_figure(

@@ -45,7 +45,7 @@ def run(args) -> int:
     """Download the vehicle's fence and write it (``-o``'s suffix says how); exit 0, 2 for an
     unknown output suffix, or 3 when the vehicle or the link fails (a
     :class:`~alphafence.errors.VehicleError`)."""
-    from alphafence.formats.mistakes import output_format
+    from alphafence.zones.mistakes import output_format
 
     args.format = output_format(args.output, what="fence output")  # before connecting
     args.key = signing_key(args)
@@ -53,9 +53,9 @@ def run(args) -> int:
 
 
 async def _download(args) -> int:
-    from alphafence.formats import qgc_plan as plan
-    from alphafence.formats import qgc_wpl as waypoints
-    from alphafence.formats.atomic import write_all
+    from alphafence.fencefiles import qgc_plan as plan
+    from alphafence.fencefiles import qgc_wpl as waypoints
+    from alphafence.fencefiles.atomic import write_all
     from alphafence.vehicle.fence_transfer import download_fence
     from alphafence.vehicle.link import open_vehicle
 

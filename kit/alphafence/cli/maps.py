@@ -77,7 +77,7 @@ def check_map_args(args) -> None:
     if not tiles:
         return
     if tiles.lower().endswith(".mbtiles"):
-        from alphafence.formats.mbtiles import check_mbtiles
+        from alphafence.plots.mbtiles import check_mbtiles
 
         check_mbtiles(tiles)
         return
@@ -102,7 +102,7 @@ def map_tiles(args, bounds):
     if not tiles:
         return None
     if tiles.lower().endswith(".mbtiles"):
-        from alphafence.formats.mbtiles import tiles_around
+        from alphafence.plots.mbtiles import tiles_around
 
         held, attribution = tiles_around(tiles, bounds)
         return {"data": held, "attribution": args.tiles_attribution or attribution or ""}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import signal
 
+from alphafence.awareness.predict import Braking
 from alphafence.cli.common import (
     add_link_option,
     add_signing_option,
@@ -30,7 +31,6 @@ from alphafence.monitor.options import (
     MonitorOptions,
     RollingOptions,
 )
-from alphafence.monitor.predict import Braking
 
 
 def register(sub):
@@ -221,7 +221,7 @@ def _not_reroute(flag):
 
 def run(args) -> int:
     """Monitor the flight until Ctrl-C or SIGTERM; exit 0, or 3 when the link fails."""
-    from alphafence.monitor.fenceset import FenceSet
+    from alphafence.awareness.fenceset import FenceSet
 
     options = MonitorOptions(
         horizon_s=args.horizon,
@@ -239,7 +239,7 @@ def run(args) -> int:
     )
     need(*monitor_wants(options))
     if args.map_server:
-        from alphafence.monitor.livemap_server import parse_address
+        from alphafence.livemap.server import parse_address
 
         need(("aiohttp", "--map-server"))
         parse_address(args.map_server)
@@ -287,7 +287,7 @@ async def _run(args, fences, options) -> int:
         observers.append(UntilDisarmed(stop))
     server = None
     if args.map_server:
-        from alphafence.monitor.livemap_server import open_live_map
+        from alphafence.livemap.server import open_live_map
 
         livemap, server = await open_live_map(
             fences, args.map_server, lambda line: out_console.print(line, soft_wrap=True)

@@ -64,7 +64,7 @@ def bbox(text: str) -> tuple:
     A malformed box, coordinates out of range or a min not below its max is a usage error
     (``argparse.ArgumentTypeError``).
     """
-    from alphafence.formats.features import parse_bbox
+    from alphafence.zones.features import parse_bbox
 
     try:
         return parse_bbox(text)
@@ -189,7 +189,7 @@ def add_database_options(p: argparse.ArgumentParser) -> None:
 
     Their values become ``args.databases``, ``args.rules``, ``args.bbox``, ``args.join``,
     ``args.margin``, ``args.max_vertices`` and ``args.max_overshoot``; :func:`build_options` turns them into the
-    library's :class:`~alphafence.build.pipeline.BuildOptions`.
+    library's :class:`~alphafence.fencing.pipeline.BuildOptions`.
     """
     p.add_argument(
         "databases",
@@ -240,7 +240,7 @@ def build_wants(databases, figure=None):
     """What ``build`` and ``compare`` need beyond the base install, as
     :func:`alphafence.errors.need` takes it: pyosmium for OSM files, scipy to build fences,
     matplotlib to draw ``figure``."""
-    from alphafence.formats.database import osm_wants
+    from alphafence.zones.database import osm_wants
 
     return [*osm_wants(databases), ("scipy", "building fences"), *figure_wants(figure)]
 
@@ -251,10 +251,10 @@ def figure_wants(figure):
 
 
 def build_options(args):
-    """The :class:`~alphafence.build.pipeline.BuildOptions` of :func:`add_database_options`'s
+    """The :class:`~alphafence.fencing.pipeline.BuildOptions` of :func:`add_database_options`'s
     values, and of ``build``'s ``--method``, ``--alpha-radius`` and ``--warn-distance`` where
     the verb has them."""
-    from alphafence.build.pipeline import BuildOptions
+    from alphafence.fencing.pipeline import BuildOptions
 
     return BuildOptions(
         method=getattr(args, "method", "alpha"),
@@ -372,9 +372,9 @@ def compile_from_args(args, records):
     """
     import shapely
 
-    from alphafence.formats.mistakes import check_box, check_point
     from alphafence.onboard.compile import compile_fences, require_fence
     from alphafence.onboard.corridor import flight_path_from_plan
+    from alphafence.zones.mistakes import check_box, check_point
 
     if getattr(args, "area", None):
         area, where = flight_path_from_plan(args.area), f"the flight path of {args.area}"

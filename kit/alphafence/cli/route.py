@@ -75,14 +75,14 @@ def register(sub):
 def run(args) -> int:
     """Plan the route and write the mission; exit 0, or 1 (a
     :class:`~alphafence.errors.RoutingError`) when no route exists."""
-    from alphafence.formats import qgc_plan as plan
-    from alphafence.formats.atomic import write_all
-    from alphafence.formats.fence_read import read_fence_file as read_fences
-    from alphafence.formats.mistakes import output_format
-    from alphafence.formats.qgc_plan import mission_items
-    from alphafence.formats.qgc_wpl import mission_waypoints_text
+    from alphafence.fencefiles import qgc_plan as plan
+    from alphafence.fencefiles.atomic import write_all
+    from alphafence.fencefiles.fence_read import read_fence_file as read_fences
+    from alphafence.fencefiles.qgc_plan import mission_items
+    from alphafence.fencefiles.qgc_wpl import mission_waypoints_text
     from alphafence.route import CorridorPlanner, NoRoute
     from alphafence.route.corridor import REACH_M
+    from alphafence.zones.mistakes import output_format
 
     fmt = output_format(args.output, what="mission output")  # before the routing
     need(("scipy", "routing"), *figure_wants(args.figure))
@@ -150,7 +150,7 @@ def _check_ends(args, records):
     """Refuse an end typed LON,LAT (far from every fence, its swap among them), and an end
     more than 50 km from every fence unless ``--beyond-fences`` (a typing slip, or fences
     for another area: a route there crosses ground these fences do not describe)."""
-    from alphafence.formats.mistakes import FAR_M, check_point
+    from alphafence.zones.mistakes import FAR_M, check_point
 
     geoms = [r.geometry for r in records]
     for name, lonlat in (("--from", args.start), ("--to", args.goal)):

@@ -173,7 +173,7 @@ def fly(args) -> int:
     """Fly the mission ``args.fly`` on the simulated vehicle at ``args.connect``; exit 0 once
     it has landed and disarmed, 3 when the vehicle or the flight fails."""
     from alphafence.errors import InputError
-    from alphafence.formats.mission_items import mission_rows
+    from alphafence.flights.mission_items import mission_rows
     from alphafence.sitl.fly import fly_mission
     from alphafence.vehicle.link import open_vehicle
 

@@ -13,9 +13,9 @@ def stats_table(cmp, opts) -> Table:
 
     Parameters
     ----------
-    cmp : alphafence.build.compare.Comparison
-        What :func:`alphafence.build.compare.compare_methods` returned.
-    opts : alphafence.build.pipeline.BuildOptions
+    cmp : alphafence.fencing.compare.Comparison
+        What :func:`alphafence.fencing.compare.compare_methods` returned.
+    opts : alphafence.fencing.pipeline.BuildOptions
         The options it ran with (the title names the margin).
     """
     margin = "rules' margins" if opts.margin_m is None else f"margin {opts.margin_m:g} m"

@@ -138,10 +138,10 @@ def load_items(args):
     tuple
         ``(items, CompileResult or None)``.
     """
-    from alphafence.formats.ardupilot_fence import read_legacy_items
-    from alphafence.formats.fence_read import read_fence_file as read_fences
-    from alphafence.formats.qgc_plan import read_plan_geofence
-    from alphafence.formats.qgc_wpl import read_waypoints_fence
+    from alphafence.fencefiles.ardupilot_fence import read_legacy_items
+    from alphafence.fencefiles.fence_read import read_fence_file as read_fences
+    from alphafence.fencefiles.qgc_plan import read_plan_geofence
+    from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
 
     name = args.fences.lower()
     if name.endswith(".plan"):
@@ -164,7 +164,7 @@ def load_items(args):
 def _plan_sites(path):
     """The sites each polygon and circle of a compiled ``.plan`` stands for (None for other
     files)."""
-    from alphafence.formats.qgc_plan import read_plan_geofence
+    from alphafence.fencefiles.qgc_plan import read_plan_geofence
 
     return read_plan_geofence(path).sites if path.lower().endswith(".plan") else None
 
@@ -173,7 +173,7 @@ def onboard_kind(path):
     """``"waypoints"`` (a QGC WPL file) or ``"legacy"`` (ArduPilot's legacy fence file) for an
     onboard fence file told by its first bytes, whatever its suffix (both are often ``.txt``),
     else None (fences to compile, or no such file: their reader says so)."""
-    from alphafence.formats.ardupilot_fence import looks_like_legacy_fence
+    from alphafence.fencefiles.ardupilot_fence import looks_like_legacy_fence
 
     try:
         with open(path, "rb") as fh:

@@ -1,12 +1,10 @@
-"""The companion monitor: full-resolution fences checked against telemetry, breaches
-predicted before they happen.
+"""The in-flight companion: samples from the vehicle in, events and actions out.
 
-The pure parts, tested and replayed without a vehicle: ``fenceset`` (the fence index),
-``applicability`` (ED-269 time windows), ``predict`` (stopping distance, closest approach),
-``state`` (alert levels with hysteresis), ``traffic`` (other aircraft), ``options``,
-``events`` (every event built one way), ``onboard`` (the fence the vehicle itself holds, as a
-layer of its own) and ``engine`` (samples in, events out); ``reroute`` plans re-routes. The async parts on a MAVSDK connection: ``feeds`` (one generator per
-stream), ``commands`` (actions and alerts to the vehicle), ``reroute_flight`` (flying a
-re-route), ``eventlog`` (the JSON-lines log), ``observe`` (the public hook for observers) and
-``runner`` (the :class:`~alphafence.monitor.runner.Monitor` wiring them together).
+The engine (``engine``, ``engine_reroute``: no I/O; what it reads of its surroundings is in
+:mod:`alphafence.awareness`), what it may do (``options``), its events (``events``) and the
+vehicle's own fence as a layer (``onboard``); on the vehicle link: ``feeds`` (one async
+generator per stream), ``commands`` (actions and alerts), ``reroute`` and ``reroute_flight``
+(re-routes planned and flown), ``rolling`` (the onboard fence re-uploaded in flight),
+``eventlog`` and ``tlog`` (the logs), ``observe`` (the public hook for observers),
+``runner`` (the :class:`~alphafence.monitor.runner.Monitor` wiring them together) and ``run``.
 """

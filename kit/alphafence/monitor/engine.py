@@ -7,18 +7,18 @@ from __future__ import annotations
 
 import math
 
+from alphafence.awareness.clearance import Clearance
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.predict import vertical_reach
+from alphafence.awareness.sample import Sample, finite_velocity, plausible
+from alphafence.awareness.state import Level, StateMachine, assess
+from alphafence.awareness.traffic import Traffic
 from alphafence.geo.frame import short_distance_m
 from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
-from alphafence.monitor.clearance import Clearance
 from alphafence.monitor.engine_reroute import REROUTE_FALLBACK, RerouteDecisions
 from alphafence.monitor.events import new_event, rounded
-from alphafence.monitor.fenceset import FenceSet
 from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
 from alphafence.monitor.options import REROUTE, MonitorOptions
-from alphafence.monitor.predict import vertical_reach
-from alphafence.monitor.sample import Sample, finite_velocity, plausible
-from alphafence.monitor.state import Level, StateMachine, assess
-from alphafence.monitor.traffic import Traffic
 
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
 # modes in which the pilot flies the vehicle (ArduPilot's names: Copter, Plane, Rover):
@@ -185,7 +185,7 @@ class Engine(RerouteDecisions):
 
     def _far_from_fences(self, x, y, speed, lookahead):
         """CLEAR without a fence query when the last full check proves it and nothing could
-        change (the level is CLEAR, no re-route): :mod:`alphafence.monitor.clearance`."""
+        change (the level is CLEAR, no re-route): :mod:`alphafence.awareness.clearance`."""
         if self.clearance is None or self.sm.level != Level.CLEAR or self.options.reroute:
             return None
         return self.clearance.assess(self.fences, x, y, speed, lookahead, self.options.braking)
@@ -208,7 +208,7 @@ class Engine(RerouteDecisions):
 
     def aircraft(self, key, t, lat, lon, alt_amsl_m, ve, vn, vu=0.0, callsign=""):
         """Another aircraft's report (ADS-B or another MAVLink system) for the dynamic fences."""
-        from alphafence.monitor.traffic import Aircraft
+        from alphafence.awareness.traffic import Aircraft
 
         x, y = self.fences.frame.to_local(lon, lat)
         self.traffic.report(

@@ -5,8 +5,8 @@ kept here to keep the engine's module small."""
 
 from __future__ import annotations
 
+from alphafence.awareness.state import Assessment, Level
 from alphafence.monitor.events import new_event
-from alphafence.monitor.state import Assessment, Level
 
 REROUTE_FALLBACK = "brake"  # when no route (or no goal) exists
 

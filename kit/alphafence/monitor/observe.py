@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from alphafence.awareness.state import Level
 from alphafence.monitor.engine import Sample
-from alphafence.monitor.state import Level
 
 
 @dataclass(frozen=True)

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import shapely
 
-from alphafence.formats.fence_geojson import FenceRecord
+from alphafence.awareness.fenceset import FenceSet
+from alphafence.awareness.state import Assessment, Level, assess
+from alphafence.fencefiles.fence_geojson import FenceRecord
 from alphafence.monitor.events import new_event
-from alphafence.monitor.fenceset import FenceSet
-from alphafence.monitor.state import Assessment, Level, assess
 from alphafence.onboard.decode import breached, decode_fence
 
 OUTSIDE_BAND_M = 20_000.0  # how far beyond an inclusion its keep-out band reaches

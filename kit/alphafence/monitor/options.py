@@ -9,10 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from alphafence.awareness.predict import Braking, stopping_distance
+from alphafence.awareness.traffic import TrafficOptions
 from alphafence.errors import InputError
 from alphafence.mavlink.storage import PROFILES, Profile
-from alphafence.monitor.predict import Braking, stopping_distance
-from alphafence.monitor.traffic import TrafficOptions
 
 # the vehicle's own fence: watched as a layer, kept equal to the fences within reach and
 # watched ("rolling": alphafence.monitor.rolling), or not

@@ -37,11 +37,11 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from alphafence.awareness.predict import Braking
 from alphafence.errors import RoutingError
 from alphafence.geo.coords import from_e7_float
 from alphafence.geo.frame import EARTH_RADIUS_M, LocalFrame
 from alphafence.mavlink import ids
-from alphafence.monitor.predict import Braking
 from alphafence.route.planner import fence_label, flown_distance, read_legs
 from alphafence.route.roadmap import NoRoute
 from alphafence.vehicle.values import fields_of

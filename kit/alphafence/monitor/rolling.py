@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from alphafence.awareness.fenceset import KEEP_IN, KEEP_OUT
 from alphafence.mavlink.inclusions import inclusion_count, needs_union
 from alphafence.monitor.events import new_event, rounded
-from alphafence.monitor.fenceset import KEEP_IN, KEEP_OUT
 
 RADIUS_SLACK_M = 1.0  # the compile selects this much farther than the plan (frames differ)
 
@@ -73,8 +73,8 @@ class RollingPlan:
 
     Examples
     --------
-    >>> from alphafence.formats.fence_geojson import FenceRecord
-    >>> from alphafence.monitor.fenceset import FenceSet
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
+    >>> from alphafence.awareness.fenceset import FenceSet
     >>> from alphafence.geo.frame import LocalFrame
     >>> frame = LocalFrame(14.5, 35.9)
     >>> square = frame.geom_to_wgs84(shapely.box(400, -10, 420, 10))

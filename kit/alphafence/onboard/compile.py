@@ -156,7 +156,7 @@ def operating_area_from_plan(path):
     first : tuple
         ``(lon, lat)`` of its first position.
     """
-    from alphafence.formats.mission import read_mission
+    from alphafence.flights.mission import read_mission
 
     pts = [(w.lon, w.lat) for w in read_mission(path, min_positions=1)]
     return shapely.MultiPoint(pts).convex_hull, pts[0]
@@ -209,7 +209,7 @@ def compile_fences(
     Examples
     --------
     >>> import shapely
-    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
     >>> from alphafence.mavlink.storage import PROFILES
     >>> square = shapely.box(14.500, 35.900, 14.501, 35.901)
     >>> fence = FenceRecord("hospital/way/1", "keep_out", square)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from alphafence.formats.mission import read_mission
+from alphafence.flights.mission import read_mission
 
 LOSS_OUTSIDE = 1e-6  # what a square metre lost outside the corridor counts (ties only)
 

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import shapely
 
-from alphafence.build.as_read import split_lonlat
 from alphafence.errors import InputError
+from alphafence.fencing.as_read import split_lonlat
 from alphafence.geo.coords import quantize_e7
 from alphafence.geo.hold import hold_as_read
 from alphafence.geo.lonlat import READ_TOLERANCE_M, as_read, frame_scale
@@ -40,7 +40,7 @@ def _covers(outer, inner, slack_m=READ_TOLERANCE_M + 0.01):
 
 def _sides(lon, lat):
     """A ring's vertices, or its parts on each side of the antimeridian when it steps
-    across it (:func:`~alphafence.build.as_read.split_lonlat`), each counter-clockwise."""
+    across it (:func:`~alphafence.fencing.as_read.split_lonlat`), each counter-clockwise."""
     ring = np.column_stack([lon, lat])
     if np.ptp(lon) <= 180.0:
         return [ring.tolist()]

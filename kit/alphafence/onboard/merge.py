@@ -10,8 +10,8 @@ import numpy as np
 import shapely
 import shapely.errors
 
-from alphafence.build.fences import enclosing_circle
 from alphafence.errors import InputError, need
+from alphafence.fencing.fences import enclosing_circle
 from alphafence.geo.alpha import alpha_shape
 from alphafence.onboard.options import Piece, piece_options
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from alphafence.build.fences import circle_polygon, enclosing_circle
+from alphafence.fencing.fences import circle_polygon, enclosing_circle
 from alphafence.geo.alpha import outer_polygons
 from alphafence.geo.outward import simplify_polygon
 from alphafence.mavlink.storage import CIRCLE_BYTES, polygon_bytes

@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import shapely  # noqa: E402
 
-from alphafence.formats.atomic import write_bytes_atomic  # noqa: E402
+from alphafence.fencefiles.atomic import write_bytes_atomic  # noqa: E402
 from alphafence.geo.frame import LocalFrame, wrap_lon  # noqa: E402
 
 #: Matplotlib patch style per fence kind.

@@ -54,7 +54,7 @@ def _view(frame, x, y, near):
 
 
 def flight_check_figure(report, path, title=None, note=None):
-    """Draw a :class:`~alphafence.monitor.postflight.FlightReport` and save it as PNG.
+    """Draw a :class:`~alphafence.review.postflight.FlightReport` and save it as PNG.
 
     Parameters
     ----------

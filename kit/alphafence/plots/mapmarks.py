@@ -121,8 +121,8 @@ def site_names(records, frame, limit=4 * NAMES):
     ----------
     records : iterable
         Fences with ``kind``, ``site_id``, ``name`` and a WGS84 ``geometry``
-        (:class:`~alphafence.formats.fence_geojson.FenceRecord` or
-        :class:`~alphafence.build.fence_types.Fence`).
+        (:class:`~alphafence.fencefiles.fence_geojson.FenceRecord` or
+        :class:`~alphafence.fencing.fence_types.Fence`).
     frame : LocalFrame
         The map's frame.
     limit : int

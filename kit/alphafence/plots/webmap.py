@@ -1,7 +1,7 @@
 """Interactive HTML maps: the layers of a map page (fences by kind, restricted areas, onboard
 items) as GeoJSON for the kit's map script, and the page written all or nothing.
 
-The page (:mod:`alphafence.formats.webmap_html`) holds Leaflet and the data, so it opens with
+The page (:mod:`alphafence.plots.webmap_html`) holds Leaflet and the data, so it opens with
 no network. Coordinates are rounded to 1e-6 degrees (about 0.1 m) to keep a country's fences
 small; Leaflet draws them on one canvas, simplified for the zoom.
 """
@@ -13,8 +13,8 @@ import json
 import numpy as np
 import shapely
 
-from alphafence.formats.atomic import write_all
-from alphafence.formats.webmap_html import page
+from alphafence.fencefiles.atomic import write_all
+from alphafence.plots.webmap_html import page
 
 DIGITS = 6  # 1e-6 degrees: about 0.1 m
 
@@ -117,7 +117,7 @@ def _properties(fence) -> dict:
     if isinstance(props, dict) and "kind" in props:  # a FenceRecord read back
         return props
     if hasattr(fence, "sources"):  # a built Fence
-        from alphafence.formats.fence_geojson import fence_properties
+        from alphafence.fencefiles.fence_geojson import fence_properties
 
         return fence_properties(fence)
     return {"site_id": fence.site_id, "kind": fence.kind, "name": fence.name,
@@ -260,7 +260,7 @@ def write_map(path, title, layers, note=None, tiles=None, bounds=None, legend_no
     note : str, optional
         Small print in the corner (the data's attribution).
     tiles : dict, optional
-        A basemap (see :func:`alphafence.formats.webmap_html.page`).
+        A basemap (see :func:`alphafence.plots.webmap_html.page`).
     bounds : list, optional
         ``[[south, west], [north, east]]`` to show first; default: every layer.
     legend_note : str, optional

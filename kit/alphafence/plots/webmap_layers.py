@@ -95,7 +95,7 @@ def route_layers(planner, route, lonlat) -> list:
 
 def leg_verdicts(result) -> dict:
     """Leg number -> its verdict (a key of :data:`LEG_COLORS`), from a
-    :class:`~alphafence.monitor.mission_check.MissionCheck`."""
+    :class:`~alphafence.review.mission_check.MissionCheck`."""
     worst = {}
     order = list(LEG_COLORS)
     for i in result.issues:
@@ -112,7 +112,7 @@ def mission_layers(result, clearance) -> list:
     Parameters
     ----------
     result : MissionCheck
-        What :func:`~alphafence.monitor.mission_check.check_mission` found.
+        What :func:`~alphafence.review.mission_check.check_mission` found.
     clearance : float
         The clearance the check used (metres).
     """
@@ -177,7 +177,7 @@ def flight_layers(report) -> list:
     Parameters
     ----------
     report : FlightReport
-        What :func:`~alphafence.monitor.postflight.check_flight` returned.
+        What :func:`~alphafence.review.postflight.check_flight` returned.
     """
     track = np.asarray(report.track, float)
     alt = track[:, 3]

@@ -1,7 +1,7 @@
 """Routes around keep-out fences: a reusable Voronoi roadmap, A*, line-of-sight smoothing, a
 corridor planner that builds the roadmap over only the fences near start and goal; and the
-legs of any mission checked against fences. Missions are written and read in
-``alphafence.formats``."""
+legs of any mission checked against fences. Missions are read in
+``alphafence.flights``."""
 
 from alphafence.route.corridor import Corridor, CorridorPlanner, FenceView
 from alphafence.route.legs import LegIssue, check_legs

@@ -144,7 +144,7 @@ class FenceView:
 
     Examples
     --------
-    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
     >>> frame = LocalFrame(14.5, 35.9)
     >>> box = FenceRecord("x", "keep_out", frame.geom_to_wgs84(shapely.box(0, 0, 100, 100)))
     >>> FenceView([box], frame, 20.0).point_clear([(50, 119), (50, 121)]).tolist()
@@ -258,7 +258,7 @@ class CorridorPlanner:
     Examples
     --------
     >>> import shapely
-    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
     >>> box = shapely.box(14.500, 35.900, 14.502, 35.902)
     >>> far = shapely.box(151.2, -33.9, 151.21, -33.89)  # Sydney, not in the corridor
     >>> fences = [FenceRecord("power/way/7", "keep_out", box), FenceRecord("x", "keep_out", far)]

@@ -3,7 +3,7 @@ leave (or come near the edge of) a keep-in fence, each leg at its altitudes agai
 fence's altitude band where the bands are given.
 
 A leg's altitude changes along it as its profile says
-(:class:`~alphafence.formats.mission_flight.Waypoint`). A leg crosses a keep-out fence when the
+(:class:`~alphafence.flights.mission_flight.Waypoint`). A leg crosses a keep-out fence when the
 part of it within the fence's band enters it; it grazes the fence when it comes closer than the
 clearance to the fence's volume, measured as the larger of the horizontal and the vertical
 distance (a box around the fence: never more than the straight-line distance). A leg leaves a
@@ -168,7 +168,7 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
         ``bands(frame)`` -> ``(lower, upper)``, arrays over ``records``: each fence's limits
         as altitudes in a leg's reference (its last waypoint's ``frame``) measure them, NaN
         where a limit cannot be compared, -inf and inf where there is none
-        (:meth:`~alphafence.monitor.fenceset.FenceSet.bands`). Omitted: every fence holds at
+        (:meth:`~alphafence.awareness.fenceset.FenceSet.bands`). Omitted: every fence holds at
         every altitude.
 
     Returns
@@ -183,8 +183,8 @@ def check_legs(waypoints, records, clearance=20.0, fence_label=None, bands=None)
     Examples
     --------
     >>> import shapely
-    >>> from alphafence.formats.fence_geojson import FenceRecord
-    >>> from alphafence.formats.mission import Waypoint
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
+    >>> from alphafence.flights.mission import Waypoint
     >>> fence = FenceRecord("power/way/7", "keep_out", shapely.box(14.500, 35.900, 14.502, 35.902))
     >>> mission = [Waypoint("home", 14.497, 35.901), Waypoint("item 1", 14.505, 35.901)]
     >>> issues, legs, warning_legs = check_legs(mission, [fence])

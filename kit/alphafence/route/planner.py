@@ -37,7 +37,7 @@ def fence_label(record) -> str:
     Examples
     --------
     >>> import shapely
-    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
     >>> box = shapely.box(14.500, 35.900, 14.502, 35.902)
     >>> fence_label(FenceRecord("power/way/7", "keep_out", box, name="Substation"))
     'power/way/7 (Substation)'
@@ -197,7 +197,7 @@ class FenceRoadmap:
     Examples
     --------
     >>> import shapely
-    >>> from alphafence.formats.fence_geojson import FenceRecord
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
     >>> box = shapely.box(14.500, 35.900, 14.502, 35.902)
     >>> start, goal = (14.497, 35.901), (14.505, 35.901)  # west and east of the fence
     >>> roadmap = FenceRoadmap([FenceRecord("power/way/7", "keep_out", box)], 20.0, [start, goal])

@@ -45,7 +45,7 @@ class Flown:
 
 
 def raw_items(rows) -> list:
-    """:func:`~alphafence.formats.mission_items.mission_rows` as the vehicle's raw mission
+    """:func:`~alphafence.flights.mission_items.mission_rows` as the vehicle's raw mission
     items (MAVLink's integers for lat, lon), the first after home current."""
     from alphafence.vehicle.values import RawItem
 
@@ -78,7 +78,7 @@ async def fly_mission(vehicle, rows, say=print, timeout: float = 900.0) -> Flown
     vehicle : PymavlinkVehicle
         Connected (:func:`~alphafence.vehicle.link.open_vehicle`).
     rows : list of WplRow
-        The mission, home first (:func:`~alphafence.formats.mission_items.mission_rows`).
+        The mission, home first (:func:`~alphafence.flights.mission_items.mission_rows`).
     say : callable
         Called with a line of progress.
     timeout : float

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from alphafence.errors import InputError
-from alphafence.formats.jsonfile import read_limited
+from alphafence.zones.jsonfile import read_limited
 
 KEY_BYTES = 32
 MAX_KEY_FILE_BYTES = 4096
