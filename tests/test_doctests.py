@@ -8,7 +8,17 @@ import pkgutil
 
 import pytest
 
-STAGES = ("geo", "mavlink", "zones", "fencefiles", "fencing", "flights", "onboard", "route", "awareness")
+STAGES = (
+    "geo",
+    "mavlink",
+    "zones",
+    "fencefiles",
+    "fencing",
+    "flights",
+    "onboard",
+    "route",
+    "awareness",
+)
 
 
 def _modules():

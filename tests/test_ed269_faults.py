@@ -80,11 +80,20 @@ def test_the_build_names_both_and_writes_nothing_then_skips_them(tmp_path, capsy
     path.write_text(json.dumps(_spoiled_ed269()))
     out = tmp_path / "f.geojson"
     assert main(["build", str(path), "-o", str(out), "-q"]) == 2
-    err = capsys.readouterr().err
+    err = " ".join(capsys.readouterr().err.split())
     assert "2 problems" in err and "ZL-BAD1" in err and "ZL-BAD2" in err
+    assert "nothing was written; --skip-invalid leaves these zones out" in err
     assert not out.exists()
     assert main(["build", str(path), "-o", str(out), "--skip-invalid"]) == 0
     said = " ".join(capsys.readouterr().err.split())
     assert said.count("left out (--skip-invalid)") == 2 and out.exists()
     fenced = json.loads(out.read_text())["features"]
     assert fenced and not any("ZL-BAD" in json.dumps(f) for f in fenced)
+
+
+def test_a_fault_skip_invalid_cannot_leave_out_gets_no_such_hint(tmp_path, capsys):
+    path = tmp_path / "zones.json"
+    path.write_text(json.dumps({"UASZoneList": "not a list"}))
+    assert main(["build", str(path), "-o", str(tmp_path / "f.geojson"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "--skip-invalid" not in err

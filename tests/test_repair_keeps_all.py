@@ -190,8 +190,9 @@ def test_skip_invalid_leaves_out_malformed_geojson_features_naming_each(tmp_path
     path.write_text(json.dumps({"type": "FeatureCollection", "features": [good, bad, bad]}))
     out = tmp_path / "f.geojson"
     assert main(["build", str(path), "-o", str(out), "-q"]) == 2
-    err = capsys.readouterr().err  # both at once, one line each
+    err = capsys.readouterr().err  # both at once, one line each, and what would build
     assert "2 problems" in err and not out.exists()
+    assert "--skip-invalid leaves these zones out" in " ".join(err.split())
     assert "feature 1: malformed LineString" in err and "feature 2: malformed LineString" in err
     assert main(["build", str(path), "-o", str(out), "--skip-invalid"]) == 0
     said = " ".join(capsys.readouterr().err.split())

@@ -106,11 +106,10 @@ def jobs_count(text: str):
 def run(args) -> int:
     """Read the databases as a stream, fence them tile by tile, write the outputs as tiles
     complete (all or nothing); exit status 0."""
-    from alphafence.errors import InputError, InputErrors
+    from alphafence.errors import InputError
     from alphafence.fencefiles.atomic import write_all
-    from alphafence.fencefiles.fence_stream import open_writers, writer_for
-    from alphafence.fencing.outputs import build_meta, render
-    from alphafence.fencing.tiled import build_tiled
+    from alphafence.fencefiles.fence_stream import writer_for
+    from alphafence.fencing.outputs import build_meta
     from alphafence.zones.database import DatabaseStream
     from alphafence.zones.rules import load_rules
 
@@ -129,28 +128,13 @@ def run(args) -> int:
     try:
         stream.read_ahead()  # what it leaves out goes in the outputs' metadata
     except InputError as exc:
-        faults = exc.errors if isinstance(exc, InputErrors) else [exc]
-        if not all(hasattr(f, "airspace") for f in faults):  # not only zones at fault
-            raise
-        raise InputErrors(exc.path, faults, SKIP_HINT) from None
+        raise _hinted(exc) from None
     meta = build_meta(stream.database(), rules, opts)
     keep = bool(args.plan or args.waypoints or args.figure or args.map)
-    with progress(not args.quiet) as prog, open_writers([args.output], meta) as writers:
-        result = build_tiled(
-            stream,
-            rules,
-            opts,
-            writers=writers,
-            jobs=args.jobs,
-            dask=args.dask,
-            keep=keep,
-            progress=phases(prog, ", ".join(args.databases)),
-            tile_deg=args.tile_size,
-            # the spool (an unlinked file, gone with the process) sits beside the output, on
-            # its disk: /tmp is often memory (tmpfs), and a country's features are gigabytes
-            spool_dir=os.path.dirname(os.path.abspath(args.output)),
-        )
-        extra = render(result.fences, meta, None, args.plan, args.waypoints) if keep else {}
+    try:
+        result, extra = _build(args, stream, rules, opts, meta, keep)
+    except InputError as exc:
+        raise _hinted(exc) from None
     write_all(extra)
     if extra:
         from alphafence.mavlink.items import fence_items
@@ -266,3 +250,42 @@ def summary(db, result, opts, written):
     for n in notes:  # names read from the files are text, not rich markup
         err_console.print(f"[yellow]note:[/] {escape(n)}")
     out_console.print("wrote " + ", ".join(written))
+
+
+def _build(args, stream, rules, opts, meta, keep):
+    """The build, its fence file written as tiles complete: ``(result, the other outputs
+    rendered)``."""
+    from alphafence.fencefiles.fence_stream import open_writers
+    from alphafence.fencing.outputs import render
+    from alphafence.fencing.tiled import build_tiled
+
+    with progress(not args.quiet) as prog, open_writers([args.output], meta) as writers:
+        result = build_tiled(
+            stream,
+            rules,
+            opts,
+            writers=writers,
+            jobs=args.jobs,
+            dask=args.dask,
+            keep=keep,
+            progress=phases(prog, ", ".join(args.databases)),
+            tile_deg=args.tile_size,
+            # the spool (an unlinked file, gone with the process) sits beside the output, on
+            # its disk: /tmp is often memory (tmpfs), and a country's features are gigabytes
+            spool_dir=os.path.dirname(os.path.abspath(args.output)),
+        )
+        extra = render(result.fences, meta, None, args.plan, args.waypoints) if keep else {}
+    return result, extra
+
+
+def _hinted(exc):
+    """``exc``, with what ``--skip-invalid`` would do when it lists several faults (an OpenAir
+    file's, one or more) and each is a zone it leaves out; a single fault stays one line."""
+    from alphafence.errors import InputErrors
+
+    faults = exc.errors if isinstance(exc, InputErrors) else [exc]
+    if not isinstance(exc, InputErrors) and not hasattr(exc, "airspace"):
+        return exc  # one bad zone, one line
+    if not all(hasattr(f, "airspace") or getattr(f, "skippable", False) for f in faults):
+        return exc
+    return InputErrors(exc.path, faults, SKIP_HINT)

@@ -194,6 +194,8 @@ def settle_faults(path, faults, invalid) -> None:
     if not faults:
         return
     if invalid is None:
+        for exc in faults:
+            exc.skippable = True  # a zone --skip-invalid leaves out (the command says so)
         raise faults[0] if len(faults) == 1 else InputErrors(path, faults)
     invalid_entries(path, faults, invalid)
 
