@@ -74,11 +74,17 @@ def onboard_geometry(items, verify):
 
 
 def contained(fence_local, polys, discs):
+    """Whether the onboard polygons and discs, together, hold the fence: one disc exactly
+    (every vertex within it), else the polygons and each disc's inscribed 256-gon (inside
+    the disc: a part held across two neighbouring circles is held)."""
     pts = shapely.get_coordinates(fence_local)
     for cx, cy, r in discs:
         if np.all(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) <= r):
             return True
-    union = shapely.union_all(polys) if polys else shapely.Polygon()
+    ang = np.linspace(0.0, 2.0 * math.pi, 256, endpoint=False)
+    inscribed = [shapely.Polygon(np.column_stack([cx + r * np.cos(ang), cy + r * np.sin(ang)]))
+                 for cx, cy, r in discs]  # fmt: skip
+    union = shapely.union_all([*polys, *inscribed]) if polys or discs else shapely.Polygon()
     return union.covers(fence_local)
 
 
@@ -304,3 +310,13 @@ def test_a_needle_spike_stays_clear_of_every_option():
     for opt in piece_options(needle, False, 255):
         assert opt.local.covers(needle)
         assert shapely.distance(opt.local.exterior, needle.exterior) >= 0.9 * PAD_M, opt.label
+
+
+def test_the_containment_check_takes_neighbouring_circles_together_and_sees_a_gap():
+    """The check the onboard properties use: a sliver held by two overlapping circles is held;
+    pull them apart, or move the sliver out, and it is not (the broken cases)."""
+    sliver = shapely.box(0.0, -0.01, 30.0, 0.01)
+    assert contained(sliver, [], [(8.0, 0.0, 9.0), (22.0, 0.0, 9.0)])
+    assert not contained(sliver, [], [(8.0, 0.0, 9.0), (24.0, 0.0, 6.0)])  # a gap at 17-18 m
+    assert not contained(shapely.box(0.0, 5.0, 30.0, 9.5), [], [(8.0, 0.0, 9.0), (22.0, 0.0, 9.0)])
+    assert contained(sliver, [shapely.box(-1, -1, 16, 1)], [(22.0, 0.0, 9.0)])
