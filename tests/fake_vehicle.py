@@ -50,6 +50,7 @@ codec; the faults are applied here, around it.
 from __future__ import annotations
 
 import asyncio
+import os
 import random
 import socket
 import time
@@ -105,7 +106,22 @@ TEXT_DELAY = 0.005  # STATUSTEXT after the ACK, as ArduPilot's deferred texts ar
 
 
 def free_udp_port() -> int:
-    """A UDP port on loopback that nothing listens on right now (for MAVSDK's udpin)."""
+    """A UDP port on loopback that nothing listens on right now (for MAVSDK's udpin).
+
+    Taken below Linux's ephemeral range (32768 up), from a thousand ports of this pytest-xdist
+    worker's own: a port the system handed out as free would go to the next socket bound to
+    port 0 (another worker's fake vehicle) before the kit binds it."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:]
+    base = 20000 + (int(worker) % 12 if worker.isdigit() else 0) * 1000
+    pick = random.SystemRandom()
+    for _ in range(200):
+        port = base + pick.randrange(1000)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:  # in use: another
+                continue
+            return port
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
