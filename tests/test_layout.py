@@ -23,6 +23,7 @@ RANK = {
     "mavlink": 2,
     "zones": 3,
     "fencefiles": 4,
+    "sources": 4,
     "fencing": 5,
     "flights": 5,
     "onboard": 6,

@@ -13,6 +13,7 @@ class                exit code  raised when
 ``VehicleError``     3          the vehicle or the link to it failed, refused or disagreed
 ``SitlError``        1          an ArduPilot SITL binary is missing or did not start
 ``RoutingError``     1          no route exists (the message says what blocks it)
+``SourceError``      4          a live source of zones failed: unreachable, refused, not GeoJSON
 ``MissingDependency``  2        a package this work needs is not installed (:func:`need`)
 ===================  =========  ==============================================================
 
@@ -120,6 +121,34 @@ class SitlError(AlphaFenceError, RuntimeError):
     """ArduPilot SITL could not be found or started, or did not become ready."""
 
 
+class SourceError(AlphaFenceError):
+    """A live source of zones (an OGC API - Features collection) failed: ``str(err)`` is one
+    line naming the source and what went wrong (name resolution, refused, HTTP status,
+    timeout, not GeoJSON, too large).
+
+    Parameters
+    ----------
+    url : str
+        The source.
+    message : str
+        What went wrong, for the operator.
+    retry : bool
+        Whether asking again may help (a timeout, a refused connection, a 5xx).
+
+    Examples
+    --------
+    >>> str(SourceError("https://zones.example/collections/uas", "HTTP 404: no such collection"))
+    'https://zones.example/collections/uas: HTTP 404: no such collection'
+    """
+
+    exit_code = 4
+
+    def __init__(self, url, message, retry: bool = False):
+        self.url, self.retry = str(url), retry
+        self.message = " ".join(str(message).split())[:300]
+        super().__init__(f"{self.url}: {self.message}")
+
+
 class RoutingError(AlphaFenceError):
     """No route: the message names what blocks it (a start inside a fence, an enclosed goal)."""
 
@@ -138,6 +167,7 @@ OPTIONAL = {
     "pyarrow": ("pyarrow", "parquet", None, "17.0"),
     "lxml": ("lxml", "kml", "python3-lxml", None),
     "aiohttp": ("aiohttp", "map", "python3-aiohttp", None),
+    "psycopg": ("psycopg", "postgis", "python3-psycopg", None),
 }
 
 

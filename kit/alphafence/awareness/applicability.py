@@ -70,3 +70,31 @@ def timed(applicability) -> bool:
     return not any(
         isinstance(e, dict) and str(e.get("permanent", "")).upper() == "YES" for e in entries
     )
+
+
+def active_within(applicability, when: datetime, slack_s: float = 0.0) -> bool:
+    """Is a zone in force anywhere within ``when`` +- ``slack_s`` seconds (a clock that may be
+    that far off)? The window's own starts and ends within that span are looked at too.
+
+    Examples
+    --------
+    >>> w = [{"startDateTime": "2026-12-06T12:05:00Z", "endDateTime": "2026-12-06T13:00:00Z"}]
+    >>> noon = datetime(2026, 12, 6, 12, 0, tzinfo=timezone.utc)
+    >>> active_within(w, noon), active_within(w, noon, 600.0)
+    (False, True)
+    """
+    from datetime import timedelta
+
+    if is_active(applicability, when):
+        return True
+    if slack_s <= 0:
+        return False
+    lo, hi = when - timedelta(seconds=slack_s), when + timedelta(seconds=slack_s)
+    probes = [lo, hi]
+    entries = applicability if isinstance(applicability, list) else [applicability]
+    for e in entries:
+        for key in ("startDateTime", "endDateTime"):
+            t = _dt(e.get(key)) if isinstance(e, dict) else None
+            if t is not None and lo <= t <= hi:
+                probes.append(t)
+    return any(is_active(applicability, t) for t in probes)

@@ -240,13 +240,13 @@ class FenceSet:
         lo, hi = self.alt_min[idx] - vertical_m, self.alt_max[idx] + vertical_m
         return (lo <= alt) & (alt <= hi) & self.active[idx]
 
-    def set_time(self, when):
-        """Switch time-windowed (ED-269 applicability) fences on or off for ``when`` (an aware
-        datetime). Inactive fences are neither inside nor nearest. Call it every few seconds."""
-        from alphafence.awareness.applicability import is_active
+    def set_time(self, when, slack_s: float = 0.0):
+        """Switch time-windowed (ED-269 applicability) fences on or off for ``when`` (aware; in
+        force anywhere within ``slack_s`` of it). Inactive ones are neither inside nor nearest."""
+        from alphafence.awareness.applicability import active_within
 
         for k in self.timed:
-            now = is_active(self.applicability[k], when)
+            now = active_within(self.applicability[k], when, slack_s)
             if now != self.active[k]:
                 self.active[k] = now
                 self.version += 1

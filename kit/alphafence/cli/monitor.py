@@ -22,6 +22,7 @@ from alphafence.cli.options import (
     sd_fence_kb,
     storage_profile,
 )
+from alphafence.cli.source_options import add_source_options, source_options
 from alphafence.errors import InputError, need
 from alphafence.monitor.options import (
     ACTIONS,
@@ -147,6 +148,7 @@ def register(sub):
     add_trust_options(p)
     add_signing_option(p)
     add_link_option(p)
+    add_source_options(p, monitor=True)
     p.set_defaults(func=run)
 
 
@@ -257,7 +259,30 @@ def run(args) -> int:
         if choose_link(args.link) != "pymavlink":
             raise InputError("--tlog", "records the pymavlink link's frames: use --link pymavlink")
         check_tlog_path(args.tlog)
-    return asyncio.run(_run(args, fences, options))
+    return asyncio.run(_run(args, fences, options, live_options(args)))
+
+
+def live_options(args):
+    """The monitor's :class:`~alphafence.monitor.live.LiveOptions` (None without
+    ``--source``)."""
+    source = source_options(args)
+    if source is None:
+        if args.rules:
+            raise InputError("--rules", "reads the source's zones: add --source URL")
+        return None
+    need(("aiohttp", "--source"), ("scipy", "--source (zones are fenced in flight)"))
+    from alphafence.fencing.pipeline import BuildOptions
+    from alphafence.monitor.live import LiveOptions
+    from alphafence.zones.rules import load_rules
+
+    return LiveOptions(
+        source,
+        load_rules(args.rules),
+        BuildOptions(),
+        refresh_s=args.refresh,
+        stale_after_s=args.stale_after,
+        radius_m=args.source_radius,
+    )
 
 
 def monitor_wants(options):
@@ -272,7 +297,7 @@ def monitor_wants(options):
     return wants
 
 
-async def _run(args, fences, options) -> int:
+async def _run(args, fences, options, live=None) -> int:
     from alphafence.monitor.run import run_monitor
     from alphafence.vehicle.link import LinkError
 
@@ -311,6 +336,7 @@ async def _run(args, fences, options) -> int:
             link=args.link,
             tlog_path=args.tlog,
             observers=observers,
+            live=live,
         )
     except LinkError as exc:
         err_console.print(f"alphafence monitor: error: {exc}", soft_wrap=True)

@@ -169,6 +169,14 @@ class Engine(RerouteDecisions):
         events += self._traffic(s, float(x), float(y))
         return events
 
+    def set_fences(self, fences: FenceSet) -> None:
+        """Check against ``fences`` from the next sample on (same frame: traffic stays put);
+        the next position gets a full check, and the home's AMSL places their limits."""
+        if self.fences.home_amsl is not None:
+            fences.set_home(self.fences.home_amsl)
+        self.fences = fences
+        self.clearance = None
+
     def _home(self, s):
         """Home's altitude AMSL (the sample's altitude AMSL less its height above home): the
         fences' AMSL limits follow it (:meth:`FenceSet.set_home`). Until one comes they hold

@@ -192,6 +192,13 @@ class RollingFence:
         self.after: asyncio.Task | None = None  # a transfer to wait for before uploading
         self.held: list | None = None  # the items of the last verified upload
 
+    def set_fences(self, fences) -> None:
+        """Compile from ``fences`` from now on: the next position starts a re-upload (one under
+        way finishes first; a compile that makes the same items sends nothing)."""
+        p = self.plan
+        self.plan = RollingPlan(fences, p.reach_m, p.trigger_m, p.radius_m)
+        self.coverage = None  # an upload under way finishes, and covers the old fences only
+
     def consider(self, sample) -> asyncio.Task | None:
         """Look at a new position: start a re-upload when one is due and none is under way,
         and say once when the fence in force no longer holds the vehicle's reach.
@@ -239,7 +246,7 @@ class RollingFence:
         from alphafence.onboard.compile import compile_fences
         from alphafence.vehicle.fence_transfer import same_items
 
-        t0 = time.monotonic()
+        t0, plan = time.monotonic(), self.plan
         fields = {
             "reason": why,
             "centre": [rounded(target.lat, 7), rounded(target.lon, 7)],
@@ -250,7 +257,7 @@ class RollingFence:
         try:
             compiled = await asyncio.to_thread(
                 compile_fences,
-                self.plan.records(target),
+                plan.records(target),
                 shapely.Point(target.lon, target.lat),
                 self.options.profile,
                 target.radius_m + RADIUS_SLACK_M,
@@ -263,12 +270,14 @@ class RollingFence:
         fields.update(merges=len(compiled.merges), compile_s=rounded(time.monotonic() - t0, 3))
         same = self.held is not None and same_items(compiled.items, self.held) == []
         if same or not compiled.items:  # nothing to send: it holds this very fence, or no
-            self.coverage = target  # fence is within the radius (what it holds is farther)
+            self.coverage = target if self.plan is plan else None  # nothing within the radius
             self.handle(new_event("onboard_kept", None, None, **fields))
             return True
         if self.after is not None:  # the monitor's first download: one transfer at a time
             await asyncio.wait([self.after])
         ok = await self._upload(compiled.items, t0, target, fields)
+        if self.plan is not plan:  # new fences came meanwhile: compile again
+            self.coverage = None
         await self.reload("rolling")
         return ok
 

@@ -22,6 +22,7 @@ async def run_monitor(
     link: str | None = None,
     tlog_path=None,
     observers=(),
+    live=None,
 ):
     """Connect to the vehicle at ``url`` and run a :class:`Monitor` until ``stop`` is set.
 
@@ -49,6 +50,8 @@ async def run_monitor(
         Record every frame the vehicle sends to this ``.tlog`` (the pymavlink link).
     observers : sequence of Observer
         Watch the monitor (:mod:`alphafence.monitor.observe`).
+    live : LiveOptions, optional
+        Zones from a live source, in flight (:mod:`alphafence.monitor.live`).
 
     Returns
     -------
@@ -67,7 +70,7 @@ async def run_monitor(
     log = EventLog(log_path, echo, clock=UtcClock.wall())
     try:
         async with open_vehicle(url, timeout, signing_key, link) as vehicle:
-            monitor = Monitor(vehicle, fences, options, log, observers=observers)
+            monitor = Monitor(vehicle, fences, options, log, observers=observers, live=live)
             tlog = await record_link(vehicle, tlog_path) if tlog_path else None
             try:
                 await monitor.run(stop)

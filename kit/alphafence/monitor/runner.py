@@ -81,7 +81,9 @@ class Monitor:
         re-upload (:mod:`alphafence.monitor.rolling`).
     """
 
-    def __init__(self, vehicle, fences, options, log: EventLog, rate_hz=10.0, observers=()):
+    def __init__(
+        self, vehicle, fences, options, log: EventLog, rate_hz=10.0, observers=(), live=None
+    ):
         self.vehicle = vehicle
         self.engine = Engine(fences, options)
         self.log = log
@@ -107,6 +109,12 @@ class Monitor:
             self.rolling = RollingFence(
                 vehicle, fences, options.rolling, options.braking, self.handle, self.reload_onboard
             )
+        self.clock_slack_s = 0.0  # how far this clock may be off (a live source's Date says)
+        self.live = None  # --source: alphafence.monitor.live.LiveSource
+        if live is not None:
+            from alphafence.monitor.live import LiveSource, split_copy
+
+            self.live = LiveSource(self, live, *split_copy(fences.records))
         self.feeds = self._feeds()
         for observer in observers:
             self.add_observer(observer)
@@ -178,6 +186,8 @@ class Monitor:
             asyncio.create_task(self._follow(name, feed), name=name)
             for name, feed in self.feeds.items()
         ]
+        if self.live is not None:
+            self.tasks.append(asyncio.create_task(self.live.run(stop), name="source"))
         if self.engine.options.watch_onboard:  # the checks start on the fences meanwhile
             start = asyncio.create_task(self.reload_onboard("start"), name="onboard:start")
             self.tasks.append(start)
@@ -197,7 +207,10 @@ class Monitor:
                 events = self.engine.tick(time.monotonic())
                 if time.monotonic() - self._clock_t > CLOCK_S:  # ED-269 time windows
                     self._clock_t = time.monotonic()
-                    self.engine.fences.set_time(datetime.now(timezone.utc))
+                    now = datetime.now(timezone.utc)
+                    self.engine.fences.set_time(now, self.clock_slack_s)
+                    if self.live is not None:
+                        self.live.tick(now)
                     events += self._ended_tasks()
                 for e in events:
                     self.handle(e)
@@ -296,6 +309,17 @@ class Monitor:
                 error = "" if exc is None else f"{type(exc).__name__}: {exc}"
                 events.append(new_event("telemetry_task_ended", task=task.get_name(), error=error))
         return events
+
+    def set_fences(self, fences) -> None:
+        """Check against ``fences`` (a :class:`~alphafence.awareness.fenceset.FenceSet`, in
+        the same frame) from the next position on: a live source's zones changed. The rolling
+        onboard fence is compiled again, the re-route planner rebuilt."""
+        fences.set_time(datetime.now(timezone.utc), self.clock_slack_s)
+        self.engine.set_fences(fences)
+        if self.rolling is not None:
+            self.rolling.set_fences(fences)
+        if self.engine.options.reroute and self._loop is not None:
+            self.reroute.planner_task = self._spawn(self.reroute.build_planner())
 
     async def reload_onboard(self, cause: str = "upload") -> list:
         """Download the vehicle's fence and check against it from now on, as a layer of its

@@ -1,0 +1,81 @@
+"""The live-source options of ``build`` and ``monitor`` (``--source URL`` and how to ask it)."""
+
+from __future__ import annotations
+
+from alphafence.cli.options import positive
+
+
+def add_source_options(p, monitor: bool = False) -> None:
+    """Add ``--source`` and its options to the sub-parser ``p`` (with ``monitor``, also how
+    often it is asked in flight)."""
+    g = p.add_argument_group("live source (OGC API - Features)")
+    g.add_argument(
+        "--source",
+        metavar="URL",
+        help="an OGC API - Features collection of zones (https://host/collections/ID: ED-318 "
+        "zones, or GeoJSON read by --rules), asked for the area that matters"
+        + (
+            " every --refresh seconds in flight"
+            if monitor
+            else " (--bbox); the output "
+            "records the source, when it was fetched and its ETag: the monitor's offline copy"
+        ),
+    )
+    g.add_argument(
+        "--source-token-file",
+        metavar="FILE",
+        help="a bearer token for the source, the file's first line (default: the "
+        "ALPHAFENCE_SOURCE_TOKEN environment variable, if set)",
+    )
+    g.add_argument(
+        "--source-ca-file",
+        metavar="PEM",
+        help="trust only these CA certificates for the source's TLS (default: the system's)",
+    )
+    g.add_argument(
+        "--source-timeout",
+        type=positive("--source-timeout", "seconds"),
+        default=10.0,
+        metavar="S",
+        help="seconds for one request, connection to last byte (default 10)",
+    )
+    if not monitor:
+        return
+    g.add_argument(
+        "--refresh",
+        type=positive("--refresh", "seconds"),
+        default=30.0,
+        metavar="S",
+        help="ask the source every S seconds (default 30)",
+    )
+    g.add_argument(
+        "--stale-after",
+        type=positive("--stale-after", "seconds"),
+        metavar="S",
+        help="without a good answer for S seconds the source is stale, said to the ground "
+        "station (default: 3 refreshes); the zones in force stay",
+    )
+    g.add_argument(
+        "--source-radius",
+        type=positive("--source-radius", "metres"),
+        default=5000.0,
+        metavar="M",
+        help="ask for the zones within M metres of the vehicle and of each mission waypoint "
+        "(default 5000)",
+    )
+    g.add_argument("--rules", metavar="FILE", help="rules TOML for the source's GeoJSON zones")
+
+
+def source_options(args):
+    """The :class:`~alphafence.sources.ogc.SourceOptions` of the parsed flags (None without
+    ``--source``); a token file that cannot be read is one line."""
+    from alphafence.sources.ogc import SourceOptions, read_token
+
+    if not getattr(args, "source", None):
+        return None
+    return SourceOptions(
+        args.source,
+        token=read_token(args.source_token_file),
+        ca_file=args.source_ca_file,
+        timeout_s=args.source_timeout,
+    )

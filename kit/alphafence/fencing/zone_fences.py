@@ -1,0 +1,115 @@
+"""Fences for a live source's zones, each zone fenced on its own.
+
+A source's zones come and go one by one (a closure added, a window ended), so each is its own
+site or sites: a zone's fences never depend on another zone, an unchanged zone is never fenced
+again, and zones with different time windows, restrictions or altitude bands are never merged.
+Each fence's properties name the zone (``source_zone``) and the version (``source_hash``) it
+was made from. Runs in the monitor's worker process (:mod:`alphafence.monitor.live`) and in
+``build --source``.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+def zone_fence_features(zones, rules, options=None) -> dict:
+    """The fences of each zone, as fence GeoJSON Features.
+
+    Parameters
+    ----------
+    zones : iterable of Zone
+        From :func:`alphafence.sources.answers.read_zones`.
+    rules : Rules
+    options : BuildOptions, optional
+
+    Returns
+    -------
+    dict
+        ``{zone hash: [Feature, ...]}`` (plain dicts: they cross process boundaries); a zone
+        no rule restricts has none.
+
+    Examples
+    --------
+    >>> from alphafence.sources.answers import read_zones
+    >>> from alphafence.zones.rules import load_rules
+    >>> square = {"type": "Polygon", "coordinates": [[[14.5, 35.9], [14.501, 35.9],
+    ...           [14.501, 35.901], [14.5, 35.901], [14.5, 35.9]]]}
+    >>> zone = {"type": "Feature", "id": "closure-7", "geometry": square,
+    ...         "properties": {"identifier": "closure-7", "type": "PROHIBITED",
+    ...                        "zoneAuthority": [{"name": "police"}]}}
+    >>> zones, bad = read_zones("https://zones.example", [zone], load_rules())
+    >>> out = zone_fence_features(zones, load_rules())
+    >>> [(f["properties"]["kind"], f["properties"]["source_zone"]) for f in out[zones[0].hash]]
+    [('keep_out', 'closure-7'), ('warning', 'closure-7')]
+    """
+    from alphafence.fencefiles.fence_geojson import fence_features
+    from alphafence.fencing.pipeline import BuildOptions, build_fences
+
+    options = options or BuildOptions()
+    out = {}
+    for zone in zones:
+        if not zone.restricted:
+            out[zone.hash] = []
+            continue
+        result = build_fences(list(zone.restricted), rules, options)
+        features = [dict(f) for f in fence_features(result.fences)]
+        for f in features:
+            f["properties"] = {**f["properties"], "source_zone": zone.id,
+                               "source_hash": zone.hash}  # fmt: skip
+        out[zone.hash] = features
+    return out
+
+
+def worker_start() -> None:
+    """A fencing worker's start: below the companion's priority (the autopilot's margin and the
+    position checks come first)."""
+    try:
+        os.nice(10)
+    except OSError:
+        pass
+
+
+def read_answer(url, features, rules, options, known) -> tuple:
+    """A source's answer read and its new zones fenced: the worker process's job.
+
+    Parameters
+    ----------
+    url : str
+        The source, for messages.
+    features : list of dict
+        The answer's GeoJSON Features.
+    rules : Rules
+    options : BuildOptions
+    known : set of str
+        Hashes of the zones already read and fenced: not read again.
+
+    Returns
+    -------
+    tuple
+        ``(entries, bad, fences)``: per zone, in order, ``("known", id, hash)`` or
+        ``("new", Zone)``; one line per feature that is not a zone; ``{hash: [Feature]}`` of
+        the new zones.
+    """
+    from alphafence.sources.answers import canonical_hash, read_zones, zone_id
+
+    entries, fresh, order = [], [], []
+    for feature in features:
+        digest = canonical_hash(feature)
+        if digest in known:
+            order.append(("known", zone_id(feature, digest), digest))
+        else:
+            order.append(None)
+            fresh.append(feature)
+    zones, bad = read_zones(url, fresh, rules)
+    by_hash = {z.hash: z for z in zones}
+    fresh_hashes = iter(canonical_hash(f) for f in fresh)
+    for item in order:
+        if item is not None:
+            entries.append(item)
+            continue
+        digest = next(fresh_hashes)
+        if digest in by_hash:
+            entries.append(("new", by_hash.pop(digest)))
+    fences = zone_fence_features([e[1] for e in entries if e[0] == "new"], rules, options)
+    return entries, bad, fences

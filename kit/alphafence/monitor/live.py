@@ -1,0 +1,342 @@
+"""Zones from a live source, in flight (``monitor --source URL``).
+
+Every ``refresh_s`` (and at once on :meth:`LiveSource.hint`) the source is asked for the area
+that matters: a square of ``radius_m`` around the vehicle, and the mission's waypoints when
+the monitor knows them. New and changed zones are read and fenced in a worker process at a
+lower priority (:func:`alphafence.fencing.zone_fences.read_answer`), never on the event loop;
+the fence set is rebuilt in a worker thread and swapped in between two checks
+(:meth:`~alphafence.monitor.runner.Monitor.set_fences`): the rolling onboard fence re-uploads,
+the re-route planner is rebuilt, and the engine predicts against the new fences from the next
+position on. What is in force follows :class:`~alphafence.monitor.live_zones.LiveZones`: a
+failed, partial or empty answer removes nothing.
+
+Events: ``source_answer`` (what came, in how long), ``source_zone`` (a new or changed zone,
+its window state), ``source_zone_removed``, ``source_zone_window`` (announced, in force,
+ended), ``source_zone_invalid`` (a feature that is not a zone: the others apply),
+``source_empty`` (an empty answer where zones were: kept until confirmed), ``source_failed``,
+``source_incomplete``, ``source_stale`` and ``source_fresh`` (after ``stale_after_s`` without a
+good answer, and back), ``source_clock`` (this clock and the server's differ; windows are
+widened by the difference), ``source_fences`` (the fences in force, built and swapped).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+from alphafence.monitor.events import new_event
+from alphafence.monitor.live_zones import LiveZones, window_state
+
+CLOCK_SKEW_S = 30.0  # this clock and the server's differ by more: said, and windows widened
+BAD_SHOWN = 10  # features that are not zones named one event each, up to this many per answer
+
+
+@dataclass
+class LiveOptions:
+    """What the monitor asks a live source, and how often.
+
+    Attributes
+    ----------
+    source : SourceOptions
+    rules : Rules
+        What a plain GeoJSON feature restricts.
+    build : BuildOptions
+        How zones are fenced.
+    refresh_s : float
+        Seconds between answers.
+    stale_after_s : float or None
+        Without a good answer this long the source is stale (default: 3 refreshes).
+    radius_m : float
+        The area asked around the vehicle (and around each mission waypoint).
+    announce_s : float
+        A zone whose window starts within this many seconds is announced.
+    """
+
+    source: object
+    rules: object
+    build: object
+    refresh_s: float = 30.0
+    stale_after_s: float | None = None
+    radius_m: float = 5000.0
+    announce_s: float = 600.0
+
+    @property
+    def stale_s(self) -> float:
+        return self.stale_after_s if self.stale_after_s is not None else 3.0 * self.refresh_s
+
+
+class LiveSource:
+    """One live source followed by a running monitor.
+
+    Parameters
+    ----------
+    monitor : Monitor
+        Its fences, log, latest position and mission.
+    options : LiveOptions
+    base : list of FenceRecord
+        The fences that are not the source's (``--fences``, less the offline copy's zones).
+    copied : list of FenceRecord
+        The offline copy's fences of the source's zones (``source_zone``/``source_hash``):
+        in force until a complete answer drops them.
+    """
+
+    def __init__(self, monitor, options: LiveOptions, base, copied=()):
+        self.monitor, self.options = monitor, options
+        self.base = list(base)
+        self.fenced = {}  # zone hash -> [FenceRecord]
+        self.zones = LiveZones(_copied_zones(copied, self.fenced))
+        self.etag = self.last_modified = None
+        self.last_good = time.monotonic()
+        self.stale = False
+        self.skew_s = 0.0
+        self.windows = {}  # zone hash -> the window state last said
+        self.answers = 0
+        self.pool = None
+        self._wake = asyncio.Event()
+        self._http = None
+
+    def hint(self) -> None:
+        """Ask the source now, not at the next refresh (a ground station's word)."""
+        self._wake.set()
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Ask the source until ``stop`` is set (the monitor runs it as a task)."""
+        import multiprocessing
+
+        from alphafence.fencing.zone_fences import worker_start
+        from alphafence.sources.ogc import session
+
+        context = multiprocessing.get_context("spawn")  # no fork of a process with threads
+        self.pool = ProcessPoolExecutor(1, mp_context=context, initializer=worker_start)
+        self._http = session(self.options.source)
+        try:
+            while not stop.is_set():
+                await self.refresh()
+                self._wake.clear()
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await asyncio.wait_for(self._wake.wait(), self.options.refresh_s)
+        finally:
+            await self._http.close()
+            self.pool.shutdown(wait=False, cancel_futures=True)
+
+    def area(self):
+        """The lon/lat box asked: around the vehicle and the mission's waypoints (before the
+        first position: around every fence)."""
+        from alphafence.geo.frame import LocalFrame
+
+        points = []
+        latest = self.monitor.engine.last
+        if latest is not None:
+            points.append((latest.lon, latest.lat))
+        mission = getattr(self.monitor.reroute, "mission", None)
+        for item in (mission[1] if mission else None) or ():
+            lat, lon = getattr(item, "x", 0) / 1e7, getattr(item, "y", 0) / 1e7
+            if lat or lon:
+                points.append((lon, lat))
+        if not points:
+            b = self.monitor.engine.fences._bounds  # the fences' frame: metres
+            frame = self.monitor.engine.fences.frame
+            corners = frame.to_wgs84([b[0], b[2]], [b[1], b[3]])
+            points = list(zip(*corners))
+        r, boxes = self.options.radius_m, []
+        for lon, lat in points:
+            frame = LocalFrame(lon, lat)
+            lons, lats = frame.to_wgs84([-r, r], [-r, r])
+            boxes.append((min(lons), min(lats), max(lons), max(lats)))
+        return (min(b[0] for b in boxes), min(b[1] for b in boxes),
+                max(b[2] for b in boxes), max(b[3] for b in boxes))  # fmt: skip
+
+    async def refresh(self) -> None:
+        """One answer: asked, read and fenced in the worker, taken, the fences swapped if
+        anything changed. Never raises but for cancellation."""
+        from alphafence.errors import SourceError
+        from alphafence.sources.ogc import fetch
+
+        put = self.monitor.log.put
+        bbox = self.area()
+        try:
+            answer = await fetch(
+                self._http, self.options.source, bbox, self.etag, self.last_modified
+            )
+        except SourceError as exc:
+            put(new_event("source_failed", error=str(exc), kept=len(self.zones.versions)))
+            self._check_stale()
+            return
+        self.answers += 1
+        self._clock(answer)
+        if answer.not_modified:
+            self._good()
+            put(new_event("source_answer", not_modified=True, seconds=round(answer.seconds, 3)))
+            return
+        loop = asyncio.get_running_loop()
+        try:
+            entries, bad, fences = await loop.run_in_executor(
+                self.pool, _read_answer, self.options, answer.features, set(self.fenced)
+            )
+        except Exception as exc:  # noqa: BLE001 - a worker that failed removes nothing
+            put(new_event("source_failed", error=f"reading the answer: {exc}"))
+            return
+        zones = self._zones(entries, fences)
+        for line in bad[:BAD_SHOWN]:
+            put(new_event("source_zone_invalid", problem=line))
+        change = self.zones.answer(zones, answer.complete, bbox)
+        put(new_event("source_answer", zones=len(zones), invalid=len(bad), pages=answer.pages,
+                      complete=answer.complete, seconds=round(answer.seconds, 3),
+                      bytes=answer.bytes))  # fmt: skip
+        if answer.complete:
+            self.etag, self.last_modified = answer.etag, answer.last_modified
+            self._good()
+        else:
+            put(
+                new_event(
+                    "source_incomplete", error=str(answer.error), kept=len(self.zones.versions)
+                )
+            )
+            self._check_stale()
+        if change.kept_empty:
+            put(new_event("source_empty", kept=[z.id for z in change.kept_empty][:20],
+                          reason="an empty answer where zones were: kept until a second one"))  # fmt: skip
+        now = datetime.now(timezone.utc)
+        for z in change.added + change.changed:
+            state = window_state(z.applicability, now, self.options.announce_s, self.skew_s)
+            self.windows[z.hash] = state
+            put(new_event("source_zone", zone=z.id, name=z.name, change="changed" if z in change.changed else "new",
+                          kinds=sorted({r.kind for r in self.fenced.get(z.hash, ())}),
+                          window=state, applicability=z.applicability, source=answer.url))  # fmt: skip
+        for z in change.removed:
+            self.windows.pop(z.hash, None)
+            put(new_event("source_zone_removed", zone=z.id, name=z.name))
+        if change:
+            await self._swap()
+
+    def tick(self, now_utc) -> None:
+        """Each second: windows that changed state are said; the source gone stale is."""
+        for z in self.zones.zones:
+            state = window_state(z.applicability, now_utc, self.options.announce_s, self.skew_s)
+            if self.windows.get(z.hash) != state:
+                self.windows[z.hash] = state
+                self.monitor.handle(
+                    new_event("source_zone_window", zone=z.id, name=z.name, window=state)
+                )
+        self._check_stale()
+
+    def records(self) -> list:
+        """Every fence in force: the base's, then each zone version's."""
+        live = [r for z in self.zones.zones for r in self.fenced.get(z.hash, ())]
+        return self.base + live
+
+    async def _swap(self) -> None:
+        from alphafence.awareness.fenceset import FenceSet
+
+        t0 = time.monotonic()
+        records, frame = self.records(), self.monitor.engine.fences.frame
+
+        def build():
+            fs = FenceSet(records, frame=frame)
+            fs.index()
+            return fs
+
+        try:
+            fences = await asyncio.to_thread(build)
+        except ValueError:  # no fence at all: the set in use stays (it holds more, not less)
+            self.monitor.log.put(new_event("source_fences", fences=0, kept=True))
+            return
+        self.monitor.set_fences(fences)
+        self.monitor.log.put(new_event("source_fences", fences=len(records),
+                                       live=len(records) - len(self.base),
+                                       seconds=round(time.monotonic() - t0, 3)))  # fmt: skip
+
+    def _zones(self, entries, fences):
+        from alphafence.fencefiles.fence_geojson import fence_record
+
+        zones, by_hash = [], {z.hash: z for z in self.zones.zones}
+        for entry in entries:
+            if entry[0] == "known":
+                z = by_hash.get(entry[2]) or self._known.get(entry[2])
+                if z is not None:
+                    zones.append(z)
+                continue
+            z = entry[1]
+            self.fenced[z.hash] = [
+                fence_record(z.id, f["properties"], _shape(f["geometry"]), f"zone {z.id}", k)
+                for k, f in enumerate(fences.get(z.hash, ()))
+            ]
+            self._known[z.hash] = z
+            zones.append(z)
+        return zones
+
+    @property
+    def _known(self) -> dict:
+        if not hasattr(self, "_known_zones"):
+            self._known_zones = {z.hash: z for z in self.zones.zones}
+        return self._known_zones
+
+    def _good(self) -> None:
+        self.last_good = time.monotonic()
+        if self.stale:
+            self.stale = False
+            self.monitor.handle(new_event("source_fresh"))
+
+    def _check_stale(self) -> None:
+        quiet = time.monotonic() - self.last_good
+        if not self.stale and quiet > self.options.stale_s:
+            self.stale = True
+            self.monitor.handle(new_event("source_stale", seconds=round(quiet, 1),
+                                          kept=len(self.zones.versions)))  # fmt: skip
+
+    def _clock(self, answer) -> None:
+        skew = answer.server_skew_s
+        if skew is None:
+            return
+        doubt = abs(skew) if abs(skew) > CLOCK_SKEW_S else 0.0
+        if doubt and not self.skew_s:
+            self.monitor.handle(new_event("source_clock", skew_s=round(skew, 1),
+                                          reason="this clock and the source's differ: zone "
+                                          "windows are widened by the difference"))  # fmt: skip
+        self.skew_s = doubt
+        self.monitor.clock_slack_s = doubt
+
+
+def _read_answer(options, features, known):
+    from alphafence.fencing.zone_fences import read_answer
+
+    return read_answer(options.source.url, features, options.rules, options.build, known)
+
+
+def _shape(geometry):
+    import shapely
+
+    return shapely.geometry.shape(geometry)
+
+
+def _copied_zones(records, fenced) -> list:
+    """The offline copy's zones, one per ``(source_zone, source_hash)`` of its fences."""
+    import shapely
+
+    from alphafence.sources.answers import Zone
+
+    groups = {}
+    for r in records:
+        key = (str(r.properties["source_zone"]), str(r.properties["source_hash"]))
+        groups.setdefault(key, []).append(r)
+    zones = []
+    for (zid, digest), recs in groups.items():
+        fenced[digest] = recs
+        window = ((recs[0].properties or {}).get("zone") or {}).get("applicability")
+        outline = shapely.union_all([r.geometry for r in recs])
+        feature = {"type": "Feature", "id": zid, "properties": {},
+                   "geometry": shapely.geometry.mapping(outline)}  # fmt: skip
+        zones.append(Zone(zid, digest, feature, (), window))
+    return zones
+
+
+def split_copy(records):
+    """``(base, copied)``: the fences not from a source, and those from one (an offline copy's,
+    with ``source_zone`` and ``source_hash``)."""
+    copied = [r for r in records if "source_zone" in (r.properties or {})]
+    base = [r for r in records if "source_zone" not in (r.properties or {})]
+    return base, copied

@@ -1,0 +1,304 @@
+"""Real servers for the live-source tests, started on loopback by the tests themselves.
+
+* :func:`postgis` - Debian's PostgreSQL with PostGIS as an unprivileged cluster in a temporary
+  folder (``initdb``, ``pg_ctl``; as root, run as the ``postgres`` user), trust auth on
+  127.0.0.1 only.
+* :func:`pygeoapi` - pygeoapi (from PyPI, in its own virtual environment ``.venv-pygeoapi``:
+  ``make test`` makes it) serving one collection, from that PostGIS table or from a GeoJSON
+  file (its file-backed provider).
+* :class:`FaultProxy` (``tests/fault_proxy.py``) sits in front of pygeoapi to make it fail.
+
+Where PostgreSQL or pygeoapi is missing the tests skip with one line (a failure under
+``CI=true``: ``NO_POSTGIS`` and ``NO_PYGEOAPI`` are real parts, see ``conftest.py``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+NO_POSTGIS = "PostgreSQL with PostGIS not found"
+NO_PYGEOAPI = "pygeoapi not found"
+START_S = 120.0  # a server on a loaded machine gets this long to answer its first request
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _pg_bin():
+    """The PostgreSQL server binaries with PostGIS beside them, or None."""
+    for bindir in sorted(glob.glob("/usr/lib/postgresql/*/bin"), reverse=True):
+        version = Path(bindir).parent.name
+        if os.path.exists(f"/usr/share/postgresql/{version}/extension/postgis.control"):
+            return Path(bindir)
+    return None
+
+
+def postgis_missing() -> str | None:
+    """Why PostGIS cannot run here (the skip line), or None."""
+    if _pg_bin() is None:
+        return (f"{NO_POSTGIS} (Debian: apt-get install postgresql postgresql-15-postgis-3; "
+                ".ci/run installs it)")  # fmt: skip
+    if os.geteuid() == 0 and shutil.which("runuser") is None:
+        return f"{NO_POSTGIS}: running as root without runuser to start it unprivileged"
+    return None
+
+
+class PostGIS:
+    """A running cluster: :attr:`url` (``postgresql://alphafence@127.0.0.1:PORT/zones``)."""
+
+    def __init__(self, folder: Path):
+        self.bindir, self.folder = _pg_bin(), Path(folder)
+        self.port = free_port()
+        self.data = self.folder / "data"
+        self.url = f"postgresql://alphafence@127.0.0.1:{self.port}/zones"
+        self._as = []
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if os.geteuid() == 0:  # PostgreSQL refuses to run as root
+            self._as = ["runuser", "-u", "postgres", "--"]
+            shutil.chown(self.folder, "postgres")
+            for parent in self.folder.parents:  # pytest's tmp folders are 0700: let it in
+                if parent == Path(parent.anchor) or parent.stat().st_mode & 0o001:
+                    break
+                os.chmod(parent, parent.stat().st_mode | 0o001)
+
+    def _run(self, *cmd, **kw):
+        return subprocess.run([*self._as, *cmd], check=True, capture_output=True, text=True, **kw)
+
+    def start(self) -> PostGIS:
+        b = self.bindir
+        self._run(str(b / "initdb"), "-D", str(self.data), "-U", "alphafence", "--auth=trust",
+                  "-E", "UTF8", "--no-sync")  # fmt: skip
+        opts = f"-p {self.port} -k {self.folder} -c listen_addresses=127.0.0.1 -c fsync=off"
+        self._run(str(b / "pg_ctl"), "-D", str(self.data), "-o", opts, "-w", "-t", "120",
+                  "-l", str(self.folder / "log"), "start")  # fmt: skip
+        self._run(str(b / "createdb"), "-h", "127.0.0.1", "-p", str(self.port), "-U",
+                  "alphafence", "zones")  # fmt: skip
+        self.sql("CREATE EXTENSION postgis")
+        return self
+
+    def sql(self, text: str, *params):
+        """Run one statement (psycopg, autocommit); the rows it returns, if any."""
+        import psycopg
+
+        with psycopg.connect(self.url, autocommit=True) as conn:
+            cur = conn.execute(text, params or None)
+            return cur.fetchall() if cur.description else None
+
+    def stop(self) -> None:
+        with contextlib.suppress(subprocess.CalledProcessError):
+            self._run(str(self.bindir / "pg_ctl"), "-D", str(self.data), "-m", "immediate",
+                      "-w", "stop")  # fmt: skip
+
+
+def pygeoapi_bin() -> str | None:
+    """pygeoapi's command: ``$ALPHAFENCE_PYGEOAPI``, ``.venv-pygeoapi``, or PATH's."""
+    for candidate in (os.environ.get("ALPHAFENCE_PYGEOAPI"),
+                      str(ROOT / ".venv-pygeoapi" / "bin" / "pygeoapi"), shutil.which("pygeoapi")):  # fmt: skip
+        if candidate and os.access(candidate, os.X_OK):
+            return candidate
+    return None
+
+
+def pygeoapi_missing() -> str | None:
+    if pygeoapi_bin() is None:
+        return f"{NO_PYGEOAPI} (make test installs it into .venv-pygeoapi)"
+    return None
+
+
+def postgres_provider(pg: PostGIS, table: str) -> dict:
+    """pygeoapi's PostgreSQL provider over ``table`` (id ``id``, geometry ``geom``)."""
+    return {
+        "type": "feature",
+        "name": "PostgreSQL",
+        "data": {
+            "host": "127.0.0.1",
+            "port": pg.port,
+            "dbname": "zones",
+            "user": "alphafence",
+            "password": "",
+            "search_path": ["public"],
+        },  # fmt: skip
+        "id_field": "id",
+        "table": table,
+        "geom_field": "geom",
+    }
+
+
+def geojson_provider(path: Path) -> dict:
+    """pygeoapi's file-backed GeoJSON provider over ``path``."""
+    return {"type": "feature", "name": "GeoJSON", "data": str(path), "id_field": "id"}
+
+
+class Pygeoapi:
+    """pygeoapi serving one collection ``zones`` on loopback: :attr:`collection`."""
+
+    def __init__(self, folder: Path, provider: dict):
+        self.folder, self.provider = Path(folder), provider
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.collection = f"{self.url}/collections/zones"
+        self.proc = None
+
+    def start(self) -> Pygeoapi:
+        import yaml
+
+        config = {
+            "server": {
+                "bind": {"host": "127.0.0.1", "port": self.port},
+                "url": self.url,
+                "mimetype": "application/json; charset=UTF-8",
+                "encoding": "utf-8",
+                "languages": ["en-US"],
+                "limits": {"default_items": 500, "max_items": 1000},
+                "map": {
+                    "url": "https://tile.openstreetmap.org/{z}/{x}/{y}.png",
+                    "attribution": "OpenStreetMap",
+                },  # fmt: skip
+            },
+            "logging": {"level": "ERROR"},
+            "metadata": {
+                "identification": {
+                    "title": "AlphaFence test zones",
+                    "description": "zones",
+                    "keywords": ["zones"],
+                    "terms_of_service": "none",
+                    "url": self.url,
+                },  # fmt: skip
+                "license": {
+                    "name": "CC0",
+                    "url": "https://creativecommons.org/publicdomain/zero/1.0/",
+                },
+                "provider": {"name": "AlphaFence tests", "url": "http://127.0.0.1"},
+                "contact": {
+                    "name": "tests",
+                    "position": "tests",
+                    "address": "-",
+                    "city": "-",
+                    "stateorprovince": "-",
+                    "postalcode": "-",
+                    "country": "-",
+                    "phone": "-",
+                    "fax": "-",
+                    "email": "-",
+                    "url": "http://127.0.0.1",
+                    "hours": "-",
+                    "instructions": "-",
+                    "role": "pointOfContact",
+                },
+            },
+            "resources": {
+                "zones": {
+                    "type": "collection",
+                    "title": "zones",
+                    "description": "UAS geographical zones",
+                    "keywords": ["zones"],
+                    "extents": {
+                        "spatial": {
+                            "bbox": [-180, -90, 180, 90],
+                            "crs": "http://www.opengis.net/def/crs/OGC/1.3/CRS84",
+                        }
+                    },  # fmt: skip
+                    "providers": [self.provider],
+                }
+            },
+        }
+        cfg = self.folder / "pygeoapi.yml"
+        cfg.write_text(yaml.safe_dump(config))
+        exe = pygeoapi_bin()
+        env = {**os.environ, "PYGEOAPI_CONFIG": str(cfg),
+               "PYGEOAPI_OPENAPI": str(self.folder / "openapi.yml")}  # fmt: skip
+        subprocess.run([exe, "openapi", "generate", str(cfg), "--output-file",
+                        str(self.folder / "openapi.yml")], check=True, env=env,
+                       capture_output=True)  # fmt: skip
+        log = open(self.folder / "pygeoapi.log", "wb")
+        self.proc = subprocess.Popen([exe, "serve"], env=env, stdout=log, stderr=log,
+                                     cwd=self.folder)  # fmt: skip
+        deadline = time.monotonic() + START_S
+        while True:
+            try:
+                with urllib.request.urlopen(f"{self.collection}?f=json", timeout=5) as r:
+                    r.read()
+                return self
+            except OSError:
+                if self.proc.poll() is not None or time.monotonic() > deadline:
+                    text = (self.folder / "pygeoapi.log").read_text(errors="replace")[-2000:]
+                    raise RuntimeError(f"pygeoapi did not start:\n{text}") from None
+                time.sleep(0.1)
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+ZONES_TABLE = """
+CREATE TABLE IF NOT EXISTS {table} (
+    id text PRIMARY KEY,
+    identifier text, name text, type text, reason text,
+    "zoneAuthority" jsonb, "limitedApplicability" jsonb, "verticalLayer" jsonb,
+    updated_at timestamptz NOT NULL DEFAULT now(),
+    geom geometry(Geometry, 4326) NOT NULL
+);
+CREATE INDEX IF NOT EXISTS {table}_geom ON {table} USING gist (geom)
+"""
+
+
+def insert_zone(pg: PostGIS, table: str, zone: dict) -> None:
+    """Insert (or replace) one ED-318 zone Feature into the zones table."""
+    import json
+
+    p = zone["properties"]
+    pg.sql(
+        f"INSERT INTO {table} (id, identifier, name, type, reason, \"zoneAuthority\", "
+        "\"limitedApplicability\", \"verticalLayer\", geom) VALUES (%s, %s, %s, %s, %s, %s, %s, "
+        "%s, ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326)) ON CONFLICT (id) DO UPDATE SET "
+        "name = EXCLUDED.name, type = EXCLUDED.type, \"limitedApplicability\" = "
+        "EXCLUDED.\"limitedApplicability\", geom = EXCLUDED.geom, updated_at = now()",
+        zone["id"], p["identifier"], p.get("name"), p["type"], p.get("reason"),
+        json.dumps(p.get("zoneAuthority")), json.dumps(p.get("limitedApplicability")),
+        json.dumps(p.get("verticalLayer")), json.dumps(zone["geometry"]),
+    )  # fmt: skip
+
+
+def ed318_zone(ident, ring, name=None, window=None, kind="PROHIBITED"):
+    """An ED-318 zone Feature over the lon/lat ``ring`` (upper limit 120 m AGL)."""
+    props = {
+        "identifier": ident,
+        "name": name or ident,
+        "type": kind,
+        "reason": "EMERGENCY",
+        "zoneAuthority": [{"name": "AlphaFence test authority", "purpose": "AUTHORIZATION"}],
+        "verticalLayer": {
+            "upper": 120,
+            "upperReference": "AGL",
+            "lower": 0,
+            "lowerReference": "AGL",
+            "uom": "m",
+        },  # fmt: skip
+    }
+    if window is not None:
+        props["limitedApplicability"] = window
+    return {"type": "Feature", "id": ident, "properties": props,
+            "geometry": {"type": "Polygon", "coordinates": [list(map(list, ring))]}}  # fmt: skip
+
+
+def python() -> str:
+    return sys.executable
