@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-pytest_plugins = ["tests.sitl_fixtures"]
+pytest_plugins = ["tests.sitl_fixtures", "tests.live_servers"]
 
 # CI runs the property tests on a fixed seed so a run is reproducible; locally each run
 # explores new examples (and replays any failure hypothesis has saved).
@@ -34,14 +34,16 @@ _use_shared_sitl()
 
 
 def _real_parts():
-    """The skip reasons of tests whose real part is missing (SITL, Chromium, socat): under
+    """The skip reasons of tests whose real part is missing (SITL, Chromium, socat, PostGIS,
+    pygeoapi): under
     ``CI=true`` each is a failure, so CI cannot pass by skipping them."""
     from alphafence.sitl.find import NOT_FOUND_HELP
 
     from .browser import MISSING
+    from .live_servers import NO_POSTGIS, NO_PYGEOAPI
     from .serial_fixtures import NO_SOCAT
 
-    return (NOT_FOUND_HELP, MISSING, NO_SOCAT)
+    return (NOT_FOUND_HELP, MISSING, NO_SOCAT, NO_POSTGIS, NO_PYGEOAPI)
 
 
 @pytest.hookimpl(hookwrapper=True)

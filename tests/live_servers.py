@@ -25,6 +25,8 @@ import time
 import urllib.request
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 NO_POSTGIS = "PostgreSQL with PostGIS not found"
 NO_PYGEOAPI = "pygeoapi not found"
@@ -302,3 +304,23 @@ def ed318_zone(ident, ring, name=None, window=None, kind="PROHIBITED"):
 
 def python() -> str:
     return sys.executable
+
+
+@pytest.fixture
+def live_source(tmp_path):
+    """``(PostGIS, Pygeoapi, table)``: an empty ED-318 zones table served as the OGC API
+    collection ``zones``; both stopped after the test."""
+    for missing in (postgis_missing(), pygeoapi_missing()):
+        if missing:
+            pytest.skip(missing)
+    pg = PostGIS(tmp_path / "pg").start()
+    api = None
+    try:
+        for statement in ZONES_TABLE.format(table="zones").split(";"):
+            pg.sql(statement)
+        api = Pygeoapi(tmp_path / "api", postgres_provider(pg, "zones")).start()
+        yield pg, api, "zones"
+    finally:
+        if api is not None:
+            api.stop()
+        pg.stop()
