@@ -33,9 +33,14 @@ from alphafence.fencefiles.fence_geojson import read_fences
 from alphafence.fencing.pipeline import BuildOptions
 from alphafence.geo.coords import to_e7
 from alphafence.geo.frame import LocalFrame
-from alphafence.mavlink.ids import MAV_CMD_NAV_LAND, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT
-from alphafence.mavlink.ids import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT
-from alphafence.mavlink.ids import MAV_MISSION_TYPE_MISSION
+from alphafence.mavlink.ids import (
+    MAV_CMD_NAV_LAND,
+    MAV_CMD_NAV_TAKEOFF,
+    MAV_CMD_NAV_WAYPOINT,
+    MAV_FRAME_GLOBAL,
+    MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    MAV_MISSION_TYPE_MISSION,
+)
 from alphafence.mavlink.storage import PROFILES
 from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.live import LiveOptions
