@@ -5,6 +5,11 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 
+# pygeoapi, the OGC API - Features server the live-source tests start on loopback (over a
+# PostGIS table): a server beside the kit, in a virtual environment of its own
+PYGEOAPI       := .venv-pygeoapi
+PYGEOAPI_STAMP := $(PYGEOAPI)/.installed
+
 .PHONY: install demo test test-oldest sitl-test navio2-test bench soak fuzz fuzz-atheris lint docs clean
 
 install: $(STAMP)
@@ -16,6 +21,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+$(PYGEOAPI_STAMP):
+	$(PYTHON) -m venv $(PYGEOAPI)
+	$(PYGEOAPI)/bin/pip install --quiet --upgrade pip
+	$(PYGEOAPI)/bin/pip install --quiet 'pygeoapi==0.21.0' 'psycopg2-binary>=2.9' 'geoalchemy2>=0.15'
+	touch $@
+
 demo: $(STAMP)
 	$(BIN)/alphafence demo -o demo-out
 
@@ -24,7 +35,7 @@ demo: $(STAMP)
 # worker keeps the cores busy (on 2 cores: 10.7 minutes with 3 workers, 14.3 with 2); the
 # SITL comes from ../shared/ardupilot-sitl when no other is found
 WORKERS ?= $(shell $(PYTHON) -c "import os; print((os.cpu_count() or 1) + 1)")
-test: $(STAMP)
+test: $(STAMP) $(PYGEOAPI_STAMP)
 	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal
 
 # the whole suite at the oldest versions the kit supports (pyproject.toml's floors, mostly
@@ -41,13 +52,13 @@ $(OLDEST_STAMP): pyproject.toml .ci/oldest-constraints.txt
 		-c .ci/oldest-constraints.txt -e '.[dev]'
 	touch $@
 
-test-oldest: $(OLDEST_STAMP)
+test-oldest: $(OLDEST_STAMP) $(PYGEOAPI_STAMP)
 	$(OLDEST)/bin/python -c "import numpy, scipy, shapely; print('oldest versions: numpy', \
 		numpy.__version__, 'scipy', scipy.__version__, 'shapely', shapely.__version__)"
 	@echo "oldest versions: the suite without the tests that drive only external parts (SITL, the browser), which make test runs"
 	$(OLDEST)/bin/pytest -q -n auto --dist worksteal -m "not sitl and not browser"
 
-sitl-test: $(STAMP)
+sitl-test: $(STAMP) $(PYGEOAPI_STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
 	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m sitl
 

@@ -306,21 +306,35 @@ def python() -> str:
     return sys.executable
 
 
-@pytest.fixture
-def live_source(tmp_path):
+@contextlib.contextmanager
+def serving(folder: Path):
     """``(PostGIS, Pygeoapi, table)``: an empty ED-318 zones table served as the OGC API
-    collection ``zones``; both stopped after the test."""
+    collection ``zones``; both stopped at the end (skips, one line, where either is missing)."""
     for missing in (postgis_missing(), pygeoapi_missing()):
         if missing:
             pytest.skip(missing)
-    pg = PostGIS(tmp_path / "pg").start()
+    pg = PostGIS(folder / "pg").start()
     api = None
     try:
         for statement in ZONES_TABLE.format(table="zones").split(";"):
             pg.sql(statement)
-        api = Pygeoapi(tmp_path / "api", postgres_provider(pg, "zones")).start()
+        api = Pygeoapi(folder / "api", postgres_provider(pg, "zones")).start()
         yield pg, api, "zones"
     finally:
         if api is not None:
             api.stop()
         pg.stop()
+
+
+@pytest.fixture
+def live_source(tmp_path):
+    """A zones table served for one test (:func:`serving`)."""
+    with serving(tmp_path) as servers:
+        yield servers
+
+
+@pytest.fixture(scope="module")
+def shared_source(tmp_path_factory):
+    """A zones table served for a module's tests (each empties it first)."""
+    with serving(tmp_path_factory.mktemp("source")) as servers:
+        yield servers

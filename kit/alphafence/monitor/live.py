@@ -105,20 +105,27 @@ class LiveSource:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Ask the source until ``stop`` is set (the monitor runs it as a task)."""
-        import multiprocessing
-
-        from alphafence.fencing.zone_fences import worker_start
-        from alphafence.sources.ogc import session
-
-        context = multiprocessing.get_context("spawn")  # no fork of a process with threads
-        self.pool = ProcessPoolExecutor(1, mp_context=context, initializer=worker_start)
-        self._http = session(self.options.source)
-        try:
+        async with self.opened():
             while not stop.is_set():
                 await self.refresh()
                 self._wake.clear()
                 with contextlib.suppress(asyncio.TimeoutError):
                     await asyncio.wait_for(self._wake.wait(), self.options.refresh_s)
+
+    @contextlib.asynccontextmanager
+    async def opened(self):
+        """The worker process (spawned, not forked: the monitor has threads) and the HTTP
+        session, for :meth:`refresh`; both closed at the end."""
+        import multiprocessing
+
+        from alphafence.fencing.zone_fences import worker_start
+        from alphafence.sources.ogc import session
+
+        context = multiprocessing.get_context("spawn")
+        self.pool = ProcessPoolExecutor(1, mp_context=context, initializer=worker_start)
+        self._http = session(self.options.source)
+        try:
+            yield self
         finally:
             await self._http.close()
             self.pool.shutdown(wait=False, cancel_futures=True)

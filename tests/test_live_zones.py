@@ -1,0 +1,107 @@
+"""Which of a live source's zones are in force: for any sequence of answers (adds, changes,
+removals, failures, partial pages, areas, empty answers), the zones in force hold every zone
+of the last complete answer, and a zone leaves only by a complete answer for an area its
+geometry meets that no longer holds it (an empty one, only when the one before it was empty
+too). A rule that trusts incomplete answers breaks the property, and the test sees it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import shapely
+from hypothesis import given
+from hypothesis import strategies as st
+
+from alphafence.monitor.live_zones import LiveZones, zone_meets
+from alphafence.sources.answers import Zone
+
+WEST, EAST = (14.0, 35.0, 14.5, 35.5), (14.5, 35.0, 15.0, 35.5)
+AREAS = [WEST, EAST, (14.0, 35.0, 15.0, 35.5), None]
+
+
+@dataclass(frozen=True)
+class Restricted:
+    geometry: object
+
+
+def zone(ident: int, version: int) -> Zone:
+    lon = 14.1 + 0.09 * ident  # ids 0-4 west, 5-9 east
+    box = shapely.box(lon, 35.2, lon + 0.01, 35.21)
+    return Zone(f"Z{ident}", f"h{ident}.{version}", {"id": f"Z{ident}"}, (Restricted(box),))
+
+
+answers = st.lists(
+    st.tuples(
+        st.frozensets(st.tuples(st.integers(0, 9), st.integers(0, 2)), max_size=6),
+        st.sampled_from(["complete", "partial", "failed"]),
+        st.sampled_from(AREAS),
+    ),
+    max_size=12,
+)
+
+
+def run_and_check(states, sequence):
+    """Feed ``sequence`` to ``states`` and check the property after every answer."""
+    last_complete = None
+    previous_empty = False
+    for served, outcome, area in sequence:
+        if outcome == "failed":
+            continue  # a failed answer never reaches the zone set
+        served = {i: v for i, v in sorted(served)}  # one version per id in an answer
+        zones = [zone(i, v) for i, v in served.items()]
+        before = set(states.versions)
+        states.answer(zones, outcome == "complete", area)
+        after = set(states.versions)
+        keys = {(z.id, z.hash) for z in zones}
+        assert keys <= after, "a served zone is not in force"
+        for key in before - after:
+            gone = zone(int(key[0][1:]), int(key[1].split(".")[1]))
+            assert outcome == "complete", f"{key} removed by a {outcome} answer"
+            assert zone_meets(gone, area), f"{key} removed by an answer for another area"
+            assert key not in keys
+            assert zones or previous_empty, f"{key} removed by a first empty answer"
+        if outcome == "complete":
+            last_complete = keys
+            previous_empty = not zones and bool(before - keys)
+        if last_complete is not None:
+            assert last_complete <= after, "fewer zones than the last complete answer"
+
+
+@given(answers)
+def test_zones_in_force_never_fewer_than_the_last_complete_answer(sequence):
+    run_and_check(LiveZones(), sequence)
+
+
+class TrustsPartialAnswers(LiveZones):
+    """Broken on purpose: takes every answer as complete."""
+
+    def answer(self, zones, complete, bbox=None):
+        return super().answer(zones, True, bbox)
+
+
+def test_a_rule_that_trusts_partial_answers_is_caught():
+    sequence = [
+        (frozenset({(1, 0), (2, 0)}), "complete", WEST),
+        (frozenset({(1, 0)}), "partial", WEST),  # page 2 failed: zone 2 was on it
+    ]
+    run_and_check(LiveZones(), sequence)
+    try:
+        run_and_check(TrustsPartialAnswers(), sequence)
+    except AssertionError as exc:
+        assert "removed by a partial answer" in str(exc)
+    else:
+        raise AssertionError("the broken rule passed")
+
+
+def test_an_empty_answer_needs_a_second_to_remove_and_other_areas_keep_theirs():
+    states = LiveZones()
+    states.answer([zone(1, 0), zone(7, 0)], True, None)
+    change = states.answer([], True, WEST)
+    assert not change and [z.id for z in change.kept_empty] == ["Z1"]
+    assert {z.id for z in states.zones} == {"Z1", "Z7"}
+    change = states.answer([], True, WEST)
+    assert [z.id for z in change.removed] == ["Z1"] and [z.id for z in states.zones] == ["Z7"]
+    change = states.answer([zone(7, 1)], False, EAST)  # a new version: both until complete
+    assert [z.hash for z in change.changed] == ["h7.1"] and len(states.zones) == 2
+    change = states.answer([zone(7, 1)], True, EAST)
+    assert not change.removed and [z.hash for z in states.zones] == ["h7.1"]
