@@ -79,7 +79,8 @@ class FaultProxy:
             doc = json.loads(text)
             if f.get("empty"):
                 doc["features"], doc["numberMatched"], doc["links"] = [], 0, []
-            doc["features"] = list(doc.get("features", [])) + list(f.get("extra_features", []))
+            extra = list(f.get("extra_features", [])) if page == 1 else []  # on the first page
+            doc["features"] = list(doc.get("features", [])) + extra
             if f.get("pad_bytes"):
                 doc["padding"] = "x" * f["pad_bytes"]
             text = json.dumps(doc)

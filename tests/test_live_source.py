@@ -147,4 +147,6 @@ async def test_malformed_features_are_named_and_the_good_ones_kept(proxy, rules)
     answer = await ask(f"{proxy.url}/collections/zones", limit=100)
     found, lines = read_zones(answer.url, answer.features, rules)
     assert len(found) == 25, lines
-    assert len(lines) == 2 and "zone BAD-1" in lines[0] and "zone BAD-2: missing zone type" in lines[1]
+    assert (
+        len(lines) == 2 and "zone BAD-1" in lines[0] and "zone BAD-2: missing zone type" in lines[1]
+    )
