@@ -22,7 +22,7 @@ from alphafence.cli.options import (
     sd_fence_kb,
     storage_profile,
 )
-from alphafence.cli.source_options import add_source_options, source_options
+from alphafence.cli.source_options import add_source_options, source_line, source_options
 from alphafence.errors import InputError, need
 from alphafence.monitor.options import (
     ACTIONS,
@@ -372,6 +372,8 @@ def _echo(event):
             f"verified in {event['seconds']} s",
             soft_wrap=True,
         )
+    elif event["event"].startswith("source_"):
+        out_console.print(f"{when} {source_line(event)}", soft_wrap=True)
     elif event["event"] != "telemetry_resumed":
         out_console.print(
             f"{when} {event['event']} "

@@ -79,3 +79,29 @@ def source_options(args):
         ca_file=args.source_ca_file,
         timeout_s=args.source_timeout,
     )
+
+
+def source_line(event) -> str:
+    """One line for a live source's event (``monitor`` prints it).
+
+    Examples
+    --------
+    >>> source_line({"event": "source_zone", "zone": "Z1", "name": "fire", "change": "new",
+    ...              "kinds": ["keep_out", "warning"], "window": "active"})
+    'zone new: fire (keep_out, warning; active)'
+    """
+    kind, zone = event["event"], event.get("name") or event.get("zone") or ""
+    if kind == "source_answer":
+        if event.get("not_modified"):
+            return f"source: unchanged ({event['seconds']} s)"
+        done = "complete" if event["complete"] else "INCOMPLETE"
+        return (f"source: {event['zones']} zones, {event['invalid']} not zones, "
+                f"{event['pages']} pages, {done}, {event['seconds']} s")  # fmt: skip
+    if kind == "source_zone":
+        return f"zone {event['change']}: {zone} ({', '.join(event['kinds'])}; {event['window']})"
+    if kind == "source_zone_window":
+        return f"zone {zone}: {event['window']}"
+    if kind == "source_fences":
+        return f"fences swapped in: {event['fences']} ({event.get('live', 0)} from the source)"
+    detail = event.get("error") or event.get("problem") or event.get("reason") or ""
+    return f"{kind} {zone} {detail}".strip()

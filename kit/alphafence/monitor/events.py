@@ -191,4 +191,42 @@ def alert_text(event) -> str | None:
         return f"AF onboard {event.get('stage', 'upload')} failed: old fence kept"[:50]
     if kind == "onboard_behind":
         return "AF onboard fence behind the vehicle's reach"
+    return _source_text(event)
+
+
+def _source_text(event) -> str | None:
+    """The alerts of a live source's events: zones new, lifted, opening and closing; the
+    source stale, empty, or its clock off.
+
+    Examples
+    --------
+    >>> _source_text({"event": "source_zone", "change": "new", "name": "police closure",
+    ...               "window": "active"})
+    'AF NEW ZONE police closure'
+    >>> _source_text({"event": "source_zone_window", "name": "fire", "window": "upcoming"})
+    'AF ZONE SOON fire'
+    >>> _source_text({"event": "source_stale", "seconds": 95.2})
+    'AF zone source stale 95s: zones kept'
+    """
+    kind, name = event["event"], str(event.get("name") or event.get("zone") or "")
+    if kind == "source_zone":
+        what = {"active": "NEW ZONE", "always": "NEW ZONE", "upcoming": "ZONE SOON"}.get(
+            event.get("window"), "zone"
+        )
+        if event.get("change") == "changed":
+            what = "ZONE CHANGED"
+        return f"AF {what} {name}"[:50] if what != "zone" else None
+    if kind == "source_zone_window":
+        what = {"active": "ZONE NOW", "upcoming": "ZONE SOON", "ended": "zone ended"}
+        return f"AF {what[event['window']]} {name}"[:50] if event["window"] in what else None
+    if kind == "source_zone_removed":
+        return f"AF zone lifted {name}"[:50]
+    if kind == "source_stale":
+        return f"AF zone source stale {event.get('seconds', 0):.0f}s: zones kept"[:50]
+    if kind == "source_empty":
+        return "AF zone source empty: zones kept"
+    if kind == "source_clock":
+        return f"AF clock off {event.get('skew_s', 0):+.0f}s: windows widened"[:50]
+    if kind == "source_fresh":
+        return "AF zone source back"
     return None

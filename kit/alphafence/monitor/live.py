@@ -163,7 +163,7 @@ class LiveSource:
         from alphafence.errors import SourceError
         from alphafence.sources.ogc import fetch
 
-        put = self.monitor.log.put
+        put = self.monitor.handle  # logged, and alerted when it says something to the GCS
         bbox = self.area()
         try:
             answer = await fetch(

@@ -50,6 +50,8 @@ class Coverage:
         The fences within this distance of the centre are in it.
     sites : frozenset of str
         The site ids of the fences compiled.
+    version : int
+        The fence set's ``version`` it was compiled from (what is in force, by time window).
     """
 
     x: float
@@ -58,6 +60,7 @@ class Coverage:
     lat: float
     radius_m: float
     sites: frozenset
+    version: int = 0
 
 
 class RollingPlan:
@@ -96,10 +99,11 @@ class RollingPlan:
         self._tree = shapely.STRtree(fences.local[self._onboard])
 
     def indices(self, x: float, y: float, distance_m: float) -> list:
-        """The keep-out and keep-in fences within ``distance_m`` of ``(x, y)`` (indices into
-        the fence set, ascending)."""
+        """The keep-out and keep-in fences in force within ``distance_m`` of ``(x, y)``
+        (indices into the fence set, ascending)."""
         hit = self._tree.query(shapely.Point(x, y), predicate="dwithin", distance=distance_m)
-        return sorted(int(self._onboard[i]) for i in hit)
+        active = self.fences.active  # a time-windowed fence only while its window is open
+        return sorted(int(self._onboard[i]) for i in hit if active[self._onboard[i]])
 
     def within(self, x: float, y: float, distance_m: float) -> list:
         """The site ids of the keep-out and keep-in fences within ``distance_m`` of ``(x, y)``."""
@@ -108,7 +112,9 @@ class RollingPlan:
     def coverage(self, x: float, y: float, lon: float, lat: float) -> Coverage:
         """The :class:`Coverage` of a fence compiled around ``(x, y)`` (``lon``, ``lat``)."""
         sites = frozenset(self.within(x, y, self.radius_m))
-        return Coverage(float(x), float(y), float(lon), float(lat), self.radius_m, sites)
+        return Coverage(
+            float(x), float(y), float(lon), float(lat), self.radius_m, sites, self.fences.version
+        )
 
     def records(self, coverage: Coverage) -> list:
         """The fence records a fence of ``coverage`` is compiled from."""
@@ -129,12 +135,14 @@ class RollingPlan:
         Returns
         -------
         str or None
-            ``"start"`` (no fence yet), ``"uncovered"`` (the fence in force no longer holds
-            the whole reach), ``"moved"`` (farther than the trigger distance from its
-            centre), or None.
+            ``"start"`` (no fence yet), ``"windows"`` (a fence's time window opened or
+            closed since), ``"uncovered"`` (the fence in force no longer holds the whole
+            reach), ``"moved"`` (farther than the trigger distance from its centre), or None.
         """
         if coverage is None:
             return "start"
+        if coverage.version != self.fences.version:
+            return "windows"
         d = math.hypot(x - coverage.x, y - coverage.y)
         if d + self.reach_m > coverage.radius_m:
             return "uncovered"
