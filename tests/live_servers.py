@@ -227,7 +227,11 @@ class Pygeoapi:
                         str(self.folder / "openapi.yml")], check=True, env=env,
                        capture_output=True)  # fmt: skip
         log = open(self.folder / "pygeoapi.log", "wb")
-        self.proc = subprocess.Popen([exe, "serve"], env=env, stdout=log, stderr=log,
+        # Flask's own server without pygeoapi serve's debug reloader (a second process)
+        python = Path(exe).parent / "python"
+        run = (f"from pygeoapi.flask_app import APP; APP.run(host='127.0.0.1', "
+               f"port={self.port}, debug=False, threaded=True)")  # fmt: skip
+        self.proc = subprocess.Popen([str(python), "-c", run], env=env, stdout=log, stderr=log,
                                      cwd=self.folder)  # fmt: skip
         deadline = time.monotonic() + START_S
         while True:

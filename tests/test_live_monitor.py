@@ -7,6 +7,7 @@ own parts run (its engine and event log) without a vehicle."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from datetime import datetime, timedelta, timezone
 from types import SimpleNamespace
 
@@ -31,9 +32,9 @@ def square(lon, lat, d=0.002):
 class Companion:
     """The parts of a running monitor a live source uses: its engine, log and handler."""
 
-    def __init__(self):
+    def __init__(self, more=()):
         base = FenceRecord("base/1", "keep_out", shapely.box(14.50, 35.90, 14.501, 35.901))
-        self.engine = Engine(FenceSet([base]))
+        self.engine = Engine(FenceSet([base, *more]))
         self.log = EventLog()
         self.reroute = SimpleNamespace(mission=None)
         self.clock_slack_s = 0.0
@@ -70,7 +71,7 @@ async def setup(shared_source, rules):
     proxy = await FaultProxy(api.url).start()
     companion = Companion()
     options = LiveOptions(
-        SourceOptions(f"{proxy.url}/collections/zones", timeout_s=1.0, retries=0, limit=1),
+        SourceOptions(f"{proxy.url}/collections/zones", timeout_s=30.0, retries=0, limit=1),
         rules, BuildOptions(), refresh_s=1.0, stale_after_s=1e-6,
     )  # fmt: skip
     live = LiveSource(companion, options, companion.engine.fences.records)
@@ -97,7 +98,11 @@ async def test_a_failing_source_removes_nothing_and_says_so(setup, fault, said):
     s = setup
     s.pg.sql(f"DELETE FROM {s.table} WHERE id = 'B'")  # gone at the source, but unseen
     s.proxy.fault = fault
+    source = s.live.options.source
+    if "delay_s" in fault:  # a server slower than the timeout
+        s.live.options.source = dataclasses.replace(source, timeout_s=1.0)
     await s.live.refresh()
+    s.live.options.source = source
     assert s.companion.in_force() == {"A", "B"}
     failed = s.companion.events("source_failed") + s.companion.events("source_incomplete")
     assert failed and said in failed[-1]["error"], s.companion.log.events

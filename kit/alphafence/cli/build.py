@@ -6,7 +6,7 @@ import os
 
 from rich.table import Table
 
-from alphafence.cli.common import err_console, out_console, progress, union_hint
+from alphafence.cli.common import SKIP_HINT, err_console, out_console, progress, union_hint
 from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import (
     add_database_options,
@@ -16,10 +16,9 @@ from alphafence.cli.options import (
     non_negative,
     positive,
 )
+from alphafence.cli.source_options import add_source_options, source_options
 from alphafence.errors import need
 from alphafence.fencing import METHODS
-
-SKIP_HINT = "nothing was written; --skip-invalid leaves these zones out and builds the rest"
 
 
 def register(sub):
@@ -29,9 +28,20 @@ def register(sub):
         help="build fences from a geofence database",
         description="Build alpha-shape (or polygon, circle, exact) fences around restricted sites.",
     )
-    add_database_options(p)
+    add_database_options(p, optional=True)
     p.add_argument(
-        "-o", "--output", required=True, metavar="FENCES.geojson", help="GeoJSON output (lon, lat)"
+        "-o",
+        "--output",
+        required=True,
+        metavar="FENCES.geojson",
+        help="the fences: GeoJSON (lon, lat), .geojsonl, .parquet, or a PostGIS table "
+        "postgresql://USER@HOST:PORT/DATABASE/SCHEMA.TABLE (its rows replaced in one "
+        "transaction, for an OGC API server to serve)",
+    )
+    p.add_argument(
+        "--zones-table",
+        metavar="postgresql://.../SCHEMA.TABLE",
+        help="also write the restricted zones read to this PostGIS table",
     )
     p.add_argument(
         "--plan", metavar="FILE.plan", help="also write a QGroundControl plan (geoFence)"
@@ -88,6 +98,7 @@ def register(sub):
         "the output's metadata) instead of failing with the list of them",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    add_source_options(p)
     p.set_defaults(func=run)
 
 
@@ -110,9 +121,21 @@ def run(args) -> int:
     from alphafence.fencefiles.atomic import write_all
     from alphafence.fencefiles.fence_stream import writer_for
     from alphafence.fencing.outputs import build_meta
+    from alphafence.sources.postgis import is_postgis_url
     from alphafence.zones.database import DatabaseStream
     from alphafence.zones.rules import load_rules
 
+    source = source_options(args)
+    if source is not None:
+        from alphafence.cli.build_source import run_source
+
+        return run_source(args, build_options(args), source)
+    if not args.databases:
+        raise InputError("build", "give a geofence database, or --source URL")
+    if is_postgis_url(args.output) or args.zones_table:
+        from alphafence.cli.build_postgis import run_postgis
+
+        return run_postgis(args, run)
     wants = build_wants(args.databases, args.figure)
     if args.dask:
         wants.append(("distributed", f"--dask {args.dask}"))

@@ -21,6 +21,9 @@ from rich.progress import (
 
 from alphafence.errors import InputError, VehicleError
 
+# what a build with several malformed zones ends with (each a zone --skip-invalid leaves out)
+SKIP_HINT = "nothing was written; --skip-invalid leaves these zones out and builds the rest"
+
 # piped or captured output gets a table-friendly width instead of rich's default 80 columns
 err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
 out_console = Console(width=None if sys.stdout.isatty() else 120)

@@ -184,7 +184,7 @@ def add_connect_option(p: argparse.ArgumentParser, required: bool = True) -> Non
 # option groups
 
 
-def add_database_options(p: argparse.ArgumentParser) -> None:
+def add_database_options(p: argparse.ArgumentParser, optional: bool = False) -> None:
     """Add the geofence database and site-grouping options of ``build`` and ``compare``.
 
     Their values become ``args.databases``, ``args.rules``, ``args.bbox``, ``args.join``,
@@ -193,7 +193,7 @@ def add_database_options(p: argparse.ArgumentParser) -> None:
     """
     p.add_argument(
         "databases",
-        nargs="+",
+        nargs="*" if optional else "+",
         metavar="DATABASE",
         help="geofence database(s): .osm.pbf, .osm, GeoJSON or ED-269 JSON",
     )

@@ -69,10 +69,9 @@ def add_source_options(p, monitor: bool = False) -> None:
 def source_options(args):
     """The :class:`~alphafence.sources.ogc.SourceOptions` of the parsed flags (None without
     ``--source``); a token file that cannot be read is one line."""
-    from alphafence.sources.ogc import SourceOptions, read_token
-
     if not getattr(args, "source", None):
         return None
+    from alphafence.sources.ogc import SourceOptions, read_token
     return SourceOptions(
         args.source,
         token=read_token(args.source_token_file),

@@ -49,6 +49,10 @@ def zone_fence_features(zones, rules, options=None) -> dict:
     options = options or BuildOptions()
     out = {}
     for zone in zones:
+        if zone.fence:  # a fence already: used as served
+            props = {**zone.feature["properties"], "source_zone": zone.id, "source_hash": zone.hash}
+            out[zone.hash] = [{**zone.feature, "properties": props}]
+            continue
         if not zone.restricted:
             out[zone.hash] = []
             continue
@@ -102,6 +106,7 @@ def read_answer(url, features, rules, options, known) -> tuple:
             order.append(None)
             fresh.append(feature)
     zones, bad = read_zones(url, fresh, rules)
+    zones = [z for z in zones if not z.fence or _fence_ok(url, z, bad)]
     by_hash = {z.hash: z for z in zones}
     fresh_hashes = iter(canonical_hash(f) for f in fresh)
     for item in order:
@@ -113,3 +118,20 @@ def read_answer(url, features, rules, options, known) -> tuple:
             entries.append(("new", by_hash.pop(digest)))
     fences = zone_fence_features([e[1] for e in entries if e[0] == "new"], rules, options)
     return entries, bad, fences
+
+
+def _fence_ok(url, zone, bad) -> bool:
+    """Whether a served fence reads as a fence file's feature does (else its line in ``bad``)."""
+    import shapely
+
+    from alphafence.errors import InputError
+    from alphafence.fencefiles.fence_geojson import fence_record
+
+    props = zone.feature["properties"]
+    try:
+        fence_record(url, props, shapely.geometry.shape(zone.feature["geometry"]),
+                     f"fence {zone.id}", 0)  # fmt: skip
+    except InputError as exc:
+        bad.append(str(exc))
+        return False
+    return True

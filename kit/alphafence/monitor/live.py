@@ -144,11 +144,11 @@ class LiveSource:
             lat, lon = getattr(item, "x", 0) / 1e7, getattr(item, "y", 0) / 1e7
             if lat or lon:
                 points.append((lon, lat))
-        if not points:
-            b = self.monitor.engine.fences._bounds  # the fences' frame: metres
-            frame = self.monitor.engine.fences.frame
-            corners = frame.to_wgs84([b[0], b[2]], [b[1], b[3]])
-            points = list(zip(*corners))
+        if not points:  # around every fence (their lon/lat bounds)
+            import shapely
+
+            b = shapely.total_bounds([r.geometry for r in self.monitor.engine.fences.records])
+            points = [(b[0], b[1]), (b[2], b[3])]
         r, boxes = self.options.radius_m, []
         for lon, lat in points:
             frame = LocalFrame(lon, lat)

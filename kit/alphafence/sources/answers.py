@@ -44,6 +44,7 @@ class Zone:
     feature: dict
     restricted: tuple
     applicability: object = None
+    fence: bool = False  # a fence already (a fleet's built fences served): used as it is
 
     @property
     def name(self) -> str:
@@ -51,7 +52,8 @@ class Zone:
         for f in self.restricted:
             if f.name:
                 return str(f.name)
-        return self.id
+        served = (self.feature or {}).get("properties") or {}
+        return str(served.get("name") or self.id)
 
 
 def canonical_hash(feature) -> str:
@@ -83,6 +85,31 @@ def zone_id(feature, digest: str) -> str:
     if isinstance(feature, dict) and feature.get("id") not in (None, ""):
         return str(feature["id"])
     return f"sha256:{digest[:12]}"
+
+
+FENCE_KINDS = ("keep_out", "keep_in", "warning")
+
+
+def fence_properties(feature) -> dict | None:
+    """The properties of a feature that is one of the kit's fences (``alphafence build``'s
+    output served from a table: ``site_id``, ``kind``, ``method``; a PostGIS table's
+    ``properties`` column holds them whole), else None.
+
+    Examples
+    --------
+    >>> fence_properties({"properties": {"site_id": "x/1", "kind": "keep_out", "method": "alpha"}})
+    {'site_id': 'x/1', 'kind': 'keep_out', 'method': 'alpha'}
+    >>> fence_properties({"properties": {"type": "PROHIBITED"}}) is None
+    True
+    """
+    props = feature.get("properties") if isinstance(feature, dict) else None
+    if not isinstance(props, dict):
+        return None
+    if isinstance(props.get("properties"), dict):
+        props = props["properties"]  # a table's whole-properties column
+    if props.get("kind") in FENCE_KINDS and props.get("site_id") and props.get("method"):
+        return props
+    return None
 
 
 def read_zones(url, features, rules, known=None):
@@ -129,6 +156,9 @@ def _read_one(url, i, feature, digest, rules) -> Zone:
     ident = zone_id(feature, digest)
     if not isinstance(feature, dict) or feature.get("type") != "Feature":
         raise InputError(url, "not a GeoJSON Feature", f"feature {i}")
+    fence = fence_properties(feature)
+    if fence is not None:
+        return _read_fence(url, feature, fence, digest)
     doc = {"type": "FeatureCollection", "features": [feature]}
     repaired, skipped, invalid = [], Counter(), []
     if looks_like_ed318(doc):
@@ -141,3 +171,20 @@ def _read_one(url, i, feature, digest, rules) -> Zone:
     nested = props.get("UASZone") if isinstance(props.get("UASZone"), dict) else {}
     window = props.get("limitedApplicability", nested.get("limitedApplicability"))
     return Zone(ident, digest, feature, tuple(restricted), window)
+
+
+def _read_fence(url, feature, props, digest) -> Zone:
+    """A served fence (checked as a fence file's feature is where it is fenced:
+    :func:`alphafence.fencing.zone_fences.read_answer`)."""
+    import shapely
+
+    ident = str(feature.get("id") or f"{props['site_id']}#{props['kind']}")
+    try:
+        geometry = shapely.geometry.shape(feature.get("geometry") or {})
+    except Exception as exc:  # noqa: BLE001 - GEOS's or shapely's words, in one line
+        raise InputError(url, f"unreadable geometry: {exc}", f"fence {ident}") from None
+    if geometry.is_empty:
+        raise InputError(url, "empty geometry", f"fence {ident}")
+    window = (props.get("zone") or {}).get("applicability")
+    served = {"type": "Feature", "properties": props, "geometry": feature["geometry"]}
+    return Zone(ident, digest, served, (), window, fence=True)

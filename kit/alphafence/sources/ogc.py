@@ -325,7 +325,8 @@ async def _get_once(http, options, url, conditional):
 
     host = urlsplit(url).netloc
     try:
-        async with http.get(url, headers=conditional) as resp:
+        timeout = aiohttp.ClientTimeout(total=options.timeout_s)
+        async with http.get(url, headers=conditional, timeout=timeout) as resp:
             if resp.status == 304:
                 return 304, resp.headers, None, 0
             if resp.status >= 400:

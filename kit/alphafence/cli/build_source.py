@@ -1,0 +1,91 @@
+"""``alphafence build --source URL``: the zones a live source serves in an area, fenced one by
+one, written as the monitor's offline copy (the source, when it was fetched and its ETag in the
+output's metadata; each fence naming its zone and version)."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from alphafence.cli.common import err_console, out_console
+from alphafence.errors import InputError, InputErrors, SourceError, need
+
+NOT_WITH_SOURCE = ("--plan", "--waypoints", "--figure", "--map", "--dask")
+
+
+def run_source(args, options, source) -> int:
+    """Fetch every page, read the zones, fence them, write ``args.output`` all or nothing."""
+    import asyncio
+
+    from alphafence.cli.common import SKIP_HINT
+    from alphafence.fencing.outputs import build_meta
+    from alphafence.sources.answers import read_zones
+    from alphafence.zones.features import Database
+    from alphafence.zones.rules import load_rules
+
+    if args.databases:
+        raise InputError("--source", "reads the zones from the source: give no database too")
+    if args.zones_table:
+        raise InputError("--zones-table", "the zones are the source's own: not with --source")
+    for flag in NOT_WITH_SOURCE:
+        if getattr(args, flag[2:].replace("-", "_"), None):
+            raise InputError(flag, "is not written with --source: build the fence file, then "
+                             "draw or convert it from there")  # fmt: skip
+    need(("aiohttp", "--source"), ("scipy", "fencing zones"))
+    rules = load_rules(args.rules)
+    answer = asyncio.run(_fetch(source, args.bbox))
+    if not answer.complete:
+        raise SourceError(answer.url, f"incomplete answer, nothing written: {answer.error}")
+    zones, bad = read_zones(answer.url, answer.features, rules)
+    invalid = []
+    if bad and not args.skip_invalid:
+        faults = [InputError(answer.url, line.split(": ", 1)[-1]) for line in bad]
+        raise faults[0] if len(faults) == 1 else InputErrors(answer.url, faults, SKIP_HINT)
+    for line in bad:
+        invalid.append({"file": answer.url, "airspace": None, "line": None, "problem": line})
+    if not any(z.restricted for z in zones):
+        raise InputError(answer.url, f"serves no restricted zone in the area ({len(zones)} "
+                         f"zones, rules: {rules.source})")  # fmt: skip
+    db = Database([f for z in zones for f in z.restricted], [answer.url], [], Counter(),
+                  args.bbox, [], invalid)  # fmt: skip
+    meta = build_meta(db, rules, options)
+    meta["source"] = answer.metadata()
+    count = _write(args.output, zones, rules, options, meta)
+    if not args.quiet:
+        for entry in invalid:
+            err_console.print(f"[yellow]note:[/] left out (--skip-invalid): {entry['problem']}")
+        out_console.print(
+            f"{len(zones)} zones from {answer.url} ({answer.pages} pages, fetched "
+            f"{answer.fetched_utc}): {count} fences; wrote {args.output}"
+        )
+    return 0
+
+
+async def _fetch(options, bbox):
+    from alphafence.sources.ogc import fetch, session
+
+    async with session(options) as http:
+        return await fetch(http, options, bbox)
+
+
+def _write(output, zones, rules, options, meta) -> int:
+    """The fences of every zone, written to ``output`` (a fence GeoJSON file, or a PostGIS
+    table); how many."""
+    from alphafence.fencefiles.atomic import write_all
+    from alphafence.fencefiles.fence_geojson import dumps
+    from alphafence.fencing.zone_fences import zone_fence_features
+    from alphafence.sources.postgis import is_postgis_url, write_features
+
+    fenced = zone_fence_features(zones, rules, options)
+    features = [f for z in zones for f in fenced[z.hash]]
+    if is_postgis_url(output):
+        write_features(output, features, meta)
+        return len(features)
+    if not str(output).lower().endswith((".geojson", ".json")):
+        raise InputError(output, "with --source the output is a fence GeoJSON file or a "
+                         "postgresql:// table")  # fmt: skip
+    from alphafence import __version__
+
+    doc = {"type": "FeatureCollection", "generator": f"alphafence {__version__}",
+           "alphafence": meta, "features": features}  # fmt: skip
+    write_all({output: dumps(doc)})
+    return len(features)

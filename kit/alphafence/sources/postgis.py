@@ -1,0 +1,118 @@
+"""Fences (and zones) written to a PostGIS table, for an OGC API server to serve to a fleet.
+
+``postgresql://user@host:port/dbname/schema.table``: a libpq URL whose last path segment is
+the table. The table is made when missing (geometry in EPSG:4326 with a GiST index, the
+properties as columns, the whole properties as ``jsonb``, a ``version`` and an ``updated_at``
+column) and its rows are replaced in one transaction: a reader sees the old fences or the new
+ones, never half. Each write's ``version`` is one more than the last.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from urllib.parse import urlsplit, urlunsplit
+
+from alphafence.errors import InputError, need
+
+SCHEMES = ("postgresql://", "postgres://")
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,62}$")
+COLUMNS = (  # fence properties kept as columns (the rest are in "properties")
+    ("site_id", "text"), ("name", "text"), ("category", "text"), ("kind", "text"),
+    ("method", "text"), ("margin_m", "double precision"), ("alt_min_m", "double precision"),
+    ("alt_max_m", "double precision"), ("source_zone", "text"), ("source_hash", "text"),
+)  # fmt: skip
+
+
+def is_postgis_url(text) -> bool:
+    """Whether an output names a PostGIS table.
+
+    Examples
+    --------
+    >>> is_postgis_url("postgresql://fleet@db/zones/public.fences"), is_postgis_url("a.geojson")
+    (True, False)
+    """
+    return str(text).lower().startswith(SCHEMES)
+
+
+def split_target(url: str) -> tuple:
+    """``(connection URL, schema, table)`` of a table URL; one line when it names none.
+
+    Examples
+    --------
+    >>> split_target("postgresql://fleet@db:5432/zones/public.fences")
+    ('postgresql://fleet@db:5432/zones', 'public', 'fences')
+    >>> split_target("postgresql://fleet@db/zones/fences")
+    ('postgresql://fleet@db/zones', 'public', 'fences')
+    """
+    parts = urlsplit(url)
+    segments = [s for s in parts.path.split("/") if s]
+    if len(segments) != 2:
+        raise InputError(url, "a PostGIS output is postgresql://USER@HOST:PORT/DATABASE/"
+                         "SCHEMA.TABLE")  # fmt: skip
+    name = segments[1]
+    schema, table = name.split(".", 1) if "." in name else ("public", name)
+    for ident in (schema, table):
+        if not _NAME.match(ident):
+            raise InputError(url, f"{ident!r} is not a plain SQL name (letters, digits, _)")
+    return urlunsplit(parts._replace(path="/" + segments[0])), schema, table
+
+
+def write_features(url: str, features, meta: dict | None = None) -> int:
+    """Replace the rows of the table ``url`` names with these Features (fences, or zones), in one
+    transaction; the new ``version``.
+
+    Parameters
+    ----------
+    url : str
+        ``postgresql://.../DATABASE/SCHEMA.TABLE``.
+    features : list of dict
+        Fence GeoJSON Features (``alphafence build``'s).
+    meta : dict, optional
+        The build's metadata, kept in a table comment.
+
+    Returns
+    -------
+    int
+    """
+    need(("psycopg", f"writing {url}"))
+    import psycopg
+
+    conninfo, schema, table = split_target(url)
+    qualified = f'"{schema}"."{table}"'
+    columns = ", ".join(f'"{c}" {t}' for c, t in COLUMNS)
+    try:
+        with psycopg.connect(conninfo) as conn, conn.transaction():
+            conn.execute(f'CREATE SCHEMA IF NOT EXISTS "{schema}"')
+            conn.execute(
+                f"CREATE TABLE IF NOT EXISTS {qualified} (id text PRIMARY KEY, {columns}, "
+                "properties jsonb NOT NULL, version integer NOT NULL, "
+                "updated_at timestamptz NOT NULL DEFAULT now(), "
+                "geom geometry(Geometry, 4326) NOT NULL)"
+            )
+            conn.execute(
+                f'CREATE INDEX IF NOT EXISTS "{table}_geom" ON {qualified} USING gist (geom)'
+            )
+            row = conn.execute(f"SELECT coalesce(max(version), 0) FROM {qualified}").fetchone()
+            version = int(row[0]) + 1
+            conn.execute(f"DELETE FROM {qualified}")
+            names = ", ".join(f'"{c}"' for c, _ in COLUMNS)
+            marks = ", ".join(["%s"] * len(COLUMNS))
+            sql = (f"INSERT INTO {qualified} (id, {names}, properties, version, geom) VALUES "
+                   f"(%s, {marks}, %s, %s, ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326))")  # fmt: skip
+            with conn.cursor() as cur:
+                cur.executemany(sql, [_row(k, f, version) for k, f in enumerate(features)])
+            if meta:
+                text = json.dumps(meta).replace("'", "''")
+                conn.execute(f"COMMENT ON TABLE {qualified} IS '{text}'")
+    except psycopg.Error as exc:
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        raise InputError(url, f"PostGIS refused the write, nothing changed: {message}") from None
+    return version
+
+
+def _row(k, feature, version):
+    p = feature["properties"]
+    ident = f"{p.get('site_id') or 'fence'}#{p.get('kind')}#{k}"
+    values = [p.get(c) for c, _ in COLUMNS]
+    return (ident, *values, json.dumps(p), version, json.dumps(feature["geometry"]))
