@@ -24,7 +24,9 @@ otherwise:
   ``background="TEXT"`` (the command keeps running, as SITL and the monitor do until Ctrl-C:
   it is started, must print TEXT, and is stopped with SIGINT once the page's blocks have run;
   it must then exit 0, or 130 as socat does on Ctrl-C),
-  ``needs=PROGRAM`` (skipped, and counted, when PROGRAM is not on PATH).
+  ``needs=PROGRAM`` (skipped, and counted, when PROGRAM is not on PATH),
+  ``unprivileged`` (a server that refuses root, PostgreSQL's: run as the ``postgres`` user
+  when the tests run as root).
 
 A command ending in ``&`` runs in the background, as a shell runs it: the next command starts
 at once, and a later ``wait`` waits for every such command, each of which must exit 0.
@@ -54,6 +56,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BIN = Path(sys.executable).parent
 MALTA = ROOT.parent / "shared" / "data" / "osm" / "malta-2018-08-27.osm.pbf"
+PYGEOAPI = ROOT / ".venv-pygeoapi" / "bin"
 
 RUN = {"console", "bash", "sh", "shell", "python"}
 COMMAND_TIMEOUT_S = 300
@@ -117,8 +120,8 @@ def _options(text: str, where: str) -> dict:
     options = {}
     for word in shlex.split(text or ""):
         key, eq, value = word.partition("=")
-        if key not in ("exit", "sitl", "background", "needs", "timeout") or (
-            bool(eq) == (key == "sitl")
+        if key not in ("exit", "sitl", "background", "needs", "timeout", "unprivileged") or (
+            bool(eq) == (key in ("sitl", "unprivileged"))
         ):
             raise ValueError(f"{where}: docs-test option {word!r} not understood")
         options[key] = value if eq else True
@@ -186,13 +189,38 @@ GIVEN = {
     "airspace.openair": lambda p: shutil.copy(ROOT / "tests/data/openair/sample.openair", p),
     # the repository's example missions, as the routes page names them from a checkout
     "missions": lambda p: shutil.copytree(ROOT / "missions", p),
+    # the live-sources page: the kit's ED-318 sample and the page's own pygeoapi.yml
+    "malta-closures.geojson": lambda p: shutil.copy(
+        ROOT / "tests/data/ed318/malta-closures.geojson", p
+    ),
+    "pygeoapi.yml": lambda p: p.write_text(_yaml_block("live-sources.md")),
 }
+
+
+def _yaml_block(page: str) -> str:
+    """The first ``yaml`` block of ``page``: a file the page shows whole."""
+    return next(b.text for b in _read(page) if b.lang == "yaml")
+
+
+def _unprivileged(argv: list, directory: Path) -> list:
+    """``argv`` as the ``postgres`` user when running as root (PostgreSQL refuses root), with
+    ``directory`` open to it."""
+    if os.geteuid() != 0:
+        return argv
+    directory.chmod(0o777)
+    for parent in directory.parents:
+        if parent == Path(parent.anchor):
+            break
+        parent.chmod(parent.stat().st_mode | 0o001)
+    return ["runuser", "-u", "postgres", "--", *argv]
 
 
 # -- running a page ---------------------------------------------------------------------------
 def _env() -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith("ALPHAFENCE_")}
     env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
+    if (PYGEOAPI / "pygeoapi").exists():  # make test's pygeoapi (the live-sources page)
+        env["PATH"] += f"{os.pathsep}{PYGEOAPI}"
     env["COLUMNS"] = "120"
     return env
 
@@ -262,7 +290,7 @@ def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
                 left_out.append(f"{block.where}: needs SITL")
                 continue
             needs = block.options.get("needs")
-            if needs and shutil.which(needs) is None:
+            if needs and shutil.which(needs, path=_env()["PATH"]) is None:
                 left_out.append(f"{block.where}: needs {needs}")
                 continue
             expected = int(block.options.get("exit", 0))
@@ -289,6 +317,8 @@ def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
                     if block.lang == "python"
                     else ["bash", "-c", command]
                 )
+                if block.options.get("unprivileged"):
+                    argv = _unprivileged(argv, directory)
                 done = subprocess.run(
                     argv,
                     cwd=directory,
@@ -305,10 +335,21 @@ def run_page(page: str, directory: Path, have_sitl: bool) -> list[str]:
                 assert job.proc.poll() is None, f"{job.where}: stopped early:\n{job.text}"
     finally:
         codes = [(job, job.stop()) for job in reversed(background + jobs)]
+        _stop_databases(directory)
     assert not jobs, f"{jobs[0].where}: started with & and never waited for: {jobs[0].command}"
     for job, code in codes:
         assert code in (0, 130), f"{job.where}: exit {code} after Ctrl-C: {job.command}\n{job.text}"
     return left_out
+
+
+def _stop_databases(directory: Path) -> None:
+    """A PostgreSQL cluster a page started and did not stop (it failed first): stopped at
+    once (SIGQUIT, its immediate shutdown), so that the next run finds its port free."""
+    for pid_file in directory.glob("*/postmaster.pid"):
+        try:
+            os.kill(int(pid_file.read_text().split()[0]), signal.SIGQUIT)
+        except (OSError, ValueError, IndexError):
+            pass
 
 
 def _params():

@@ -42,7 +42,7 @@ def run_source(args, options, source) -> int:
         raise faults[0] if len(faults) == 1 else InputErrors(answer.url, faults, SKIP_HINT)
     for line in bad:
         invalid.append({"file": answer.url, "airspace": None, "line": None, "problem": line})
-    if not any(z.restricted for z in zones):
+    if not any(z.restricted or z.fence for z in zones):
         raise InputError(answer.url, f"serves no restricted zone in the area ({len(zones)} "
                          f"zones, rules: {rules.source})")  # fmt: skip
     db = Database([f for z in zones for f in z.restricted], [answer.url], [], Counter(),
