@@ -36,17 +36,18 @@ class FaultProxy:
         self.url = None
         self._runner = None
 
-    async def start(self) -> FaultProxy:
+    async def start(self, ssl_context=None) -> FaultProxy:
+        """Listen on a free loopback port (HTTPS with ``ssl_context``)."""
         from aiohttp import web
 
         app = web.Application()
         app.router.add_get("/{tail:.*}", self._handle)
         self._runner = web.AppRunner(app)
         await self._runner.setup()
-        site = web.TCPSite(self._runner, "127.0.0.1", 0)
+        site = web.TCPSite(self._runner, "127.0.0.1", 0, ssl_context=ssl_context)
         await site.start()
         port = site._server.sockets[0].getsockname()[1]
-        self.url = f"http://127.0.0.1:{port}"
+        self.url = f"{'https' if ssl_context else 'http'}://127.0.0.1:{port}"
         return self
 
     async def stop(self) -> None:

@@ -150,3 +150,61 @@ async def test_malformed_features_are_named_and_the_good_ones_kept(proxy, rules)
     assert (
         len(lines) == 2 and "zone BAD-1" in lines[0] and "zone BAD-2: missing zone type" in lines[1]
     )
+
+
+def _certificates(folder):
+    """A CA and a server certificate for 127.0.0.1 it signed: (CA PEM path, server context)."""
+    import datetime
+    import ipaddress
+    import ssl
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    now = datetime.datetime.now(datetime.timezone.utc)
+
+    def cert(subject, issuer, key, signer, ca):
+        b = (x509.CertificateBuilder().subject_name(subject).issuer_name(issuer)
+             .public_key(key.public_key()).serial_number(x509.random_serial_number())
+             .not_valid_before(now - datetime.timedelta(days=1))
+             .not_valid_after(now + datetime.timedelta(days=1))
+             .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))  # fmt: skip
+        if not ca:
+            b = b.add_extension(
+                x509.SubjectAlternativeName([x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]),
+                critical=False,
+            )
+        return b.sign(signer, hashes.SHA256())
+
+    ca_key, key = ec.generate_private_key(ec.SECP256R1()), ec.generate_private_key(ec.SECP256R1())
+    ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "AlphaFence test CA")])
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "127.0.0.1")])
+    ca = cert(ca_name, ca_name, ca_key, ca_key, True)
+    server = cert(name, ca_name, key, ca_key, False)
+    pem = serialization.Encoding.PEM
+    (folder / "ca.pem").write_bytes(ca.public_bytes(pem))
+    (folder / "server.pem").write_bytes(server.public_bytes(pem))
+    (folder / "server.key").write_bytes(key.private_bytes(
+        pem, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))  # fmt: skip
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    context.load_cert_chain(folder / "server.pem", folder / "server.key")
+    return folder / "ca.pem", context
+
+
+async def test_tls_is_verified_and_a_ca_file_trusts_a_private_ca(zones, tmp_path):
+    _, api, _ = zones
+    ca, context = _certificates(tmp_path)
+    proxy = await FaultProxy(api.url).start(ssl_context=context)
+    try:
+        url = f"{proxy.url}/collections/zones"
+        assert url.startswith("https://")
+        with pytest.raises(SourceError, match="TLS certificate of 127.0.0.1:.* not trusted"):
+            await ask(url)
+        answer = await ask(url, ca_file=str(ca))
+        assert answer.complete and len(answer.features) == 25
+        with pytest.raises(SourceError, match="cannot read the CA file"):
+            await ask(url, ca_file=str(tmp_path / "missing.pem"))
+    finally:
+        await proxy.stop()

@@ -72,6 +72,7 @@ def source_options(args):
     if not getattr(args, "source", None):
         return None
     from alphafence.sources.ogc import SourceOptions, read_token
+
     return SourceOptions(
         args.source,
         token=read_token(args.source_token_file),

@@ -45,23 +45,28 @@ def zone_fence_features(zones, rules, options=None) -> dict:
     """
     from alphafence.fencefiles.fence_geojson import fence_features
     from alphafence.fencing.pipeline import BuildOptions, build_fences
+    from alphafence.fencing.sites import group_sites
 
     options = options or BuildOptions()
-    out = {}
+    out, sites, owner = {}, [], {}
     for zone in zones:
+        out[zone.hash] = []
         if zone.fence:  # a fence already: used as served
             props = {**zone.feature["properties"], "source_zone": zone.id, "source_hash": zone.hash}
             out[zone.hash] = [{**zone.feature, "properties": props}]
             continue
-        if not zone.restricted:
-            out[zone.hash] = []
-            continue
-        result = build_fences(list(zone.restricted), rules, options)
-        features = [dict(f) for f in fence_features(result.fences)]
-        for f in features:
-            f["properties"] = {**f["properties"], "source_zone": zone.id,
-                               "source_hash": zone.hash}  # fmt: skip
-        out[zone.hash] = features
+        # each zone's own sites (never merged with another zone's), fenced all at once below
+        for site in group_sites(list(zone.restricted), rules, options.join_m):
+            if site.site_id in owner:  # two zones' sites named alike: told apart by a suffix
+                site.site_id = f"{site.site_id}#{zone.hash[:8]}"
+            owner[site.site_id] = zone
+            sites.append(site)
+    if sites:
+        result = build_fences([], rules, options, sites=sites)
+        for fence, feature in zip(result.fences, fence_features(result.fences)):
+            zone = owner[fence.site_id]
+            props = {**feature["properties"], "source_zone": zone.id, "source_hash": zone.hash}
+            out[zone.hash].append({**feature, "properties": props})
     return out
 
 
@@ -92,8 +97,8 @@ def read_answer(url, features, rules, options, known) -> tuple:
     -------
     tuple
         ``(entries, bad, fences)``: per zone, in order, ``("known", id, hash)`` or
-        ``("new", Zone)``; one line per feature that is not a zone; ``{hash: [Feature]}`` of
-        the new zones.
+        ``("new", Zone)``; one line per feature that is not a zone; ``{hash: [FenceRecord]}``
+        of the new zones (read here, in the worker, as a fence file's features are).
     """
     from alphafence.sources.answers import canonical_hash, read_zones, zone_id
 
@@ -117,7 +122,24 @@ def read_answer(url, features, rules, options, known) -> tuple:
         if digest in by_hash:
             entries.append(("new", by_hash.pop(digest)))
     fences = zone_fence_features([e[1] for e in entries if e[0] == "new"], rules, options)
-    return entries, bad, fences
+    return entries, bad, {h: _records(url, h, feats) for h, feats in fences.items()}
+
+
+def _records(url, digest, features) -> list:
+    import shapely
+
+    from alphafence.fencefiles.fence_geojson import fence_record
+
+    return [
+        fence_record(
+            url,
+            f["properties"],
+            shapely.geometry.shape(f["geometry"]),
+            f"zone {f['properties']['source_zone']}",
+            k,
+        )  # fmt: skip
+        for k, f in enumerate(features)
+    ]
 
 
 def _fence_ok(url, zone, bad) -> bool:

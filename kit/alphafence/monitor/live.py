@@ -258,8 +258,6 @@ class LiveSource:
                                        seconds=round(time.monotonic() - t0, 3)))  # fmt: skip
 
     def _zones(self, entries, fences):
-        from alphafence.fencefiles.fence_geojson import fence_record
-
         zones, by_hash = [], {z.hash: z for z in self.zones.zones}
         for entry in entries:
             if entry[0] == "known":
@@ -268,10 +266,7 @@ class LiveSource:
                     zones.append(z)
                 continue
             z = entry[1]
-            self.fenced[z.hash] = [
-                fence_record(z.id, f["properties"], _shape(f["geometry"]), f"zone {z.id}", k)
-                for k, f in enumerate(fences.get(z.hash, ()))
-            ]
+            self.fenced[z.hash] = fences.get(z.hash, [])  # read in the worker
             self._known[z.hash] = z
             zones.append(z)
         return zones
@@ -312,12 +307,6 @@ def _read_answer(options, features, known):
     from alphafence.fencing.zone_fences import read_answer
 
     return read_answer(options.source.url, features, options.rules, options.build, known)
-
-
-def _shape(geometry):
-    import shapely
-
-    return shapely.geometry.shape(geometry)
 
 
 def _copied_zones(records, fenced) -> list:
