@@ -22,7 +22,7 @@ from alphafence.cli.options import (
     sd_fence_kb,
     storage_profile,
 )
-from alphafence.cli.source_options import add_source_options, source_line, source_options
+from alphafence.cli.source_options import add_source_options, live_options, source_line
 from alphafence.errors import InputError, need
 from alphafence.monitor.options import (
     ACTIONS,
@@ -114,6 +114,12 @@ def register(sub):
         "near it, its own fence, other aircraft, events) at http://HOST:PORT/; 127.0.0.1 is "
         "this computer only, any other address needs the token printed at start; read-only "
         "(needs aiohttp: the map extra)",
+    )
+    p.add_argument(
+        "--basemap",
+        metavar="EXTRACT.osm.pbf",
+        help="with --map-server: draw the roads, water and place names of this OpenStreetMap "
+        "extract beneath the live map, offline (within 10 km of the fences)",
     )
     p.add_argument(
         "--onboard",
@@ -245,6 +251,10 @@ def run(args) -> int:
 
         need(("aiohttp", "--map-server"))
         parse_address(args.map_server)
+    if args.basemap and not args.map_server:
+        raise InputError("--basemap", "is drawn on the live map: add --map-server HOST:PORT")
+    if args.basemap:
+        need(("osmium.filter", f"--basemap {args.basemap}"))
     check_trust(args, args.fences)
     fences = FenceSet.from_geojson(args.fences)
     args.key = signing_key(args)
@@ -260,29 +270,6 @@ def run(args) -> int:
             raise InputError("--tlog", "records the pymavlink link's frames: use --link pymavlink")
         check_tlog_path(args.tlog)
     return asyncio.run(_run(args, fences, options, live_options(args)))
-
-
-def live_options(args):
-    """The monitor's :class:`~alphafence.monitor.live.LiveOptions` (None without
-    ``--source``)."""
-    source = source_options(args)
-    if source is None:
-        if args.rules:
-            raise InputError("--rules", "reads the source's zones: add --source URL")
-        return None
-    need(("aiohttp", "--source"), ("scipy", "--source (zones are fenced in flight)"))
-    from alphafence.fencing.pipeline import BuildOptions
-    from alphafence.monitor.live import LiveOptions
-    from alphafence.zones.rules import load_rules
-
-    return LiveOptions(
-        source,
-        load_rules(args.rules),
-        BuildOptions(),
-        refresh_s=args.refresh,
-        stale_after_s=args.stale_after,
-        radius_m=args.source_radius,
-    )
 
 
 def monitor_wants(options):
@@ -314,8 +301,16 @@ async def _run(args, fences, options, live=None) -> int:
     if args.map_server:
         from alphafence.livemap.server import open_live_map
 
+        basemap = None
+        if args.basemap:  # read in a worker thread: an extract is seconds of work
+            from alphafence.plots.osm_basemap import around, osm_basemap
+
+            basemap = await asyncio.to_thread(osm_basemap, args.basemap, around(fences.records))
         livemap, server = await open_live_map(
-            fences, args.map_server, lambda line: out_console.print(line, soft_wrap=True)
+            fences,
+            args.map_server,
+            lambda line: out_console.print(line, soft_wrap=True),
+            basemap=basemap,
         )
         observers.append(livemap)
     mode = "enforcing" if options.enforce else "alerting only"

@@ -105,3 +105,30 @@ def source_line(event) -> str:
         return f"fences swapped in: {event['fences']} ({event.get('live', 0)} from the source)"
     detail = event.get("error") or event.get("problem") or event.get("reason") or ""
     return f"{kind} {zone} {detail}".strip()
+
+
+def live_options(args):
+    """The monitor's :class:`~alphafence.monitor.live.LiveOptions` (None without
+    ``--source``)."""
+    source = source_options(args)
+    if source is None:
+        if args.rules:
+            from alphafence.errors import InputError
+
+            raise InputError("--rules", "reads the source's zones: add --source URL")
+        return None
+    from alphafence.errors import need
+
+    need(("aiohttp", "--source"), ("scipy", "--source (zones are fenced in flight)"))
+    from alphafence.fencing.pipeline import BuildOptions
+    from alphafence.monitor.live import LiveOptions
+    from alphafence.zones.rules import load_rules
+
+    return LiveOptions(
+        source,
+        load_rules(args.rules),
+        BuildOptions(),
+        refresh_s=args.refresh,
+        stale_after_s=args.stale_after,
+        radius_m=args.source_radius,
+    )

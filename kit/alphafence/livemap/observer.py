@@ -27,6 +27,7 @@ from alphafence.livemap.view import (
 )
 from alphafence.monitor.observe import Observer
 
+OSM_ATTRIBUTION = "© OpenStreetMap contributors (ODbL)"
 QUEUE_MAX = 256  # messages waiting for one page (events, fences); the oldest is dropped
 SEND_TIMEOUT_S = 5.0  # a page that takes longer than this to accept one message is dropped
 NEAR_M = 5000.0  # the full-resolution fences within this of the vehicle are sent
@@ -90,6 +91,9 @@ class LiveMap(Observer):
         A page that takes longer to accept one message is dropped.
     vehicle_every_s : float
         The least time between two vehicle messages to a page (the latest step is sent).
+    basemap : dict, optional
+        A GeoJSON FeatureCollection each page draws beneath everything (an OpenStreetMap
+        extract's roads, water and place names: ``monitor --basemap``).
 
     Attributes
     ----------
@@ -109,8 +113,11 @@ class LiveMap(Observer):
         queue_max=QUEUE_MAX,
         send_timeout_s=SEND_TIMEOUT_S,
         vehicle_every_s=VEHICLE_EVERY_S,
+        basemap=None,
     ):
         self.near = NearFences(fences.records)
+        self.near_records = self.near.records  # what the next gathering indexes
+        self.basemap = basemap  # a GeoJSON FeatureCollection drawn beneath (an OSM extract's)
         self.near_m = float(near_m)
         self.queue_max = queue_max
         self.send_timeout_s = send_timeout_s
@@ -151,8 +158,16 @@ class LiveMap(Observer):
             c.wake.set()
 
     def on_event(self, event: dict) -> None:
-        """Queue the event for every page (and the vehicle's fence, when it changed)."""
+        """Queue the event for every page (and the vehicle's fence, when it changed; the
+        fences near the vehicle again, when a live source's zones changed them)."""
         self.events.append(event)
+        if event.get("event") == "source_fences" and self.engine is not None:
+            self.near_records = self.engine.fences.records  # indexed at the next gathering
+            self._near = None
+            for c in self.clients:
+                c.near_center = None
+                c.vehicle_due = True
+                c.wake.set()
         onboard = event.get("event") in ONBOARD_EVENTS
         if onboard:
             self.onboard_cause = event.get("cause") or event.get("reason") or event["event"]
@@ -199,6 +214,9 @@ class LiveMap(Observer):
         last_vehicle = -1e9
         try:
             await self._send(send, self.hello())
+            if self.basemap is not None:
+                await self._send(send, {"type": "basemap", "geojson": self.basemap,
+                                        "attribution": OSM_ATTRIBUTION})  # fmt: skip
             while True:
                 await client.wake.wait()
                 client.wake.clear()
@@ -258,12 +276,19 @@ class LiveMap(Observer):
             return have[:2], have[2]
         if self._near_task is None or self._near_task.done():
             self._near_task = asyncio.ensure_future(
-                asyncio.to_thread(self.near.around, lon, lat, self.near_m)
+                asyncio.to_thread(self._around, self.near_records, lon, lat)
             )
             self._near_task.add_done_callback(lambda t, at=(lon, lat): self._keep_near(t, at))
         await asyncio.shield(self._near_task)
         have = self._near
         return have[:2], have[2]
+
+    def _around(self, records, lon, lat) -> str:
+        """The fences near lon, lat (in a worker thread), indexed again first when a live
+        source changed them."""
+        if records is not self.near.records:
+            self.near = NearFences(records)
+        return self.near.around(lon, lat, self.near_m)
 
     def _keep_near(self, task, at) -> None:
         if not task.cancelled() and task.exception() is None:

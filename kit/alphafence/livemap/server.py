@@ -218,7 +218,7 @@ async def _ignore_incoming(ws) -> None:
         pass
 
 
-async def open_live_map(fences, address: str, say, flag: str = "--map-server"):
+async def open_live_map(fences, address: str, say, flag: str = "--map-server", basemap=None):
     """The live map of ``fences`` served at ``address`` (``HOST:PORT``), its URL said.
 
     Parameters
@@ -231,6 +231,8 @@ async def open_live_map(fences, address: str, say, flag: str = "--map-server"):
         Called with the lines to print (the URL, the token's use).
     flag : str
         The option's name, for errors.
+    basemap : dict, optional
+        Drawn beneath (:func:`alphafence.plots.osm_basemap.osm_basemap`).
 
     Returns
     -------
@@ -240,7 +242,7 @@ async def open_live_map(fences, address: str, say, flag: str = "--map-server"):
     from alphafence.livemap.observer import LiveMap
 
     host, port = parse_address(address, flag)
-    livemap = LiveMap(fences)
+    livemap = LiveMap(fences, basemap=basemap)
     server = await start_map_server(livemap, host, port)
     say(f"live map: {server.url}")
     if server.token:

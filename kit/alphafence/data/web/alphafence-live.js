@@ -36,14 +36,18 @@
     if (p.radius_m != null) rows.push(["radius", p.radius_m + " m"]);
     if (p.vertices != null) rows.push(["vertices", p.vertices]);
     if (p.area_m2 != null) rows.push(["area", Math.round(p.area_m2) + " m\u00b2"]);
+    if (p.source_zone != null) rows.push(["live zone", p.source_zone]);
+    var window_ = windowText((p.zone || {}).applicability);
+    if (window_) rows.push(["in force", window_]);
     return window.AlphaFence.popupHtml({title: p.name || p.site_id, popup: rows.filter(
       function (r) { return r[1] != null; })});
   }
 
   var fences = L.geoJSON(null, {
     style: function (f) {
-      var k = (f.properties || {}).kind;
-      return {color: KIND[k] || "#555", weight: 1.5, fillOpacity: k === "keep_out" ? 0.15 : 0,
+      var k = (f.properties || {}).kind, live_ = (f.properties || {}).source_zone != null;
+      return {color: KIND[k] || "#555", weight: live_ ? 3 : 1.5,
+              fillOpacity: k === "keep_out" ? (live_ ? 0.3 : 0.15) : 0,
               dashArray: k === "warning" ? "5 4" : null};
     }
   }).bindPopup(function (l) { return fencePopup(l.feature.properties || {}); }).addTo(map);
@@ -58,6 +62,21 @@
     return window.AlphaFence.popupHtml({title: p.name, popup: [["kind", p.kind],
       ["shape", p.shape], ["items", p.items]]});
   }).addTo(map);
+  // the offline basemap (roads, water, place names of an OSM extract): beneath everything
+  var WATER = "#9ecae1", ROAD = {motorway: 3, trunk: 3, primary: 2.5, secondary: 2, tertiary: 1.5};
+  var basemap = L.geoJSON(null, {
+    style: function (f) {
+      var p = f.properties || {};
+      if (p.layer === "water") return {color: WATER, weight: 1, fillColor: WATER, fillOpacity: 0.6};
+      return {color: "#b0b0b0", weight: ROAD[p["class"]] || 1, opacity: 0.9};
+    },
+    pointToLayer: function (f, latlng) {
+      return L.circleMarker(latlng, {radius: 2, color: "#555", weight: 1, fillOpacity: 1})
+        .bindTooltip(f.properties.name, {permanent: true, direction: "right",
+                                         className: "af-place"});
+    },
+    interactive: false
+  });
   var track = L.polyline([], {color: "#455a64", weight: 2, opacity: 0.7}).addTo(map);
   var path = L.polyline([], {color: "#6a1b9a", weight: 3, dashArray: "8 6"});
   var stop = L.circleMarker([0, 0], {radius: 5, color: "#6a1b9a", fillColor: "#fff",
@@ -88,6 +107,7 @@
   control.addOverlay(track, "track");
   control.addOverlay(traffic, "other aircraft");
   control.addOverlay(eventMarks, "events");
+  control.addOverlay(basemap, "basemap (OpenStreetMap extract)");
 
   function panel(position, cls) {
     var c = L.control({position: position});
@@ -106,7 +126,22 @@
   var status = panel("topleft", "af-status");
   var list = panel("bottomright", "af-events");
 
+  function windowText(a) {
+    if (!a) return null;
+    return (Array.isArray(a) ? a : [a]).map(function (w) {
+      return (w.startDateTime || "\u2026") + " \u2192 " + (w.endDateTime || "\u2026");
+    }).join(", ");
+  }
+
   function eventText(e) {
+    if (e.event === "source_zone") {
+      var w = windowText(e.applicability);
+      return (e.change === "new" ? "new zone " : "zone changed ") + (e.name || e.zone) + " (" +
+        (e.kinds || []).join(", ") + "; " + e.window + (w ? ": " + w : "") + ") from " +
+        (e.source || "the source");
+    }
+    if (e.event === "source_zone_window") return "zone " + (e.name || e.zone) + ": " + e.window;
+    if (e.event === "source_zone_removed") return "zone lifted: " + (e.name || e.zone);
     if (e.event === "level") {
       return e.previous + " \u2192 " + e.level + " " + (e.fence || "") + " (" + e.reason +
         ", " + fmt(e.distance_m, " m") + ")";
@@ -205,6 +240,14 @@
       live.onboardCause = m.cause;
     },
     traffic: onTraffic,
+    basemap: function (m) {
+      basemap.clearLayers();
+      basemap.addData(m.geojson);
+      if (!map.hasLayer(basemap)) basemap.addTo(map);
+      basemap.bringToBack();
+      live.basemap = m.geojson.features.length;
+      if (m.attribution) map.attributionControl.addAttribution(m.attribution);
+    },
     event: function (m) { onEvent(m.event); },
     dropped: function (m) { live.dropped = m.messages; drawStatus(); }
   };
