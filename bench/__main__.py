@@ -30,6 +30,7 @@ from bench import (
     cli_bench,
     compile_bench,
     link_bench,
+    live_bench,
     livemap_bench,
     monitor_bench,
     monitor_cpu_bench,
@@ -61,6 +62,7 @@ def main(argv=None) -> int:
             "upload",
             "monitor",
             "map",
+            "live",
             "rolling",
             "route",
             "scale",
@@ -116,6 +118,8 @@ def main(argv=None) -> int:
         take("link", link_bench.run(build_bench.Row))
     if args.only in (None, "map"):
         take("map", livemap_bench.run(args.osm, build_bench.Row))
+    if args.only in (None, "live"):
+        take("live", live_bench.run(args.osm, build_bench.Row))
     if args.only in (None, "rolling"):
         take("rolling", rolling_bench.overshoot(args.osm, build_bench.Row))
         take("rolling", rolling_bench.in_flight(args.osm, build_bench.Row))

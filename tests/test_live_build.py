@@ -144,3 +144,32 @@ async def test_a_build_written_to_postgis_is_served_back_as_fences(
     bad = pg.url + "/public.fences; DROP TABLE x"
     assert main(["build", scene, "-o", bad, "-q"]) == 2
     assert "is not a plain SQL name" in capsys.readouterr().err
+
+
+def test_compile_takes_the_sources_zones_in_the_operating_area(zones, tmp_path):
+    import shapely
+
+    from alphafence.fencefiles.qgc_plan import read_plan_geofence
+    from alphafence.onboard.decode import breached, decode_fence
+
+    _, api, _ = zones
+    local = tmp_path / "local.geojson"
+    assert main(["build", "--source", api.collection, "--bbox", BOX, "-o", str(local), "-q"]) == 0
+    doc = json.loads(local.read_text())  # the local file: zone A's fences only
+    doc["features"] = [f for f in doc["features"] if f["properties"]["source_zone"] == "A"]
+    local.write_text(json.dumps(doc))
+    box = "14.505,35.905,14.53,35.92"
+    alone, both = tmp_path / "alone.plan", tmp_path / "both.plan"
+    assert main(["compile", str(local), "--bbox", box, "-o", str(alone)]) == 0
+    assert main(["compile", str(local), "--bbox", box, "-o", str(both), "--source",
+                 api.collection]) == 0  # fmt: skip
+
+    def held(path):  # zone B's corners and centre, each inside an exclusion of the plan
+        fences = decode_fence(read_plan_geofence(path).items)
+        points = [
+            *square(14.52, 35.91)[:4],
+            tuple(shapely.Polygon(square(14.52, 35.91)).centroid.coords[0]),
+        ]
+        return [breached(fences, lon, lat) for lon, lat in points]
+
+    assert not any(held(alone)) and all(held(both))

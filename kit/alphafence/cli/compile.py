@@ -5,6 +5,7 @@ from __future__ import annotations
 from alphafence.cli.common import out_console, union_hint
 from alphafence.cli.maps import add_map_options, check_map_args, onboard_map
 from alphafence.cli.options import add_compile_options, bbox, compile_from_args, figure_wants
+from alphafence.cli.source_options import add_source_options, with_source
 from alphafence.cli.tables import compile_report
 from alphafence.errors import need
 
@@ -53,6 +54,7 @@ def register(sub):
         help="draw the onboard fences over the full-resolution ones, the path and the corridor",
     )
     add_map_options(p)
+    add_source_options(p)
     p.set_defaults(func=run)
 
 
@@ -73,7 +75,7 @@ def run(args) -> int:
 
         check_private_key(args.sign_key)
     check_map_args(args)
-    records = read_fences(args.fences)
+    records = with_source(args, read_fences(args.fences))
     result = compile_from_args(args, records)
     if fmt == "plan":
         sites = result.fence_sites()  # which site each polygon and circle stands for

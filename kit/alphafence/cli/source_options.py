@@ -132,3 +132,45 @@ def live_options(args):
         stale_after_s=args.stale_after,
         radius_m=args.source_radius,
     )
+
+
+def with_source(args, records) -> list:
+    """``records`` and, with ``--source``, the fences of the source's zones around the
+    operating area (``--area``'s flight path or ``--bbox``, widened by ``--distance``),
+    fetched whole or not at all: ``compile`` and ``upload``."""
+    source = source_options(args)
+    if source is None:
+        return records
+    import asyncio
+
+    import shapely
+
+    from alphafence.errors import InputError, InputErrors, SourceError, need
+    from alphafence.fencing.zone_fences import read_answer, unpack
+    from alphafence.geo.frame import LocalFrame
+    from alphafence.onboard.corridor import flight_path_from_plan
+    from alphafence.sources.ogc import fetch, session
+    from alphafence.zones.rules import load_rules
+
+    need(("aiohttp", "--source"), ("scipy", "--source (its zones are fenced here)"))
+    area = flight_path_from_plan(args.area) if args.area else shapely.box(*args.bbox)
+    frame = LocalFrame(*shapely.centroid(area).coords[0])
+    x0, y0, x1, y1 = shapely.bounds(frame.geom_to_local(shapely.envelope(area))).tolist()
+    pad = float(getattr(args, "distance", 0.0) or 0.0) + 100.0
+    lons, lats = frame.to_wgs84([x0 - pad, x1 + pad], [y0 - pad, y1 + pad])
+    bbox = (float(min(lons)), float(min(lats)), float(max(lons)), float(max(lats)))
+
+    async def ask():
+        async with session(source) as http:
+            return await fetch(http, source, bbox)
+
+    answer = asyncio.run(ask())
+    if not answer.complete:
+        raise SourceError(answer.url, f"incomplete answer, nothing compiled: {answer.error}")
+    from alphafence.fencing.pipeline import BuildOptions
+
+    _, bad, fenced = read_answer(answer.url, answer.features, load_rules(), BuildOptions(), set())
+    if bad:
+        faults = [InputError(answer.url, line.split(": ", 1)[-1]) for line in bad]
+        raise faults[0] if len(faults) == 1 else InputErrors(answer.url, faults)
+    return list(records) + unpack(answer.url, [p for packed in fenced.values() for p in packed])

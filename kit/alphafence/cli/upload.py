@@ -35,6 +35,7 @@ from alphafence.cli.options import (
     figure_wants,
     storage_profile,
 )
+from alphafence.cli.source_options import add_source_options, with_source
 from alphafence.cli.tables import compile_report, items_report
 from alphafence.errors import InputError, VehicleError, need
 from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
@@ -97,6 +98,7 @@ def register(sub):
     add_trust_options(p)
     add_signing_option(p)
     add_link_option(p)
+    add_source_options(p)
     p.add_argument(
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
@@ -157,7 +159,7 @@ def load_items(args):
             "fences to compile (fence GeoJSON, KML, OpenAir...) need an operating area: "
             "--area MISSION.plan or --bbox",
         )
-    result = compile_from_args(args, read_fences(args.fences))
+    result = compile_from_args(args, with_source(args, read_fences(args.fences)))
     return result.items, result
 
 

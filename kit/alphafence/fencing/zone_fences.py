@@ -97,8 +97,10 @@ def read_answer(url, features, rules, options, known) -> tuple:
     -------
     tuple
         ``(entries, bad, fences)``: per zone, in order, ``("known", id, hash)`` or
-        ``("new", Zone)``; one line per feature that is not a zone; ``{hash: [FenceRecord]}``
-        of the new zones (read here, in the worker, as a fence file's features are).
+        ``("new", Zone)``; one line per feature that is not a zone; ``{hash: [(properties,
+        WKB)]}`` of the new zones' fences, each checked here as a fence file's feature is
+        (:func:`unpack` makes them fence records: plain data crosses the process boundary
+        cheaply, where shapely objects would be rebuilt one by one in the monitor).
     """
     from alphafence.sources.answers import canonical_hash, read_zones, zone_id
 
@@ -130,16 +132,27 @@ def _records(url, digest, features) -> list:
 
     from alphafence.fencefiles.fence_geojson import fence_record
 
-    return [
-        fence_record(
-            url,
-            f["properties"],
-            shapely.geometry.shape(f["geometry"]),
-            f"zone {f['properties']['source_zone']}",
-            k,
-        )  # fmt: skip
-        for k, f in enumerate(features)
-    ]
+    out = []
+    for k, f in enumerate(features):
+        geometry = shapely.geometry.shape(f["geometry"])
+        fence_record(url, f["properties"], geometry, f"zone {f['properties']['source_zone']}", k)
+        out.append((f["properties"], shapely.to_wkb(geometry)))
+    return out
+
+
+def unpack(url, packed) -> list:
+    """Fence records from :func:`read_answer`'s ``(properties, WKB)`` pairs (checked in the
+    worker already), their geometries read in one vectorised call."""
+    import numpy as np
+    import shapely
+
+    from alphafence.fencefiles.fence_geojson import fence_record
+
+    if not packed:
+        return []
+    geoms = shapely.from_wkb(np.array([w for _, w in packed], dtype=object))
+    return [fence_record(url, p, g, f"zone {p.get('source_zone')}", k)
+            for k, ((p, _), g) in enumerate(zip(packed, geoms))]  # fmt: skip
 
 
 def _fence_ok(url, zone, bad) -> bool:

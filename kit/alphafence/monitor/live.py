@@ -87,7 +87,7 @@ class LiveSource:
     def __init__(self, monitor, options: LiveOptions, base, copied=()):
         self.monitor, self.options = monitor, options
         self.base = list(base)
-        self.fenced = {}  # zone hash -> [FenceRecord]
+        self.fenced = {}  # zone hash -> [FenceRecord] (or the worker's packed fences, unread)
         self.zones = LiveZones(_copied_zones(copied, self.fenced))
         self.etag = self.last_modified = None
         self.last_good = time.monotonic()
@@ -212,7 +212,7 @@ class LiveSource:
             state = window_state(z.applicability, now, self.options.announce_s, self.skew_s)
             self.windows[z.hash] = state
             put(new_event("source_zone", zone=z.id, name=z.name, change="changed" if z in change.changed else "new",
-                          kinds=sorted({r.kind for r in self.fenced.get(z.hash, ())}),
+                          kinds=self._kinds(z.hash),
                           window=state, applicability=z.applicability, source=answer.url))  # fmt: skip
         for z in change.removed:
             self.windows.pop(z.hash, None)
@@ -232,17 +232,34 @@ class LiveSource:
         self._check_stale()
 
     def records(self) -> list:
-        """Every fence in force: the base's, then each zone version's."""
-        live = [r for z in self.zones.zones for r in self.fenced.get(z.hash, ())]
-        return self.base + live
+        """Every fence in force: the base's, then each zone version's (the worker's packed
+        fences read first, all in one call)."""
+        from alphafence.fencing.zone_fences import unpack
+
+        hashes = [z.hash for z in self.zones.zones]
+        packed = [h for h in hashes if self.fenced.get(h) and isinstance(self.fenced[h][0], tuple)]
+        if packed:
+            read = iter(
+                unpack(self.options.source.url, [p for h in packed for p in self.fenced[h]])
+            )
+            for h in packed:
+                self.fenced[h] = [next(read) for _ in self.fenced[h]]
+        return self.base + [r for h in hashes for r in self.fenced.get(h, ())]
+
+    def _kinds(self, digest) -> list:
+        got = self.fenced.get(digest, ())
+        return sorted({r[0]["kind"] if isinstance(r, tuple) else r.kind for r in got})
 
     async def _swap(self) -> None:
         from alphafence.awareness.fenceset import FenceSet
 
         t0 = time.monotonic()
-        records, frame = self.records(), self.monitor.engine.fences.frame
+        frame = self.monitor.engine.fences.frame
+        records = None
 
-        def build():
+        def build():  # the new zones' records read and the set indexed: a worker thread
+            nonlocal records
+            records = self.records()
             fs = FenceSet(records, frame=frame)
             fs.index()
             return fs
