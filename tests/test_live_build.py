@@ -173,3 +173,75 @@ def test_compile_takes_the_sources_zones_in_the_operating_area(zones, tmp_path):
         return [breached(fences, lon, lat) for lon, lat in points]
 
     assert not any(held(alone)) and all(held(both))
+
+
+@pytest.fixture
+def web_folder(tmp_path):
+    """A plain web server (Python's) on loopback serving a folder: ``(folder, base URL)``."""
+    import functools
+    import http.server
+    import threading
+
+    folder = tmp_path / "www"
+    folder.mkdir()
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(folder))
+    handler.log_message = lambda *a: None
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield folder, f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+
+
+async def test_a_signed_fence_bundle_on_a_web_server_is_verified_at_every_answer(
+    web_folder, tmp_path, rules
+):
+    import os
+    import shutil
+    from importlib import resources
+
+    folder, base = web_folder
+    scene = str(resources.files("alphafence").joinpath("data/demo-scene.geojson"))
+    fences = folder / "fences.geojson"
+    key, pub = tmp_path / "ops.pem", tmp_path / "ops.pub.pem"
+    for args in (["build", scene, "-o", str(fences), "-q"],
+                 ["bundle", "keygen", "--private", str(key), "--public", str(pub)],
+                 ["bundle", "sign", str(fences), "--key", str(key)]):  # fmt: skip
+        assert await asyncio.to_thread(main, args) == 0
+    import shapely
+
+    from alphafence.fencefiles.fence_geojson import FenceRecord
+
+    anchor = FenceRecord("anchor", "keep_out", shapely.box(-0.58, 51.42, -0.579, 51.421))
+    companion = Companion([anchor])
+    options = LiveOptions(SourceOptions(f"{base}/fences.geojson"), rules, BuildOptions(),
+                          trusted_keys=(str(pub),))  # fmt: skip
+    live = LiveSource(companion, options, companion.engine.fences.records)
+    expected = {r.site_id for r in read_fences(fences)}
+    async with live.opened():
+        await live.refresh()
+        served = {
+            r.site_id for r in companion.engine.fences.records if "source_zone" in r.properties
+        }
+        assert served == expected and not companion.events("source_failed")
+        await live.refresh()  # unchanged (If-Modified-Since): nothing rebuilt
+        assert companion.events("source_answer")[-1].get("not_modified") is True
+        swaps = len(companion.events("source_fences"))
+        doc = json.loads(fences.read_text())  # tampered on the server: one fence dropped
+        doc["features"] = doc["features"][1:]
+        fences.write_text(json.dumps(doc))
+        os.utime(fences, (fences.stat().st_mtime + 5,) * 2)
+        await live.refresh()
+        failed = companion.events("source_failed")[-1]["error"]
+        assert "not authentic, not applied: the fences changed after they were signed" in failed
+        assert len(companion.events("source_fences")) == swaps  # nothing in force changed
+        shutil.copy(fences, tmp_path / "resigned.geojson")
+        assert (
+            await asyncio.to_thread(main, ["bundle", "sign", str(fences), "--key", str(key)]) == 0
+        )
+        await live.refresh()  # signed again: applied, the dropped fence lifted
+        served = {
+            r.site_id for r in companion.engine.fences.records if "source_zone" in r.properties
+        }
+        assert len(served) <= len(expected) and companion.events("source_zone_removed")

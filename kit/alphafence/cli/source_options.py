@@ -131,6 +131,7 @@ def live_options(args):
         refresh_s=args.refresh,
         stale_after_s=args.stale_after,
         radius_m=args.source_radius,
+        trusted_keys=trusted_keys(args),
     )
 
 
@@ -174,3 +175,14 @@ def with_source(args, records) -> list:
         faults = [InputError(answer.url, line.split(": ", 1)[-1]) for line in bad]
         raise faults[0] if len(faults) == 1 else InputErrors(answer.url, faults)
     return list(records) + unpack(answer.url, [p for packed in fenced.values() for p in packed])
+
+
+def trusted_keys(args) -> tuple:
+    """The public keys a document source's signature is checked against: ``--trusted-key``
+    and ``ALPHAFENCE_TRUSTED_KEYS``, as for the fences' own file."""
+    import os
+
+    env = os.environ.get("ALPHAFENCE_TRUSTED_KEYS", "")
+    return tuple(getattr(args, "trusted_key", None) or ()) + tuple(
+        k for k in env.split(os.pathsep) if k
+    )

@@ -54,6 +54,10 @@ class LiveOptions:
         The area asked around the vehicle (and around each mission waypoint).
     announce_s : float
         A zone whose window starts within this many seconds is announced.
+    trusted_keys : tuple of str
+        PEM public keys: a source that is one document (a signed fence bundle on a web
+        server, not a collection) must come with ``URL.sig.json`` signed by one of them
+        (:mod:`alphafence.fencing.bundle`), checked at every answer.
     """
 
     source: object
@@ -63,6 +67,7 @@ class LiveOptions:
     stale_after_s: float | None = None
     radius_m: float = 5000.0
     announce_s: float = 600.0
+    trusted_keys: tuple = ()  # a document source (a fence bundle): its signature must verify
 
     @property
     def stale_s(self) -> float:
@@ -173,6 +178,13 @@ class LiveSource:
             put(new_event("source_failed", error=str(exc), kept=len(self.zones.versions)))
             self._check_stale()
             return
+        if answer.raw is not None and self.options.trusted_keys:
+            try:
+                await self._verify(answer)
+            except SourceError as exc:
+                put(new_event("source_failed", error=str(exc), kept=len(self.zones.versions)))
+                self._check_stale()
+                return
         self.answers += 1
         self._clock(answer)
         if answer.not_modified:
@@ -219,6 +231,30 @@ class LiveSource:
             put(new_event("source_zone_removed", zone=z.id, name=z.name))
         if change:
             await self._swap()
+
+    async def _verify(self, answer) -> None:
+        """The document's detached signature (``URL.sig.json``) checked against the trusted
+        keys (in a worker thread: files and hashing): SourceError when it is not authentic."""
+        import tempfile
+        from pathlib import Path
+
+        from alphafence.errors import InputError, SourceError
+        from alphafence.fencing.bundle import SUFFIX, verify
+        from alphafence.sources.ogc import fetch_bytes
+
+        signature = await fetch_bytes(self._http, self.options.source, answer.url + SUFFIX)
+
+        def check():
+            with tempfile.TemporaryDirectory(prefix="alphafence-") as tmp:
+                doc = Path(tmp) / "fences.geojson"
+                doc.write_bytes(answer.raw)
+                Path(str(doc) + SUFFIX).write_bytes(signature)
+                verify(doc, self.options.trusted_keys)
+
+        try:
+            await asyncio.to_thread(check)
+        except InputError as exc:
+            raise SourceError(answer.url, f"not authentic, not applied: {exc.message}") from None
 
     def tick(self, now_utc) -> None:
         """Each second: windows that changed state are said; the source gone stale is."""

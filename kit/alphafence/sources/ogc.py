@@ -154,6 +154,7 @@ class Answer:
     seconds: float = 0.0
     bytes: int = 0
     matched: int | None = field(default=None)
+    raw: bytes | None = None  # a whole document's bytes (not a collection's pages): to verify
 
     def metadata(self) -> dict:
         """What an offline copy records of this answer (``build --source``)."""
@@ -230,12 +231,14 @@ async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modifie
         conditional["If-None-Match"] = etag
     if last_modified:
         conditional["If-Modified-Since"] = last_modified
-    answer = Answer(url, None if bbox is None else tuple(bbox), [], True,
+    asked = None if bbox is None or not options.paged else tuple(bbox)  # a document: all of it
+    answer = Answer(url, asked, [], True,
                     fetched_utc=fetched.isoformat(timespec="milliseconds").replace("+00:00", "Z"))  # fmt: skip
     page_url, seen = first, set()
     while page_url is not None:
         try:
-            status, headers, doc, size = await _get(http, options, page_url, conditional)
+            status, headers, doc, raw = await _get(http, options, page_url, conditional)
+            size = len(raw or b"")
         except SourceError as exc:
             if answer.pages == 0:
                 raise
@@ -250,6 +253,8 @@ async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modifie
                 answer.not_modified, answer.features = True, None
                 break
         conditional = {}
+        if not options.paged:
+            answer.raw = raw
         features, next_url, matched = _page(options, page_url, doc)
         answer.features.extend(features)
         if answer.pages == 1 and matched is not None:
@@ -271,6 +276,13 @@ async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modifie
         )
     answer.seconds = loop.time() - t0
     return answer
+
+
+async def fetch_bytes(http, options: SourceOptions, url: str) -> bytes:
+    """The body at ``url`` (a signature beside a document), asked as every request is:
+    SourceError (one line) when it fails or is not JSON."""
+    _, _, _, raw = await _get(http, options, url, {})
+    return raw or b""
 
 
 def _skew(date_header, fetched) -> float | None:
@@ -306,7 +318,7 @@ def _page(options, page_url, doc):
 
 async def _get(http, options, url, conditional):
     """One request, retried with backoff and full jitter while a retry may help:
-    ``(status, headers, parsed JSON or None, bytes)``."""
+    ``(status, headers, parsed JSON or None, the body's bytes or None)``."""
     tries = 0
     while True:
         try:
@@ -328,7 +340,7 @@ async def _get_once(http, options, url, conditional):
         timeout = aiohttp.ClientTimeout(total=options.timeout_s)
         async with http.get(url, headers=conditional, timeout=timeout) as resp:
             if resp.status == 304:
-                return 304, resp.headers, None, 0
+                return 304, resp.headers, None, None
             if resp.status >= 400:
                 raise _status_error(url, resp.status)
             body = bytearray()
@@ -345,7 +357,7 @@ async def _get_once(http, options, url, conditional):
                 if kind and "json" not in kind:
                     raise SourceError(url, f"answer is not GeoJSON (content type {kind})") from None
                 raise SourceError(url, "answer is not JSON (cut short or malformed)") from None
-            return resp.status, resp.headers, doc, len(body)
+            return resp.status, resp.headers, doc, bytes(body)
     except SourceError:
         raise
     except (asyncio.TimeoutError, aiohttp.ServerTimeoutError):
