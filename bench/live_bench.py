@@ -187,9 +187,12 @@ def _swapping(records, frame, swaps=3):
         fs.index()
 
     async def work(stop, started):
+        from alphafence.monitor.live import short_switches
+
         started.set()
         for _ in range(swaps):
-            await asyncio.to_thread(build)
+            with short_switches():  # as the monitor swaps
+                await asyncio.to_thread(build)
         stop.set()
 
     return work

@@ -31,6 +31,7 @@ from datetime import datetime, timezone
 from alphafence.monitor.events import new_event
 from alphafence.monitor.live_zones import LiveZones, window_state
 
+SWITCH_S = 0.0002  # the interpreter's thread switch interval while a fence set is rebuilt
 CLOCK_SKEW_S = 30.0  # this clock and the server's differ by more: said, and windows widened
 BAD_SHOWN = 10  # features that are not zones named one event each, up to this many per answer
 
@@ -301,7 +302,8 @@ class LiveSource:
             return fs
 
         try:
-            fences = await asyncio.to_thread(build)
+            with short_switches():
+                fences = await asyncio.to_thread(build)
         except ValueError:  # no fence at all: the set in use stays (it holds more, not less)
             self.monitor.log.put(new_event("source_fences", fences=0, kept=True))
             return
@@ -354,6 +356,21 @@ class LiveSource:
                                           "windows are widened by the difference"))  # fmt: skip
         self.skew_s = doubt
         self.monitor.clock_slack_s = doubt
+
+
+@contextlib.contextmanager
+def short_switches(interval_s: float = SWITCH_S):
+    """The interpreter's thread switch interval shortened while a worker thread rebuilds the
+    fence set: a position check waits at most this long for the interpreter between its GEOS
+    calls (at the default 5 ms the checks during a rebuild are several times slower)."""
+    import sys
+
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(interval_s)
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(old)
 
 
 def _read_answer(options, features, known):
