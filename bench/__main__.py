@@ -91,6 +91,7 @@ def main(argv=None) -> int:
         help="areas built by the scale group (default 133000,1000000)",
     )
     args = p.parse_args(argv)
+    _use_shared_sitl()
     console = Console(width=150)
     rows = []
     load_start = _loadavg()
@@ -157,6 +158,18 @@ def main(argv=None) -> int:
     path = write_results(args.out, rows, argv, load_start)
     console.print(f"rows written to {path}")
     return 1 if failed else 0
+
+
+def _use_shared_sitl():
+    """The copter SITL beside the checkout (``../shared/ardupilot-sitl``) when no other is
+    found ($ARDUPILOT_SITL, $ARDUPILOT_HOME, ~/ardupilot, PATH), as the tests use it."""
+    from pathlib import Path
+
+    from alphafence.sitl.find import find_sitl_binary
+
+    shared = Path(__file__).resolve().parents[2] / "shared" / "ardupilot-sitl"
+    if find_sitl_binary() is None and (shared / "build/sitl/bin/arducopter").is_file():
+        os.environ["ARDUPILOT_HOME"] = str(shared)
 
 
 def _loadavg():

@@ -13,6 +13,7 @@ STAGES = (
     "mavlink",
     "zones",
     "fencefiles",
+    "sources",
     "fencing",
     "flights",
     "onboard",
