@@ -232,6 +232,7 @@ async def _served(servers):
     from alphafence.sitl import launch_sitl
     from alphafence.sources.ogc import SourceOptions
     from alphafence.vehicle.link import open_vehicle
+    from bench.rolling_bench import fly_to
     from tests.live_servers import ed318_zone, insert_zone
 
     pg, api, table = servers
@@ -247,19 +248,7 @@ async def _served(servers):
             monitor = Monitor(vehicle, FenceSet([base]), options, log, live=live)
             stop = asyncio.Event()
             task = asyncio.create_task(monitor.run(stop))
-            await vehicle.action.set_takeoff_altitude(20.0)
-            for _ in range(60):  # ArduPilot refuses arming until its position estimate
-                try:
-                    await vehicle.action.arm()
-                    break
-                except Exception:
-                    await asyncio.sleep(1.0)
-            await vehicle.action.takeoff()
-            async for p in vehicle.telemetry.subscribe_position():
-                if p.relative_altitude_m > 18.0:
-                    break
-            await vehicle.action.set_current_speed(SPEED)
-            await vehicle.action.goto_location(end[1], end[0], sitl.home.alt + 20.0, 0.0)
+            await fly_to(vehicle, end, sitl.home.alt + 20.0, SPEED)
             inserted = []
             for k in range(3):
                 await asyncio.sleep(7.0)

@@ -142,19 +142,7 @@ async def _in_flight(fences_path, repeat):
             monitor = Monitor(vehicle, fences, MonitorOptions(onboard="rolling"), log)
             stop = asyncio.Event()
             task = asyncio.create_task(monitor.run(stop))
-            await vehicle.action.set_takeoff_altitude(20.0)
-            for _ in range(60):  # ArduPilot refuses arming until its position estimate
-                try:
-                    await vehicle.action.arm()
-                    break
-                except Exception:
-                    await asyncio.sleep(1.0)
-            await vehicle.action.takeoff()
-            async for p in vehicle.telemetry.subscribe_position():
-                if p.relative_altitude_m > 18.0:
-                    break
-            await vehicle.action.set_current_speed(10.0)
-            await vehicle.action.goto_location(END[1], END[0], sitl.home.alt + 20.0, 0.0)
+            await fly_to(vehicle, END, sitl.home.alt + 20.0, 10.0)
             await asyncio.sleep(60.0)  # 600 m of the leg at 10 m/s, speedup 1
             stop.set()
             await task
@@ -166,6 +154,24 @@ async def _in_flight(fences_path, repeat):
                 times.append(time.perf_counter() - t)
                 assert report.verified
             return rolled, times
+
+
+async def fly_to(vehicle, lonlat, alt_amsl_m, speed_mps) -> None:
+    """Arm (once ArduPilot's position estimate allows it), take off to 20 m in GUIDED and fly
+    towards ``lonlat`` at ``speed_mps``; returns once on the way."""
+    await vehicle.action.set_takeoff_altitude(20.0)
+    for _ in range(60):  # ArduPilot refuses arming until its position estimate
+        try:
+            await vehicle.action.arm()
+            break
+        except Exception:
+            await asyncio.sleep(1.0)
+    await vehicle.action.takeoff()
+    async for p in vehicle.telemetry.subscribe_position():
+        if p.relative_altitude_m > 18.0:
+            break
+    await vehicle.action.set_current_speed(speed_mps)
+    await vehicle.action.goto_location(lonlat[1], lonlat[0], alt_amsl_m, 0.0)
 
 
 def in_flight(osm, Row, repeat=5):

@@ -109,3 +109,14 @@ def layer_counts(driver):
         "var out = {}; Object.keys(window.afLayers).forEach(function (k) {"
         " out[k] = window.afLayers[k].getLayers().length; }); return out;"
     )
+
+
+@pytest.fixture(scope="module")
+def local_browser():
+    """Headless Chromium that may reach 127.0.0.1 (a live map's server), nothing else."""
+    driver, profile = start(loopback=True)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-pytest_plugins = ["tests.sitl_fixtures", "tests.live_servers"]
+pytest_plugins = ["tests.sitl_fixtures", "tests.live_servers", "tests.browser"]
 
 # CI runs the property tests on a fixed seed so a run is reproducible; locally each run
 # explores new examples (and replays any failure hypothesis has saved).

@@ -97,21 +97,6 @@ async def test_a_new_zone_appears_on_the_map_with_its_window_and_source(shared_s
     assert event["applicability"] == window and event["source"] == f"{api.collection}/items"
 
 
-@pytest.fixture(scope="module")
-def local_browser():
-    """Headless Chromium that may reach 127.0.0.1 (the map's server), nothing else."""
-    import shutil
-
-    from tests.browser import start
-
-    driver, profile = start(loopback=True)
-    try:
-        yield driver
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
-
-
 PAGE_STATE = (
     "var l = window.afLive; if (!l) return null;"
     "var live = []; l.layers.fences.eachLayer(function (x) {"

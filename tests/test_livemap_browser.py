@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -14,8 +13,6 @@ import time
 from pathlib import Path
 
 import pytest
-
-from tests.browser import start
 
 pytestmark = pytest.mark.browser
 
@@ -33,17 +30,6 @@ STATE = (
     ".map(function (e) { return e.level; }),"
     " shown: Array.from(document.querySelectorAll('.af-event')).map(e => e.innerText)};"
 )
-
-
-@pytest.fixture(scope="module")
-def local_browser():
-    """Headless Chromium that may reach 127.0.0.1 (the map's server), nothing else."""
-    driver, profile = start(loopback=True)
-    try:
-        yield driver
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
 
 
 def _wait(what, probe):
