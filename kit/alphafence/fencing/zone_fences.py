@@ -86,8 +86,9 @@ def read_answer(url, features, rules, options, known) -> tuple:
     ----------
     url : str
         The source, for messages.
-    features : list of dict
-        The answer's GeoJSON Features.
+    features : list of dict, or list of bytes
+        The answer's GeoJSON Features, or its pages' bodies as they came (FeatureCollections'
+        JSON: read here).
     rules : Rules
     options : BuildOptions
     known : set of str
@@ -104,6 +105,10 @@ def read_answer(url, features, rules, options, known) -> tuple:
     """
     from alphafence.sources.answers import canonical_hash, read_zones, zone_id
 
+    if features and isinstance(features[0], (bytes, bytearray)):
+        import json
+
+        features = [f for page in features for f in json.loads(page)["features"]]
     entries, fresh, order = [], [], []
     for feature in features:
         digest = canonical_hash(feature)

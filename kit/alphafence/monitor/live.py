@@ -195,7 +195,7 @@ class LiveSource:
         loop = asyncio.get_running_loop()
         try:
             entries, bad, fences = await loop.run_in_executor(
-                self.pool, _read_answer, self.options, answer.features, set(self.fenced)
+                self.pool, _read_answer, self.options, answer.pages_raw, set(self.fenced)
             )
         except Exception as exc:  # noqa: BLE001 - a worker that failed removes nothing
             put(new_event("source_failed", error=f"reading the answer: {exc}"))

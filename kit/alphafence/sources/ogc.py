@@ -138,6 +138,9 @@ class Answer:
     pages : int
     error : SourceError or None
         Why the answer is incomplete.
+    pages_raw : list of bytes
+        Each page's body as it came (a worker process reads the features from these: bytes
+        cross a process boundary for the price of a copy).
     """
 
     url: str
@@ -155,6 +158,7 @@ class Answer:
     bytes: int = 0
     matched: int | None = field(default=None)
     raw: bytes | None = None  # a whole document's bytes (not a collection's pages): to verify
+    pages_raw: list = field(default_factory=list)  # each page's bytes, as they came
 
     def metadata(self) -> dict:
         """What an offline copy records of this answer (``build --source``)."""
@@ -255,6 +259,7 @@ async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modifie
         conditional = {}
         if not options.paged:
             answer.raw = raw
+        answer.pages_raw.append(raw)
         features, next_url, matched = _page(options, page_url, doc)
         answer.features.extend(features)
         if answer.pages == 1 and matched is not None:
