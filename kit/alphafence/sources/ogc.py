@@ -324,11 +324,14 @@ def _page(options, page_url, doc):
 async def _get(http, options, url, conditional):
     """One request, retried with backoff and full jitter while a retry may help:
     ``(status, headers, parsed JSON or None, the body's bytes or None)``."""
-    tries = 0
+    tries, fresh = 0, False
     while True:
         try:
             return await _get_once(http, options, url, conditional)
         except SourceError as exc:
+            if getattr(exc, "stale", False) and not fresh:  # a kept-alive connection the
+                fresh = True  # server had closed: asked again at once, on a new one
+                continue
             if not exc.retry or tries >= options.retries:
                 if tries:
                     raise SourceError(exc.url, f"{exc.message} (after {tries + 1} tries)") from None
@@ -382,7 +385,11 @@ async def _get_once(http, options, url, conditional):
                 url, f"connection refused by {host} (is the server running?)", retry=True
             ) from None
         raise SourceError(url, f"cannot connect to {host}: {os_error or exc}", retry=True) from None
-    except (aiohttp.ClientPayloadError, aiohttp.ServerDisconnectedError) as exc:
+    except aiohttp.ServerDisconnectedError:
+        error = SourceError(url, "the server closed the connection: answer cut short", retry=True)
+        error.stale = True
+        raise error from None
+    except aiohttp.ClientPayloadError as exc:
         raise SourceError(url, f"answer cut short: {type(exc).__name__}", retry=True) from None
     except aiohttp.ClientError as exc:
         raise SourceError(url, f"request failed: {type(exc).__name__}: {exc}", retry=True) from None
