@@ -28,7 +28,7 @@ from alphafence.livemap.server import start_map_server  # noqa: E402
 from alphafence.monitor.live import LiveOptions, LiveSource  # noqa: E402
 from alphafence.monitor.observe import Step  # noqa: E402
 from alphafence.sources.ogc import SourceOptions  # noqa: E402
-from tests.live_servers import ed318_zone, insert_zone  # noqa: E402
+from tests.live_servers import clear_zones, ed318_zone, insert_zone  # noqa: E402
 from tests.test_live_monitor import Companion, iso, square  # noqa: E402
 
 
@@ -52,7 +52,7 @@ def _step(lon, lat):
 
 async def test_a_new_zone_appears_on_the_map_with_its_window_and_source(shared_source, rules):
     pg, api, table = shared_source
-    pg.sql(f"DELETE FROM {table}")
+    clear_zones(pg, table)
     now = datetime.now(timezone.utc)
     window = [{"startDateTime": iso(now - timedelta(minutes=1)),
                "endDateTime": iso(now + timedelta(hours=2))}]  # fmt: skip
@@ -113,7 +113,7 @@ async def test_the_page_draws_the_offline_basemap_and_the_new_zone(
     from alphafence.plots.osm_basemap import osm_basemap
 
     pg, api, table = shared_source
-    pg.sql(f"DELETE FROM {table}")
+    clear_zones(pg, table)
     companion = Companion()
     basemap = osm_basemap(malta, (14.48, 35.88, 14.54, 35.93))
     layers = {f["properties"]["layer"] for f in basemap["features"]}

@@ -22,7 +22,7 @@ from alphafence.monitor.eventlog import EventLog
 from alphafence.monitor.live import LiveOptions, LiveSource
 from alphafence.sources.ogc import SourceOptions
 from tests.fault_proxy import FaultProxy
-from tests.live_servers import ed318_zone, insert_zone
+from tests.live_servers import clear_zones, delete_zone, ed318_zone, insert_zone
 
 
 def square(lon, lat, d=0.002):
@@ -65,7 +65,7 @@ def iso(dt):
 @pytest.fixture
 async def setup(shared_source, rules):
     pg, api, table = shared_source
-    pg.sql(f"DELETE FROM {table}")
+    clear_zones(pg, table)
     insert_zone(pg, table, ed318_zone("A", square(14.51, 35.91)))
     insert_zone(pg, table, ed318_zone("B", square(14.52, 35.91)))
     proxy = await FaultProxy(api.url).start()
@@ -96,7 +96,7 @@ async def setup(shared_source, rules):
 )
 async def test_a_failing_source_removes_nothing_and_says_so(setup, fault, said):
     s = setup
-    s.pg.sql(f"DELETE FROM {s.table} WHERE id = 'B'")  # gone at the source, but unseen
+    delete_zone(s.pg, s.table, "B")  # gone at the source, but unseen
     s.proxy.fault = fault
     source = s.live.options.source
     if "delay_s" in fault:  # a server slower than the timeout

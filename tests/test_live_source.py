@@ -13,7 +13,7 @@ from alphafence.errors import SourceError
 from alphafence.sources.answers import read_zones
 from alphafence.sources.ogc import SourceOptions, fetch, read_token, session
 from tests.fault_proxy import FaultProxy
-from tests.live_servers import ed318_zone, insert_zone
+from tests.live_servers import clear_zones, ed318_zone, insert_zone
 
 BOX = (14.40, 35.80, 14.60, 36.00)
 
@@ -26,7 +26,7 @@ def square(lon, lat, d=0.001):
 def zones(shared_source):
     """The shared table holding 25 zones inside BOX and 5 outside it."""
     pg, api, table = shared_source
-    pg.sql(f"DELETE FROM {table}")
+    clear_zones(pg, table)
     for k in range(25):
         insert_zone(pg, table, ed318_zone(f"IN-{k}", square(14.45 + 0.004 * k, 35.9)))
     for k in range(5):
