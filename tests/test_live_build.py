@@ -12,7 +12,8 @@ import pytest
 from alphafence.cli import main
 from alphafence.fencefiles.fence_geojson import read_fences
 from alphafence.fencing.pipeline import BuildOptions
-from alphafence.monitor.live import LiveOptions, LiveSource, split_copy
+from alphafence.monitor.live import LiveOptions, LiveSource
+from alphafence.monitor.live_zones import split_copy
 from alphafence.sources.ogc import SourceOptions
 from tests.live_servers import (
     NO_POSTGIS,

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 
 from alphafence.monitor.events import new_event
-from alphafence.monitor.live_zones import LiveZones, window_state
+from alphafence.monitor.live_zones import LiveZones, copied_zones, window_state
 
 SWITCH_S = 0.0002  # the interpreter's thread switch interval while a fence set is rebuilt
 CLOCK_SKEW_S = 30.0  # this clock and the server's differ by more: said, and windows widened
@@ -94,7 +94,7 @@ class LiveSource:
         self.monitor, self.options = monitor, options
         self.base = list(base)
         self.fenced = {}  # zone hash -> [FenceRecord] (or the worker's packed fences, unread)
-        self.zones = LiveZones(_copied_zones(copied, self.fenced))
+        self.zones = LiveZones(copied_zones(copied, self.fenced))
         self.etag = self.last_modified = None
         self.last_good = time.monotonic()
         self.stale = False
@@ -241,7 +241,7 @@ class LiveSource:
 
         from alphafence.errors import InputError, SourceError
         from alphafence.fencing.bundle import SUFFIX, verify
-        from alphafence.sources.ogc import fetch_bytes
+        from alphafence.sources.request import fetch_bytes
 
         signature = await fetch_bytes(self._http, self.options.source, answer.url + SUFFIX)
 
@@ -377,32 +377,3 @@ def _read_answer(options, features, known):
     from alphafence.fencing.zone_fences import read_answer
 
     return read_answer(options.source.url, features, options.rules, options.build, known)
-
-
-def _copied_zones(records, fenced) -> list:
-    """The offline copy's zones, one per ``(source_zone, source_hash)`` of its fences."""
-    import shapely
-
-    from alphafence.sources.answers import Zone
-
-    groups = {}
-    for r in records:
-        key = (str(r.properties["source_zone"]), str(r.properties["source_hash"]))
-        groups.setdefault(key, []).append(r)
-    zones = []
-    for (zid, digest), recs in groups.items():
-        fenced[digest] = recs
-        window = ((recs[0].properties or {}).get("zone") or {}).get("applicability")
-        outline = shapely.union_all([r.geometry for r in recs])
-        feature = {"type": "Feature", "id": zid, "properties": {},
-                   "geometry": shapely.geometry.mapping(outline)}  # fmt: skip
-        zones.append(Zone(zid, digest, feature, (), window))
-    return zones
-
-
-def split_copy(records):
-    """``(base, copied)``: the fences not from a source, and those from one (an offline copy's,
-    with ``source_zone`` and ``source_hash``)."""
-    copied = [r for r in records if "source_zone" in (r.properties or {})]
-    base = [r for r in records if "source_zone" not in (r.properties or {})]
-    return base, copied

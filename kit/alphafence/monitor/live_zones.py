@@ -162,3 +162,33 @@ def _end(entry):
     from alphafence.awareness.applicability import _dt
 
     return _dt(entry.get("endDateTime")) if isinstance(entry, dict) else None
+
+
+def copied_zones(records, fenced) -> list:
+    """The offline copy's zones, one per ``(source_zone, source_hash)`` of its fences; each
+    version's fence records go into ``fenced`` (``{hash: [FenceRecord]}``)."""
+    import shapely
+
+    from alphafence.sources.answers import Zone
+
+    groups = {}
+    for r in records:
+        key = (str(r.properties["source_zone"]), str(r.properties["source_hash"]))
+        groups.setdefault(key, []).append(r)
+    zones = []
+    for (zid, digest), recs in groups.items():
+        fenced[digest] = recs
+        window = ((recs[0].properties or {}).get("zone") or {}).get("applicability")
+        outline = shapely.union_all([r.geometry for r in recs])
+        feature = {"type": "Feature", "id": zid, "properties": {},
+                   "geometry": shapely.geometry.mapping(outline)}  # fmt: skip
+        zones.append(Zone(zid, digest, feature, (), window))
+    return zones
+
+
+def split_copy(records):
+    """``(base, copied)``: the fences not from a source, and those from one (an offline copy's,
+    with ``source_zone`` and ``source_hash``)."""
+    copied = [r for r in records if "source_zone" in (r.properties or {})]
+    base = [r for r in records if "source_zone" not in (r.properties or {})]
+    return base, copied

@@ -112,7 +112,8 @@ class Monitor:
         self.clock_slack_s = 0.0  # how far this clock may be off (a live source's Date says)
         self.live = None  # --source: alphafence.monitor.live.LiveSource
         if live is not None:
-            from alphafence.monitor.live import LiveSource, split_copy
+            from alphafence.monitor.live import LiveSource
+            from alphafence.monitor.live_zones import split_copy
 
             self.live = LiveSource(self, live, *split_copy(fences.records))
         self.feeds = self._feeds()
