@@ -100,6 +100,7 @@ class LiveSource:
         self.stale = False
         self.skew_s = 0.0
         self.windows = {}  # zone hash -> the window state last said
+        self._timed = None  # (the zone set's revision, its zones with a window)
         self.answers = 0
         self.pool = None
         self._wake = asyncio.Event()
@@ -258,8 +259,14 @@ class LiveSource:
             raise SourceError(answer.url, f"not authentic, not applied: {exc.message}") from None
 
     def tick(self, now_utc) -> None:
-        """Each second: windows that changed state are said; the source gone stale is."""
-        for z in self.zones.zones:
+        """Each second: windows that changed state are said; the source gone stale is. Only
+        the zones with a window are looked at (the others are always in force)."""
+        from alphafence.awareness.applicability import timed
+
+        if self._timed is None or self._timed[0] != self.zones.revision:
+            windowed = [z for z in self.zones.zones if timed(z.applicability)]
+            self._timed = (self.zones.revision, windowed)
+        for z in self._timed[1]:
             state = window_state(z.applicability, now_utc, self.options.announce_s, self.skew_s)
             if self.windows.get(z.hash) != state:
                 self.windows[z.hash] = state

@@ -70,11 +70,14 @@ class LiveZones:
         until a complete answer drops it).
     empty_pending : bool
         The last complete answer was empty where zones were: the next empty one removes them.
+    revision : int
+        Counts the answers that changed what is in force.
     """
 
     def __init__(self, zones=()):
         self.versions = {(z.id, z.hash): z for z in zones}
         self.empty_pending = False
+        self.revision = 0  # one more at every answer that changed what is in force
 
     @property
     def zones(self) -> list:
@@ -97,6 +100,11 @@ class LiveZones:
         -------
         Change
         """
+        change = self._answer(zones, complete, bbox)
+        self.revision += bool(change)
+        return change
+
+    def _answer(self, zones, complete, bbox) -> Change:
         change = Change()
         ids_in_force = {k[0] for k in self.versions}
         served = {(z.id, z.hash) for z in zones}
