@@ -32,7 +32,8 @@ demo: $(STAMP)
 
 # the suite on every core and one worker more (pytest-xdist; each SITL on its own ports and
 # folder): a SITL test spends most of its time waiting on the simulated clock, so one more
-# worker keeps the cores busy (on 2 cores: 10.7 minutes with 3 workers, 14.3 with 2); the
+# worker keeps the cores busy (on 2 cores, measured 2026-12-06 before the live-source tests:
+# 10.7 minutes with 3 workers, 14.3 with 2); the
 # SITL comes from ../shared/ardupilot-sitl when no other is found
 WORKERS ?= $(shell $(PYTHON) -c "import os; print((os.cpu_count() or 1) + 1)")
 test: $(STAMP) $(PYGEOAPI_STAMP)
