@@ -2,10 +2,9 @@
 
 ``/collections/{id}/items`` with ``bbox`` and ``limit``, following the ``next`` links of
 paging; conditional (``If-None-Match`` with the last ETag, ``If-Modified-Since``), compressed
-(aiohttp asks for gzip and inflates), each request with a timeout and a bounded body, a bounded
-number of pages, retries with exponential backoff and full jitter on what may pass (refused,
-timeouts, 429 and 5xx), a bearer token (services behind OAuth2 give them), TLS verified against
-the system's or a given CA file. A URL that is not a collection (a plain GeoJSON file on a web
+(aiohttp asks for gzip and inflates), a bounded number of pages, a bearer token (services
+behind OAuth2 give them), TLS verified against the system's or a given CA file; each request
+with a timeout, a bounded body and retries (:mod:`alphafence.sources.request`). A URL that is not a collection (a plain GeoJSON file on a web
 server) is fetched whole, once.
 
 Every failure a user can meet is one line (:class:`~alphafence.errors.SourceError`). A failure
