@@ -29,7 +29,7 @@ from alphafence.monitor.live import LiveOptions, LiveSource  # noqa: E402
 from alphafence.monitor.observe import Step  # noqa: E402
 from alphafence.sources.ogc import SourceOptions  # noqa: E402
 from tests.live_servers import clear_zones, ed318_zone, insert_zone  # noqa: E402
-from tests.test_live_monitor import Companion, iso, square  # noqa: E402
+from tests.test_live_monitor import Companion, square, window  # noqa: E402
 
 
 async def _page(server, got):
@@ -54,8 +54,7 @@ async def test_a_new_zone_appears_on_the_map_with_its_window_and_source(shared_s
     pg, api, table = shared_source
     clear_zones(pg, table)
     now = datetime.now(timezone.utc)
-    window = [{"startDateTime": iso(now - timedelta(minutes=1)),
-               "endDateTime": iso(now + timedelta(hours=2))}]  # fmt: skip
+    in_force = window(now, -timedelta(minutes=1), timedelta(hours=2))
     companion = Companion()
     livemap = LiveMap(companion.engine.fences, near_m=3000.0)
     livemap.on_engine(companion.engine)
@@ -71,7 +70,7 @@ async def test_a_new_zone_appears_on_the_map_with_its_window_and_source(shared_s
         await _until(lambda: any(m["type"] == "fences" for m in got), "the fences near it")
         first = [m for m in got if m["type"] == "fences"][0]
         assert {f["properties"]["site_id"] for f in first["geojson"]["features"]} == {"base/1"}
-        insert_zone(pg, table, ed318_zone("FIRE-9", square(14.51, 35.91), "wildfire", window))
+        insert_zone(pg, table, ed318_zone("FIRE-9", square(14.51, 35.91), "wildfire", in_force))
         async with live.opened():
             await live.refresh()
         livemap.on_step(_step(14.5051, 35.9051))  # the next position: fences gathered again
@@ -89,12 +88,12 @@ async def test_a_new_zone_appears_on_the_map_with_its_window_and_source(shared_s
         reader.cancel()
         await server.close()
     props = fence_of_zone()["properties"]
-    assert props["kind"] in ("keep_out", "warning") and props["zone"]["applicability"] == window
+    assert props["kind"] in ("keep_out", "warning") and props["zone"]["applicability"] == in_force
     (event,) = [
         m["event"] for m in got if m["type"] == "event" and m["event"]["event"] == "source_zone"
     ]
     assert event["name"] == "wildfire" and event["window"] == "active"
-    assert event["applicability"] == window and event["source"] == f"{api.collection}/items"
+    assert event["applicability"] == in_force and event["source"] == f"{api.collection}/items"
 
 
 PAGE_STATE = (

@@ -62,6 +62,11 @@ def iso(dt):
     return dt.isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
+def window(now, start, end):
+    """An ED-318 window from ``now + start`` to ``now + end`` (timedeltas)."""
+    return [{"startDateTime": iso(now + start), "endDateTime": iso(now + end)}]
+
+
 @pytest.fixture
 async def setup(shared_source, rules):
     pg, api, table = shared_source
@@ -151,18 +156,8 @@ async def test_malformed_zones_are_named_and_the_good_ones_apply(setup):
 async def test_windows_are_announced_enforced_and_ended(setup):
     s = setup
     now = datetime.now(timezone.utc)
-    soon = [
-        {
-            "startDateTime": iso(now + timedelta(minutes=5)),
-            "endDateTime": iso(now + timedelta(hours=1)),
-        }
-    ]
-    over = [
-        {
-            "startDateTime": iso(now - timedelta(hours=1)),
-            "endDateTime": iso(now - timedelta(minutes=1)),
-        }
-    ]
+    soon = window(now, timedelta(minutes=5), timedelta(hours=1))
+    over = window(now, -timedelta(hours=1), -timedelta(minutes=1))
     insert_zone(s.pg, s.table, ed318_zone("SOON", square(14.53, 35.92), window=soon))
     insert_zone(s.pg, s.table, ed318_zone("OVER", square(14.54, 35.92), window=over))
     await s.live.refresh()
@@ -179,12 +174,7 @@ async def test_windows_are_announced_enforced_and_ended(setup):
 async def test_a_clock_ten_minutes_off_widens_the_windows(setup):
     s = setup
     now = datetime.now(timezone.utc)
-    soon = [
-        {
-            "startDateTime": iso(now + timedelta(minutes=5)),
-            "endDateTime": iso(now + timedelta(hours=1)),
-        }
-    ]
+    soon = window(now, timedelta(minutes=5), timedelta(hours=1))
     insert_zone(s.pg, s.table, ed318_zone("SOON", square(14.53, 35.92), window=soon))
     s.proxy.fault = {"date_offset_s": 600.0}  # the source's clock (or ours) is 10 minutes off
     await s.live.refresh()
