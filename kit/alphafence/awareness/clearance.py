@@ -1,16 +1,15 @@
-"""Positions provably far from every fence, decided without asking the fences again.
+"""The room around a fully checked position: how far the vehicle may move before a full
+check could say anything but CLEAR.
 
-After a full check that found the vehicle outside every fence (of any kind, at any altitude)
-and at least ``keep_out_m`` from every keep-out in force, the triangle inequality bounds the
-next positions: within ``clear_m`` of that point the vehicle is still outside every fence, and
-its distance to the nearest keep-out is at least ``keep_out_m`` minus how far it has moved.
-While that bound exceeds the look-ahead and the stopping margin, the full check could only
-say CLEAR (no breach ahead within the look-ahead, nothing within the margin, inside nothing),
-so :meth:`Clearance.assess` says it at the cost of one ``hypot``: most positions of a flight
-away from fences touch no geometry at all, which is most of the monitor's CPU on a small
-computer. Anything that changes what is in force (a time window opening, a new frame) changes
-the fences' ``version`` and ends the shortcut; the engine uses it only while its level is
-CLEAR, so no event can differ (``tests/test_monitor_clearance.py`` checks that property).
+After a full check that found the vehicle CLEAR (inside no keep-out and no warning layer, and
+inside every keep-in it must be in), two distances bound what the next positions can change:
+``room_m``, the distance to the nearest fence *boundary* of any kind, in force or not (within
+it no fence's inside or outside changes, so a keep-in holds the vehicle as it did), and
+``keep_out_m``, the distance to the nearest keep-out in force at any altitude (the triangle
+inequality: it shrinks by at most how far the vehicle moves). A fence with an altitude band
+that holds the position could change with altitude alone: ``vertical_m`` is how far the
+altitude may move before it reaches such a band's limit. :mod:`alphafence.awareness.reach`
+turns these into the time a full check holds.
 """
 
 from __future__ import annotations
@@ -18,8 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from alphafence.awareness.predict import stopping_distance, time_to_breach
-from alphafence.awareness.state import Assessment, Level
+import numpy as np
+import shapely
 
 
 @dataclass(frozen=True)
@@ -30,49 +29,97 @@ class Clearance:
     ----------
     x, y : float
         The position (metres, the fences' frame).
-    clear_m : float
-        Its distance to the nearest fence of any kind, in force or not (> 0: outside all).
+    room_m : float
+        Its distance to the nearest fence boundary of any kind, in force or not.
     keep_out_m : float
         Its distance to the nearest keep-out in force, at any altitude (infinite when there
         is none).
-    fence : int or None
-        That keep-out's index.
+    vertical_m : float
+        How far its altitude may move before the band of a fence holding it is reached
+        (infinite when no banded fence holds it).
     version : int
         The fences' ``version`` it was measured at.
     """
 
     x: float
     y: float
-    clear_m: float
+    room_m: float
     keep_out_m: float
-    fence: int | None
+    vertical_m: float
     version: int
 
     @classmethod
-    def after(cls, fences, x: float, y: float, check) -> Clearance | None:
+    def after(cls, fences, x: float, y: float, alt: float, check) -> Clearance | None:
         """The clearance of a position whose full check is ``check``, or None when it is in
-        or at a fence (or has left a keep-in): the next position is then checked in full."""
+        a keep-out or a warning layer or has left a keep-in (the next position is then
+        checked in full).
+
+        Parameters
+        ----------
+        fences : FenceSet
+            The fences ``check`` was made against.
+        x, y : float
+            The position, metres in their frame.
+        alt : float
+            Metres above home.
+        check : Check
+            :meth:`FenceSet.check <alphafence.awareness.fenceset.FenceSet.check>`'s answer.
+        """
         if check.inside_keep_out or check.inside_warning or check.outside_keep_in:
             return None
-        clear = fences.clearance(x, y)
-        if not clear > 0.0:
-            return None
+        room, vertical = measure_room(fences, x, y, alt)
         nearest = check.nearest_keep_out
         # at any altitude: the vehicle may climb or descend into a band before the next check
         keep_out = min(check.keep_out_any_m, nearest.distance_m if nearest else math.inf)
-        return cls(x, y, clear, keep_out, nearest.index if nearest else None, fences.version)
+        return cls(x, y, room, keep_out, vertical, fences.version)
 
-    def assess(self, fences, x, y, speed_mps, lookahead_m, braking) -> Assessment | None:
-        """CLEAR at ``(x, y)`` if this clearance proves it (see the module), else None."""
-        if self.version != fences.version:
+    def join(self, other: Clearance | None) -> Clearance | None:
+        """The room both leave (another layer's, in the same frame at the same position)."""
+        if other is None:
             return None
-        moved = math.hypot(x - self.x, y - self.y)
-        if not moved < self.clear_m:
-            return None
-        lower = self.keep_out_m - moved
-        if not lower > max(lookahead_m, braking.margin_m):
-            return None
-        stop = stopping_distance(speed_mps, braking)
-        return Assessment(
-            Level.CLEAR, self.fence, lower, time_to_breach(None, speed_mps), stop, "clear"
+        return Clearance(
+            self.x,
+            self.y,
+            min(self.room_m, other.room_m),
+            min(self.keep_out_m, other.keep_out_m),
+            min(self.vertical_m, other.vertical_m),
+            self.version,
         )
+
+
+def index_room(fences):
+    """The STRtree of the fences' boundaries :func:`measure_room` asks (built once per frame:
+    at 100,000 fences it takes a while, so the monitor builds it before the flight)."""
+    cached = getattr(fences, "_room_tree", None)
+    if cached is None or cached[0] is not fences.boundary:
+        cached = (fences.boundary, shapely.STRtree(fences.boundary))
+        fences._room_tree = cached
+    return cached[1]
+
+
+def measure_room(fences, x: float, y: float, alt: float) -> tuple[float, float]:
+    """``(room_m, vertical_m)`` at a position of a :class:`~alphafence.awareness.fenceset.FenceSet`
+    (see :class:`Clearance`).
+
+    Examples
+    --------
+    >>> from alphafence.awareness.fenceset import FenceSet
+    >>> from alphafence.fencefiles.fence_geojson import FenceRecord
+    >>> from alphafence.geo.frame import LocalFrame
+    >>> frame = LocalFrame(14.5, 35.9)
+    >>> box = frame.geom_to_wgs84(shapely.box(-100, -100, 100, 100))
+    >>> fences = FenceSet([FenceRecord("a", "keep_in", box, alt_max_m=120.0)], frame=frame)
+    >>> [round(v, 1) for v in measure_room(fences, 0.0, 60.0, 100.0)]
+    [40.0, 20.0]
+    >>> [round(v, 1) for v in measure_room(fences, 0.0, 160.0, 100.0)]
+    [60.0, inf]
+    """
+    p = shapely.points((x, y))
+    _, d = index_room(fences).query_nearest(p, return_distance=True)
+    room = float(d[0]) if d.size else math.inf
+    holding = fences.tree.query(p, predicate="intersects")  # at any altitude, in force or not
+    if not holding.size:
+        return room, math.inf
+    gaps = np.abs(np.concatenate([fences.alt_min[holding], fences.alt_max[holding]]) - alt)
+    gaps = gaps[np.isfinite(gaps)]
+    return room, float(gaps.min()) if gaps.size else math.inf

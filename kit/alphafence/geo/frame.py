@@ -122,6 +122,30 @@ class LocalFrame:
         )
         return wrap_lon(lon / _RADIANS_PER_DEGREE), lat / _RADIANS_PER_DEGREE
 
+    def jacobian(self, lon: float, lat: float, step_deg: float = 1e-5) -> tuple:
+        """The frame's metres per degree at ``(lon, lat)``: ``(dx/dlon, dx/dlat, dy/dlon,
+        dy/dlat)`` by central differences, so that a small displacement ``(dlon, dlat)`` is
+        ``(x, y) = (j[0] dlon + j[1] dlat, j[2] dlon + j[3] dlat)`` metres (the monitor's reading
+        of positions near a checked one: :mod:`alphafence.awareness.reach`).
+
+        Examples
+        --------
+        >>> j = LocalFrame(14.5, 35.9).jacobian(14.5, 35.9)
+        >>> [round(v, 1) + 0.0 for v in j]
+        [90277.4, 0.0, 0.0, 110957.1]
+        """
+        e = step_deg
+        x, y = self._tr.transform(
+            np.array([lon + e, lon - e, lon, lon]), np.array([lat, lat, lat + e, lat - e])
+        )
+        h = 2.0 * e
+        return (
+            float((x[0] - x[1]) / h),
+            float((x[2] - x[3]) / h),
+            float((y[0] - y[1]) / h),
+            float((y[2] - y[3]) / h),
+        )
+
     def _fwd(self, coords):
         x, y = self._tr.transform(coords[:, 0], coords[:, 1])
         return np.column_stack([x, y])

@@ -76,6 +76,11 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         Frames dropped unread because their id was not wanted.
     on_skipped : callable or None
         ``on_skipped(frame)`` with the raw bytes of each frame dropped unread.
+    fast : dict
+        ``{message id: take}`` (with ``wanted_ids`` set): ``take(frame, addr) -> bool`` is
+        given each whole MAVLink 2 frame of that id first, in order among the others; a frame
+        it returns False for is parsed by pymavlink as any other (which rejects it or
+        delivers it).
     transport : asyncio.DatagramTransport or None
         The endpoint while it is open.
     """
@@ -89,6 +94,7 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         self.wanted_ids: set[int] | None = None
         self.skipped = 0
         self.on_skipped: Callable | None = None
+        self.fast: dict[int, Callable] = {}
         self._rest = b""  # an unfinished frame, when wanted_ids is set
         self.transport: asyncio.DatagramTransport | None = None
         self._connected = False  # opened with a remote address: sends go there only
@@ -179,6 +185,12 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
                 if self.on_skipped is not None:
                     self.on_skipped(bytes(buf[i : i + size]))
                 start = i + size
+            elif marker == MARKER_V2 and (take := self.fast.get(ident)) is not None:
+                if start < i:  # what came before it, first
+                    self._parse(buf[start:i], addr)
+                    start = i
+                if take(bytes(buf[i : i + size]), addr):
+                    start = i + size
             i += size
         if start < i:
             self._parse(buf if start == 0 and i == n else buf[start:i], addr)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 
-from alphafence.awareness.clearance import Clearance
 from alphafence.awareness.fenceset import FenceSet
 from alphafence.awareness.predict import vertical_reach
 from alphafence.awareness.sample import Sample, finite_velocity, plausible
@@ -15,6 +14,7 @@ from alphafence.awareness.state import Level, StateMachine, assess
 from alphafence.awareness.traffic import Traffic
 from alphafence.geo.frame import short_distance_m
 from alphafence.mavlink.ids import GPS_FIX_TYPE_3D_FIX
+from alphafence.monitor.engine_reach import GLITCH_SLACK_M, LOOKAHEAD_MIN_M, LazyChecks
 from alphafence.monitor.engine_reroute import REROUTE_FALLBACK, RerouteDecisions
 from alphafence.monitor.events import new_event, rounded
 from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unreadable
@@ -28,10 +28,9 @@ PILOT_MODES = {
     *("MANUAL", "TRAINING", "FBWA", "FBWB", "CRUISE", "QSTABILIZE", "QHOVER", "QACRO"),
     "STEERING",
 }
-GLITCH_SLACK_M = 25.0  # telemetry arrival jitter must not look like a jump
 
 
-class Engine(RerouteDecisions):
+class Engine(RerouteDecisions, LazyChecks):
     """The monitor's decisions, fed one telemetry sample (:meth:`step`) or timer tick
     (:meth:`tick`) at a time; every call returns the events it decided (dicts, see
     :mod:`alphafence.monitor.events`). ``checks`` counts the positions checked against the
@@ -49,7 +48,7 @@ class Engine(RerouteDecisions):
         self.fences = fences
         self.options = options or MonitorOptions()
         self.sm = StateMachine(self.options.hold_s)
-        self.last: Sample | None = None
+        self._last: Sample | None = None
         self.last_t: float | None = None
         self.stale = False
         self.action_t = -math.inf  # when the monitor last commanded a mode
@@ -64,8 +63,10 @@ class Engine(RerouteDecisions):
         self.rerouting = False  # a re-route is being planned or flown (the runner's task)
         self.handing_back = False  # the next commanded mode change returns control
         self.onboard: OnboardLayer | None = None  # the fence the vehicle holds (load_onboard)
-        self.shortcut = True  # positions far from every fence skip the fence query
-        self.clearance: Clearance | None = None  # the room around the last full check
+        self.shortcut = True  # positions a full check still proves CLEAR are not checked again
+        self.reach = None  # what the last full check proves, and until when (a Reach)
+        self.full_checks = 0  # positions checked against the fences in full
+        self._skipped = None  # the last position :meth:`skip` took, when newer than ``last``
         self.amsl_said = False  # whether AMSL limits without an altitude AMSL were said
 
     # -- inputs ---------------------------------------------------------------------
@@ -96,6 +97,10 @@ class Engine(RerouteDecisions):
             The events, in the order they happened (empty when nothing changed).
         """
         s = finite_velocity(s)
+        r = self.reach
+        if r is not None and r.stamp == (s.mode, s.armed, s.gps_fix) and self._holds(r, s):
+            self._skipped, self._last = None, s
+            return []
         events = []
         if s.gps_fix is not None and s.gps_fix < GPS_FIX_TYPE_3D_FIX:
             if not self.gps_degraded:
@@ -127,17 +132,15 @@ class Engine(RerouteDecisions):
         self.last, self.last_t = s, s.t
         x, y = self.fences.frame.to_local(s.lon, s.lat)
         speed = math.hypot(s.vn, s.ve)
-        lookahead = max(50.0, speed * self.options.horizon_s)
+        lookahead = max(LOOKAHEAD_MIN_M, speed * self.options.horizon_s)
         x, y = float(x), float(y)
-        a = self._far_from_fences(x, y, speed, lookahead)
-        if a is None:
-            vertical = vertical_reach(s.vd, self.options.horizon_s)
-            check = self.fences.check(x, y, s.alt_m, s.ve, s.vn, lookahead, vertical)
-            a = assess(check, speed, self.options.horizon_s, self.options.braking)
-            if self.options.reroute:
-                a = self._reroute_assessment(a, check)
-            self.clearance = Clearance.after(self.fences, x, y, check) if self.shortcut else None
+        vertical = vertical_reach(s.vd, self.options.horizon_s)
+        check = self.fences.check(x, y, s.alt_m, s.ve, s.vn, lookahead, vertical)
+        a = assess(check, speed, self.options.horizon_s, self.options.braking)
+        if self.options.reroute:
+            a = self._reroute_assessment(a, check)
         self.checks += 1
+        self.full_checks += 1
         if self.onboard is None:
             d = Decision(a, full_level=a.level)
         else:  # the vehicle's own fence, as a layer of its own
@@ -167,6 +170,8 @@ class Engine(RerouteDecisions):
             )
             events += self._act(s, level, onboard_only=d.onboard_only)
         events += self._traffic(s, float(x), float(y))
+        calm = level == a.level == Level.CLEAR and not events
+        self.reach = self._reach(s, x, y, speed, check) if calm and self.shortcut else None
         return events
 
     def set_fences(self, fences: FenceSet) -> None:
@@ -175,7 +180,7 @@ class Engine(RerouteDecisions):
         if self.fences.home_amsl is not None:
             fences.set_home(self.fences.home_amsl)
         self.fences = fences
-        self.clearance = None
+        self.reach = None
 
     def _home(self, s):
         """Home's altitude AMSL (the sample's altitude AMSL less its height above home): the
@@ -191,13 +196,6 @@ class Engine(RerouteDecisions):
                 return [new_event("altitude_unknown", s.t, s, fences=sites[:10], reason=why)]
         return []
 
-    def _far_from_fences(self, x, y, speed, lookahead):
-        """CLEAR without a fence query when the last full check proves it and nothing could
-        change (the level is CLEAR, no re-route): :mod:`alphafence.awareness.clearance`."""
-        if self.clearance is None or self.sm.level != Level.CLEAR or self.options.reroute:
-            return None
-        return self.clearance.assess(self.fences, x, y, speed, lookahead, self.options.braking)
-
     def load_onboard(self, items, t=None, union=False, **fields) -> list:
         """The vehicle's fence (its items, as downloaded) becomes the onboard layer, checked
         beside the full-resolution fences from the next step on, its inclusions read by the
@@ -207,6 +205,7 @@ class Engine(RerouteDecisions):
         self.onboard, events = load_layer(
             self.onboard, items, self.fences, t, self.last, union, **fields
         )
+        self.reach = None
         return events
 
     def onboard_unreadable(self, error, t=None, **fields) -> list:
@@ -219,6 +218,7 @@ class Engine(RerouteDecisions):
         from alphafence.awareness.traffic import Aircraft
 
         x, y = self.fences.frame.to_local(lon, lat)
+        self.reach = None
         self.traffic.report(
             Aircraft(str(key), t, float(x), float(y), alt_amsl_m, ve, vn, vu, callsign)
         )

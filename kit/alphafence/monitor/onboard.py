@@ -129,7 +129,7 @@ class OnboardLayer:
         if self.index is None:
             return Decision(full, full_level=full.level)
         speed = math.hypot(ve, vn)
-        check = self.index.check(x, y, alt, ve, vn, lookahead_m)
+        check = self.last_check = self.index.check(x, y, alt, ve, vn, lookahead_m)
         a = assess(check, speed, options.horizon_s, options.braking)
         if a.level <= full.level:
             return Decision(full, full_level=full.level)

@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass, field
 
 from alphafence.awareness.predict import Braking, stopping_distance
+from alphafence.awareness.reach import DEFAULT_ACCEL_MPS2
 from alphafence.awareness.traffic import TrafficOptions
 from alphafence.errors import InputError
 from alphafence.mavlink.storage import PROFILES, Profile
@@ -105,6 +106,8 @@ class MonitorOptions:
     backoff_s: float = 15.0  # after the pilot changes mode, alert only
     stale_s: float = 1.0
     max_speed_mps: float = 60.0  # a position jump faster than this is a GPS glitch
+    # the vehicle's acceleration at most: when the next full check is due far from fences
+    max_accel_mps2: float = DEFAULT_ACCEL_MPS2
     traffic: TrafficOptions = field(default_factory=TrafficOptions)
     mavlink_traffic: bool = False  # other MAVLink systems' positions as traffic (ADS-B always)
     link_lost_s: float = 5.0  # no telemetry this long: the link is lost

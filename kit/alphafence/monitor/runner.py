@@ -136,10 +136,24 @@ class Monitor:
 
     def _feeds(self) -> dict:
         def keep(key):
-            def deliver(t, value):
-                self.latest[key] = (t, value)
-                if key == "position":
+            if key == "position":
+
+                def deliver(t, value):
+                    self.latest[key] = (t, value)
                     self._position_came()
+
+            elif key == "velocity":
+
+                def deliver(t, value):
+                    self.latest[key] = (t, value)
+
+            else:  # the mode, the armed state, the GPS fix: a change needs a full check
+
+                def deliver(t, value):
+                    old = self.latest[key]
+                    self.latest[key] = (t, value)
+                    if old is None or old[1] != value:
+                        self.engine.invalidate()
 
             return deliver
 
@@ -240,6 +254,8 @@ class Monitor:
         if self._loop is None or self._failure is not None:
             return
         try:
+            if not self.observers and self.rolling is None and self._skip():
+                return  # the last full check proves this position: nothing to do
             sample = latest_sample(self.latest)
             if sample is None:
                 return
@@ -250,6 +266,16 @@ class Monitor:
                 self.handle(e)
         except Exception as exc:  # noqa: BLE001 - handed to run(), which raises it
             self._failure = exc
+
+    def _skip(self) -> bool:
+        """Whether the engine takes the latest position without a check (its values read as
+        they are, no Sample built: :meth:`Engine.skip <alphafence.monitor.engine.Engine.skip>`)."""
+        pos, vel = self.latest["position"], self.latest["velocity"]
+        if pos is None or vel is None:
+            return False
+        p, v = pos[1], vel[1]
+        lat, lon, alt = p.latitude_deg, p.longitude_deg, p.relative_altitude_m
+        return self.engine.skip(pos[0], lat, lon, alt, v.north_m_s, v.east_m_s)
 
     async def _follow(self, name, feed):
         """Deliver every value of ``feed`` (then tell the observers); a feed that fails is its

@@ -19,6 +19,7 @@ ports, ``udpin``, ``udpout``, ``udpbcast``, ``tcpout``, ``tcpin``), signed or no
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -230,6 +231,37 @@ class VehicleLink:
         self.stats.sent += 1
 
     # -- receiving ------------------------------------------------------------------
+    @contextlib.contextmanager
+    def fast(self, cls, deliver: Callable, alone: Callable[[], bool] = lambda: True):
+        """``with link.fast(cls, deliver):`` the messages of pymavlink class ``cls`` are
+        decoded straight from their frames (:mod:`alphafence.vehicle.fast_frames`) and given
+        to ``deliver(fields, system, component)`` (the fields in wire order) instead of
+        ``on_message``, while ``alone()`` says nothing else follows them; the frames it cannot
+        vouch for go to pymavlink as before."""
+        from alphafence.vehicle.fast_frames import FrameDecoder
+
+        decoder = FrameDecoder(cls)
+        reader = self.reader
+
+        def take(frame, addr) -> bool:
+            if not alone():
+                return False
+            signing = reader.signing if reader.signing.secret_key is not None else None
+            fields = decoder.decode(frame, signing)
+            if fields is None:
+                return False
+            if self.key is not None:
+                self._follow_timestamp(frame)
+            self._accepted(frame, addr)
+            deliver(fields, frame[5], frame[6])
+            return True
+
+        self._wire.fast[decoder.msgid] = take
+        try:
+            yield decoder
+        finally:
+            self._wire.fast.pop(decoder.msgid, None)
+
     def _received(self, data: bytes, addr) -> None:
         """Bytes from the vehicle (a datagram, or a chunk of a serial or TCP stream)."""
         self._wire.feed(data, addr)
@@ -241,13 +273,16 @@ class VehicleLink:
             self.stats.garbage += 1
             return
         if self.key is not None:
-            self._follow_timestamp(msg)
+            self._follow_timestamp(msg.get_msgbuf())
+        self._accepted(msg.get_msgbuf(), addr)
+        self.on_message(msg)
+
+    def _accepted(self, frame, addr) -> None:
         if self.kind in ("udpin", "udpbcast") and addr is not None:
             self.remote = addr  # learnt from accepted (verified, when signing) messages only
         self.stats.received += 1
         if self._recorder is not None:
-            self._recorder(msg.get_msgbuf())
-        self.on_message(msg)
+            self._recorder(frame)
 
     def _reject(self, msg, addr) -> None:
         if msg is None:  # the parser raised (robust parsing should not); never crash
@@ -255,10 +290,10 @@ class VehicleLink:
         else:
             self._count_bad(msg)
 
-    def _follow_timestamp(self, msg) -> None:
-        """Sign with timestamps no older than the vehicle's: it rejects a new stream more than
-        a minute behind its own clock (which runs ahead of ours in SITL at a speedup)."""
-        buf = msg.get_msgbuf()
+    def _follow_timestamp(self, buf) -> None:
+        """Sign with timestamps no older than the vehicle's (those of the frame ``buf``): it
+        rejects a new stream more than a minute behind its own clock (which runs ahead of ours
+        in SITL at a speedup)."""
         if is_signed(buf) and len(buf) >= 25:
             ts = int.from_bytes(bytes(buf[-12:-6]), "little")
             if ts > self.mav.signing.timestamp:

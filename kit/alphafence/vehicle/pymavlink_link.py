@@ -60,6 +60,11 @@ class Bus:
         if (msgid := self._id(name)) is not None:
             self.wanted_ids.discard(msgid)
 
+    def alone(self, name: str) -> bool:
+        """Whether one subscriber alone follows ``name`` messages (a fast decoder may then
+        take them: :meth:`VehicleLink.fast <alphafence.vehicle.bridge.VehicleLink.fast>`)."""
+        return len(self._subs.get(name, ())) == 1
+
     def publish(self, msg) -> None:
         """Hand ``msg`` to every subscriber of its type: its ``handle`` first, if it has one
         (which may take the message), else its queue."""

@@ -10,7 +10,11 @@ their PARAM_VALUE, AUTO's progress from MISSION_CURRENT.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
+from operator import itemgetter
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from alphafence.errors import VehicleError
 from alphafence.geo.coords import from_e7, to_e7
@@ -56,6 +60,18 @@ async def _command(vehicle, command, *params):
         raise CommandRefused(f"command {command} refused ({_result_name(result)})")
 
 
+# the fields of GLOBAL_POSITION_INT a position and velocity are made of, in wire order
+POSITION_FIELDS = ("lat", "lon", "alt", "relative_alt", "vx", "vy", "vz")
+
+
+def _position_velocity(lat, lon, alt, relative_alt, vx, vy, vz):
+    """GLOBAL_POSITION_INT's fields (1e-7 degrees, mm, cm/s) as MAVSDK's values."""
+    return (
+        Position(from_e7(lat), from_e7(lon), alt / 1000.0, relative_alt / 1000.0),
+        VelocityNed(vx / 100.0, vy / 100.0, vz / 100.0),
+    )
+
+
 class Telemetry:
     """``subscribe_*`` streams of the autopilot's own messages, and their rates."""
 
@@ -81,29 +97,33 @@ class Telemetry:
         """Both from each GLOBAL_POSITION_INT, as ``(Position, VelocityNed)`` (one stream where
         MAVSDK has two)."""
         async for m in self._own("GLOBAL_POSITION_INT"):
-            yield (
-                Position(from_e7(m.lat), from_e7(m.lon), m.alt / 1000.0, m.relative_alt / 1000.0),
-                VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
-            )
+            yield _position_velocity(m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz)
 
+    @contextlib.contextmanager
     def listen_position_velocity(self, callback):
         """``with telemetry.listen_position_velocity(callback):`` ``callback((Position,
         VelocityNed))`` for each GLOBAL_POSITION_INT of the autopilot, called as the message is
-        parsed: no task wakes up for it (the monitor's feed at 10-50 Hz)."""
+        parsed: no task wakes up for it (the monitor's feed at 10-50 Hz). While nothing else
+        follows GLOBAL_POSITION_INT, its frames are decoded straight to these values
+        (:mod:`alphafence.vehicle.fast_frames`), not through pymavlink's message objects."""
+        v = self.v
 
         def handle(m) -> bool:
-            if self.v.from_autopilot(m):
-                callback(
-                    (
-                        Position(
-                            from_e7(m.lat), from_e7(m.lon), m.alt / 1000.0, m.relative_alt / 1000.0
-                        ),
-                        VelocityNed(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
-                    )
-                )
+            if v.from_autopilot(m):
+                callback(_position_velocity(m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz))
             return True
 
-        return self.v.bus.subscribe("GLOBAL_POSITION_INT", maxsize=1, handle=handle)
+        pick = None
+
+        def fast(fields, system, component):
+            if (system, component) == v.target:
+                callback(_position_velocity(*pick(fields)))
+
+        name, cls = "GLOBAL_POSITION_INT", mavlink.MAVLink_global_position_int_message
+        with v.bus.subscribe(name, maxsize=1, handle=handle):
+            with v.link.fast(cls, fast, lambda: v.bus.alone(name)) as decoder:
+                pick = itemgetter(*(decoder.index[f] for f in POSITION_FIELDS))
+                yield
 
     async def subscribe_flight_mode(self):
         """Each HEARTBEAT's mode as :class:`~alphafence.vehicle.values.FlightMode`."""

@@ -1,0 +1,160 @@
+"""GLOBAL_POSITION_INT decoded straight from its frames (alphafence.vehicle.fast_frames) gives
+what pymavlink gives, and accepts nothing pymavlink would reject: random field values and
+truncated payloads, corrupted bytes, signatures with the wrong key, replayed timestamps,
+unsigned frames on a signed link; through the link, in order among other messages. A decoder
+that skips the CRC is caught by the same corruption."""
+
+from __future__ import annotations
+
+import hypothesis.strategies as st
+from hypothesis import given, settings
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from alphafence.mavlink.udp import MavlinkDatagrams
+from alphafence.vehicle import fast_frames
+from alphafence.vehicle.fast_frames import FrameDecoder
+from alphafence.vehicle.keys import signing_timestamp
+
+KEY = bytes(range(32))
+GPI = mavlink.MAVLink_global_position_int_message
+
+fields = st.tuples(
+    st.integers(0, 2**32 - 1),
+    *[st.integers(-(2**31), 2**31 - 1)] * 4,
+    *[st.integers(-(2**15), 2**15 - 1)] * 3,
+    st.integers(0, 2**16 - 1),
+)
+
+
+def sender(key=None, system=1):
+    mav = mavlink.MAVLink(None, srcSystem=system, srcComponent=1)
+    if key is not None:
+        mav.signing.secret_key = key
+        mav.signing.sign_outgoing = True
+        mav.signing.timestamp = signing_timestamp() + 1000
+    return mav
+
+
+def reader(key=None):
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    if key is not None:
+        mav.signing.secret_key = key
+        mav.signing.timestamp = signing_timestamp()
+    return mav
+
+
+def by_pymavlink(codec, frame):
+    msgs = [m for m in codec.parse_buffer(frame) or [] if m.get_type() != "BAD_DATA"]
+    return tuple(getattr(msgs[0], f) for f in GPI.ordered_fieldnames) if msgs else None
+
+
+DECODER = FrameDecoder(GPI)
+
+
+def fast(codec, frame, decoder=DECODER):
+    signing = codec.signing if codec.signing.secret_key is not None else None
+    return decoder.decode(frame, signing)
+
+
+@settings(max_examples=300, deadline=None)
+@given(values=fields, signed=st.booleans())
+def test_a_good_frame_decodes_as_pymavlink_decodes_it(values, signed):
+    key = KEY if signed else None
+    frame = GPI(*values).pack(sender(key))
+    assert fast(reader(key), frame) == by_pymavlink(reader(key), frame) == values
+
+
+@settings(max_examples=400, deadline=None)
+@given(values=fields, signed=st.booleans(), at=st.integers(1, 60), bit=st.integers(0, 7))
+def test_a_corrupted_frame_is_never_accepted_where_pymavlink_rejects_it(values, signed, at, bit):
+    key = KEY if signed else None
+    frame = bytearray(GPI(*values).pack(sender(key)))
+    at %= len(frame)
+    frame[at] ^= 1 << bit
+    frame = bytes(frame)
+    got = fast(reader(key), frame)
+    if got is not None:  # then pymavlink accepts it too, with the same fields
+        assert got == by_pymavlink(reader(key), frame)
+    if at >= 10 and at < len(frame) - (13 if signed else 0):  # a payload or CRC byte
+        assert got is None
+
+
+def test_signatures_are_checked_before_the_stream_moves_on():
+    frame = GPI(*[1] * 9).pack(sender(bytes(32)))  # signed with another key
+    codec = reader(KEY)
+    assert fast(codec, frame) is None
+    assert codec.signing.stream_timestamps == {}  # a forged frame moves no stream
+    mav = sender(KEY)
+    first = GPI(*[1] * 9).pack(mav)
+    assert fast(codec, first) is not None
+    assert fast(codec, first) is None  # replayed
+    assert fast(codec, GPI(*[2] * 9).pack(mav)) is not None
+    unsigned = GPI(*[3] * 9).pack(sender())
+    assert fast(codec, unsigned) is None  # on a signed link
+
+
+def test_a_decoder_that_skips_the_crc_accepts_corruption(monkeypatch):
+    # broken on purpose: with the CRC comparison gone, a flipped payload bit is delivered
+    frame = bytearray(GPI(1, 359000000, 144000000, 5, 6, 7, 8, 9, 10).pack(sender()))
+    frame[14] ^= 0x10
+    assert fast(reader(), bytes(frame)) is None
+
+    class Lenient(int):
+        def __ne__(self, other):
+            return False
+
+    monkeypatch.setattr(fast_frames, "x25crc", lambda data: type("C", (), {"crc": Lenient(0)})())
+    assert fast(reader(), bytes(frame)) is not None
+
+
+def delivered(data, key, with_fast):
+    """What a link's wire delivers of ``data``: ``(type, time_boot_ms or None)`` in order."""
+    got, rejected = [], []
+    codec = reader(key)
+
+    def message(m, addr):
+        got.append((m.get_type(), getattr(m, "time_boot_ms", None)))
+
+    wire = MavlinkDatagrams(codec, message, lambda m, a: rejected.append(m))
+    wire.wanted_ids = {0, GPI.id}
+    decoder = FrameDecoder(GPI)
+
+    def take(frame, addr):
+        values = fast(codec, frame, decoder)
+        if values is not None:
+            got.append(("GLOBAL_POSITION_INT", values[0]))
+        return values is not None
+
+    if with_fast:
+        wire.fast[GPI.id] = take
+    wire.feed(data)
+    return got, len(rejected)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    kinds=st.lists(st.sampled_from(["heartbeat", "gpi", "bad", "noise"]), min_size=1, max_size=12),
+    signed=st.booleans(),
+)
+def test_the_link_delivers_what_pymavlink_alone_delivers(kinds, signed):
+    key = KEY if signed else None
+    mav = sender(key)
+    data = b""
+    for i, kind in enumerate(kinds):
+        if kind == "heartbeat":
+            data += mav.heartbeat_encode(2, 3, 0, 0, 4).pack(mav)
+        elif kind == "noise":
+            data += b"\x00\x01 not mavlink"
+        else:
+            frame = bytearray(GPI(i, 2, 3, 4, 5, 6, 7, 8, 9).pack(mav))
+            if kind == "bad":
+                frame[12] ^= 1
+            data += bytes(frame)
+    assert delivered(data, key, True) == delivered(data, key, False)
+    assert (
+        any(kind == "gpi" for kind in kinds)
+        <= any(t == "GLOBAL_POSITION_INT" for t, _ in delivered(data, key, True)[0])
+        or "bad" in kinds
+        or "noise" in kinds
+    )
