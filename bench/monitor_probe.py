@@ -5,8 +5,8 @@ the armhf userland under qemu-user, beside x86's).
     python -m bench.monitor_probe --connect udpin:127.0.0.1:14550 --fences fences.geojson \\
         [--hz 10,50] [--link pymavlink] [--floor]
 
-prints one JSON line per rate: ``{"link", "hz", "share", "rate", "per_position_s", "machine",
-"native"}`` (``share``: of one core; ``native``: which compiled pieces are in use, so that a
+prints one JSON line per rate: ``{"link", "hz", "share", "rate", "per_position_s",
+"full_share", "machine", "native"}`` (``full_share``: of the positions, those checked in full) (``share``: of one core; ``native``: which compiled pieces are in use, so that a
 missing wheel shows), and with ``--floor`` a line ``{"link": "floor", ...}`` per rate: an
 endpoint that does nothing, bound to the same port after the monitor, receiving the datagrams
 the vehicle still sends at that rate.
@@ -50,34 +50,28 @@ async def _windows(count):
 
 
 async def measure_monitor(url, fences, link, hz, settle_s=SETTLE_S):
-    """The real monitor (link, telemetry, checks, event log) on ``url`` at ``hz``."""
+    """The real monitor (link, telemetry, checks, event log) on ``url`` at ``hz``: ``(share of
+    a core, positions decided per second, CPU s per position, share of them checked in
+    full)``. Nothing observes it (an observer sees every position, which the monitor alone
+    does not need to build)."""
     from alphafence.monitor.eventlog import EventLog
-    from alphafence.monitor.observe import Observer
     from alphafence.monitor.options import MonitorOptions
     from alphafence.monitor.runner import Monitor
     from alphafence.vehicle.link import open_vehicle
 
-    class Checks(Observer):
-        """Counts the positions the monitor checks against the fences."""
-
-        n = 0
-
-        def on_step(self, step):
-            self.n += step.checked
-
     async with open_vehicle(url, link=link) as vehicle:
-        checks = Checks()
-        monitor = Monitor(
-            vehicle, fences, MonitorOptions(), EventLog(None), rate_hz=hz, observers=[checks]
-        )
+        monitor = Monitor(vehicle, fences, MonitorOptions(), EventLog(None), rate_hz=hz)
+        engine = monitor.engine
         stop = asyncio.Event()
         task = asyncio.create_task(monitor.run(stop))
         await asyncio.sleep(settle_s)
+        checks, full = engine.checks, engine.full_checks
         try:
-            return await _windows(lambda: checks.n)
+            share, rate, per = await _windows(lambda: engine.checks)
         finally:
             stop.set()
             await task
+        return share, rate, per, (engine.full_checks - full) / max(1, engine.checks - checks)
 
 
 async def measure_floor(port, settle_s=SETTLE_S):
@@ -107,8 +101,9 @@ async def probe(url, fences, link, rates, floor):
     """One JSON-ready dict per measurement."""
     out = []
     for hz in rates:
-        share, rate, per = await measure_monitor(url, fences, link, hz)
-        out.append({"link": link, "hz": hz, "share": share, "rate": rate, "per_position_s": per})
+        share, rate, per, full = await measure_monitor(url, fences, link, hz)
+        out.append({"link": link, "hz": hz, "share": share, "rate": rate, "per_position_s": per,
+                    "full_share": full})  # fmt: skip
         if floor:
             share, rate, per = await measure_floor(port_of(url))
             out.append({"link": "floor", "hz": hz, "share": share, "rate": rate})

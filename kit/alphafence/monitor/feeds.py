@@ -73,9 +73,12 @@ class Feed:
 
 
 def telemetry_feed(vehicle, key: str, deliver) -> Feed:
-    """The :class:`Feed` of telemetry stream ``key`` (one of :data:`TELEMETRY`)."""
+    """The :class:`Feed` of telemetry stream ``key`` (one of :data:`TELEMETRY`): pushed as
+    parsed where the link can (its ``listen_*``, the pymavlink link's), else followed."""
     method = TELEMETRY[key]
-    return Feed(lambda: getattr(vehicle.telemetry, method)(), deliver)
+    telemetry = getattr(vehicle, "telemetry", None)
+    listen = getattr(telemetry, method.replace("subscribe_", "listen_", 1), None)
+    return Feed(lambda: getattr(vehicle.telemetry, method)(), deliver, listen=listen)
 
 
 def telemetry_feeds(vehicle, keep) -> dict:

@@ -24,26 +24,24 @@ from datetime import datetime, timezone
 from alphafence.monitor.commands import Commands
 from alphafence.monitor.engine import Engine
 from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.events import alert_text, new_event
+from alphafence.monitor.events import alert_text
 from alphafence.monitor.feeds import (
     TELEMETRY,
-    Feed,
-    adsb,
     latest_sample,
-    other_systems,
     set_rates,
-    telemetry_feeds,
 )
 from alphafence.monitor.observe import Observer, Step
 from alphafence.monitor.options import REROUTE
 from alphafence.monitor.reroute_flight import RerouteFlight
+from alphafence.monitor.runner_feeds import FeedTasks
 
 TICK_EPSILON_S = 0.005  # the tick wakes this long after its due time (timers may fire early)
 CLOCK_S = 1.0  # fences' time windows and ended telemetry streams are looked at this often
+REARM_S = 0.5  # while positions come, the loop's wake-up is moved on this often
 ROLLING_FINISH_S = 20.0  # a fence transfer under way at shutdown may take this long to end
 
 
-class Monitor:
+class Monitor(FeedTasks):
     """The monitor on one vehicle: feeds in, the engine's decisions out.
 
     Parameters
@@ -97,6 +95,9 @@ class Monitor:
         self.tasks = []
         self.pending = set()  # alerts, actions, commands, re-routes under way
         self._clock_t = -math.inf
+        self._wake = asyncio.Event()  # the loop's: stale telemetry, the clock, a failure, stop
+        self._timer = None  # what sets it when due
+        self._armed_t = -math.inf
         self._ended = set()  # tasks whose end has been reported
         self.commands = Commands(vehicle, log, self._spawn)
         self.reroute = RerouteFlight(
@@ -134,49 +135,6 @@ class Monitor:
             observer.on_engine(self.engine)
         self.log.add_listener(observer.on_event)
 
-    def _feeds(self) -> dict:
-        def keep(key):
-            if key == "position":
-
-                def deliver(t, value):
-                    self.latest[key] = (t, value)
-                    self._position_came()
-
-            elif key == "velocity":
-
-                def deliver(t, value):
-                    self.latest[key] = (t, value)
-
-            else:  # the mode, the armed state, the GPS fix: a change needs a full check
-
-                def deliver(t, value):
-                    old = self.latest[key]
-                    self.latest[key] = (t, value)
-                    if old is None or old[1] != value:
-                        self.engine.invalidate()
-
-            return deliver
-
-        def traffic(t, report):
-            self.engine.aircraft(t=t, **report)
-
-        vehicle = self.vehicle
-        feeds = telemetry_feeds(vehicle, keep)
-        position = feeds["telemetry:position"]
-        if position.split:  # the velocity came with the position: check at once
-            self._inline_check = True
-            position.then = self._check
-        feeds["adsb"] = Feed(lambda: adsb(vehicle), traffic, "adsb_unavailable")
-        if self.engine.options.mavlink_traffic:
-            # every GLOBAL_POSITION_INT on the link crosses into Python: opt-in, for links
-            # that carry other aircraft
-            feeds["traffic"] = Feed(
-                lambda: other_systems(vehicle), traffic, "traffic_link_unavailable"
-            )
-        if self.engine.options.reroute:
-            feeds.update({f"reroute:{k}": f for k, f in self.reroute.feeds().items()})
-        return feeds
-
     async def run(self, stop: asyncio.Event) -> None:
         """Follow the feeds and check every new position until ``stop`` is set; then cancel
         every task the monitor started.
@@ -209,27 +167,24 @@ class Monitor:
             if self.rolling is not None:  # one fence transfer at a time
                 self.rolling.after = start
         stopping = asyncio.ensure_future(stop.wait())
+        stopping.add_done_callback(lambda _: self._wake.set())
         self._loop = asyncio.get_running_loop()
         try:
             while not stop.is_set():
-                due = min(self.engine.tick_due(), self._clock_t + CLOCK_S)
-                await asyncio.wait(
-                    {stopping},
-                    timeout=min(CLOCK_S, max(0.0, due - time.monotonic())) + TICK_EPSILON_S,
-                )
+                self._arm()
+                await self._wake.wait()
+                self._wake.clear()
                 if self._failure is not None:
                     raise self._failure
-                events = self.engine.tick(time.monotonic())
-                if time.monotonic() - self._clock_t > CLOCK_S:  # ED-269 time windows
-                    self._clock_t = time.monotonic()
-                    now = datetime.now(timezone.utc)
-                    self.engine.fences.set_time(now, self.clock_slack_s)
-                    if self.live is not None:
-                        self.live.tick(now)
-                    events += self._ended_tasks()
+                now = time.monotonic()
+                events = self.engine.tick(now)
+                if now - self._clock_t > CLOCK_S:
+                    events += self._clock(now)
                 for e in events:
                     self.handle(e)
         finally:
+            if self._timer is not None:
+                self._timer.cancel()
             self._loop = None  # no check after this
             stopping.cancel()
             for t in self.tasks + list(self.pending):
@@ -239,6 +194,25 @@ class Monitor:
                     await t
             if self.rolling is not None:
                 await self.rolling.finish(ROLLING_FINISH_S)
+
+    def _arm(self) -> None:
+        """Wake the loop when telemetry would turn stale or the clock is due, whichever comes
+        first. While positions come, each does the clock's work when due (:meth:`_check`) and
+        moves this wake-up on, at most every :data:`REARM_S`: the loop then never wakes."""
+        due = min(self.engine.tick_due(), self._clock_t + CLOCK_S) + TICK_EPSILON_S
+        if self._timer is not None:
+            self._timer.cancel()
+        self._armed_t = now = time.monotonic()
+        self._timer = self._loop.call_at(min(due, now + CLOCK_S), self._wake.set)
+
+    def _clock(self, now) -> list:
+        """Each second: fences' time windows, a live source's windows, ended streams."""
+        self._clock_t = now
+        utc = datetime.now(timezone.utc)
+        self.engine.fences.set_time(utc, self.clock_slack_s)
+        if self.live is not None:
+            self.live.tick(utc)
+        return self._ended_tasks()
 
     def _position_came(self) -> None:
         """A new position: check it as soon as the values that came with it are in (one
@@ -254,6 +228,12 @@ class Monitor:
         if self._loop is None or self._failure is not None:
             return
         try:
+            now = time.monotonic()
+            if now - self._clock_t > CLOCK_S:  # the loop's work, while positions come
+                for e in self._clock(now):
+                    self.handle(e)
+            if now - self._armed_t > REARM_S:
+                self._arm()
             if not self.observers and self.rolling is None and self._skip():
                 return  # the last full check proves this position: nothing to do
             sample = latest_sample(self.latest)
@@ -266,6 +246,7 @@ class Monitor:
                 self.handle(e)
         except Exception as exc:  # noqa: BLE001 - handed to run(), which raises it
             self._failure = exc
+            self._wake.set()
 
     def _skip(self) -> bool:
         """Whether the engine takes the latest position without a check (its values read as
@@ -277,41 +258,6 @@ class Monitor:
         lat, lon, alt = p.latitude_deg, p.longitude_deg, p.relative_altitude_m
         return self.engine.skip(pos[0], lat, lon, alt, v.north_m_s, v.east_m_s)
 
-    async def _follow(self, name, feed):
-        """Deliver every value of ``feed`` (then tell the observers); a feed that fails is its
-        ``unavailable`` event, or ends the task (telemetry: see :meth:`_ended_tasks`)."""
-        stream = name.split(":", 1)[-1]
-
-        def take(value):
-            t = time.monotonic()
-            feed.deliver(t, value)
-            if self.observers:
-                parts = zip(feed.split, value) if feed.split else ((stream, value),)
-                for part, v in list(parts):
-                    for observer in self.observers:
-                        observer.on_value(part, t, v)
-            if feed.then is not None:
-                feed.then()
-
-        def pushed(value):  # called by the link as it parses: a failure goes to run()
-            try:
-                take(value)
-            except Exception as exc:  # noqa: BLE001 - run() raises it
-                self._failure = self._failure or exc
-
-        try:
-            if feed.listen is not None:
-                with feed.listen(pushed):
-                    await asyncio.Event().wait()  # until cancelled
-            async for value in feed.open():
-                take(value)
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:
-            if feed.unavailable is None:
-                raise
-            self.log.put(new_event(feed.unavailable, error=str(exc)))
-
     def _step(self, sample):
         started, checks = time.monotonic(), self.engine.checks
         events = self.engine.step(sample)
@@ -321,20 +267,6 @@ class Monitor:
             )
             for observer in self.observers:
                 observer.on_step(step)
-        return events
-
-    def _ended_tasks(self):
-        """A telemetry stream that ended (MAVSDK raised, or the stream closed) is an event,
-        once: its value would otherwise go stale without a word."""
-        events = []
-        for task in self.tasks:
-            if not task.get_name().startswith("telemetry:"):
-                continue
-            if task.done() and task not in self._ended and not task.cancelled():
-                self._ended.add(task)
-                exc = task.exception()
-                error = "" if exc is None else f"{type(exc).__name__}: {exc}"
-                events.append(new_event("telemetry_task_ended", task=task.get_name(), error=error))
         return events
 
     def set_fences(self, fences) -> None:

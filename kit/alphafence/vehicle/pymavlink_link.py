@@ -30,6 +30,8 @@ from alphafence.vehicle.values import Message
 
 AUTOPILOT_COMPONENT = 1  # MAV_COMP_ID_AUTOPILOT1
 HEARTBEAT_S = 1.0  # our GCS heartbeat
+BEAT_EARLY, BEAT_LATE = 0.5, 1.5  # with the autopilot's, if at least half a period since ours;
+# alone after one and a half periods without one of the autopilot's
 CONNECTED_S = 3.0  # no autopilot heartbeat for this long: not connected
 COMMAND_RETRY_S = 1.0
 COMMAND_TRIES = 3
@@ -139,6 +141,9 @@ class PymavlinkVehicle(Vehicle):
         self.param = Param(self)
         self.mission_raw = MissionRaw(self)
         self._tasks: list[asyncio.Task] = []
+        self._follow = None  # the subscription to the autopilot's heartbeats, once connected
+        self._beat_t = -1e9  # when our last heartbeat went
+        self._beat_timer: asyncio.TimerHandle | None = None
 
     async def connect(self, timeout: float) -> PymavlinkVehicle:
         """Open the link and wait for the autopilot's heartbeat.
@@ -152,7 +157,7 @@ class PymavlinkVehicle(Vehicle):
             await self.link.open()
         except BridgeError as exc:
             raise LinkError(str(exc)) from None
-        self._tasks.append(asyncio.create_task(self._heartbeats()))
+        self._beat()
         with self.bus.subscribe("HEARTBEAT") as queue:
             try:
                 await asyncio.wait_for(self._autopilot(queue), timeout)
@@ -161,7 +166,8 @@ class PymavlinkVehicle(Vehicle):
                 diagnosis = self.link.closed or self.link.stats.diagnosis(self.link.key is not None)
                 await self.close()
                 raise LinkError(why + (f" ({diagnosis})" if diagnosis else "")) from None
-        self._tasks.append(asyncio.create_task(self._follow()))
+        self._follow = self.bus.subscribe("HEARTBEAT", maxsize=1, handle=self._autopilot_heard)
+        self._follow.__enter__()
         await self.start()
         return self
 
@@ -177,25 +183,38 @@ class PymavlinkVehicle(Vehicle):
         self.mav_type = int(msg.type)
         self.last_heartbeat = time.monotonic()
 
-    async def _follow(self):
-        """The autopilot's heartbeats, for :meth:`is_connected`."""
-        async for msg in self.bus.stream("HEARTBEAT", maxsize=8):
-            if (msg.get_srcSystem(), msg.get_srcComponent()) == self.target:
-                self.last_heartbeat = time.monotonic()
+    def _autopilot_heard(self, msg) -> bool:
+        """Each HEARTBEAT as it is parsed: the autopilot's, for :meth:`is_connected`; ours
+        goes out with it when one is due (no task wakes up for either)."""
+        if (msg.get_srcSystem(), msg.get_srcComponent()) == self.target:
+            self.last_heartbeat = now = time.monotonic()
+            if now - self._beat_t >= BEAT_EARLY * HEARTBEAT_S:
+                self._beat(BEAT_LATE * HEARTBEAT_S)
+        return True
 
-    async def _heartbeats(self):
+    def _beat(self, fallback_s: float = HEARTBEAT_S) -> None:
+        """Send our GCS heartbeat, and the next one in ``fallback_s`` unless the autopilot's
+        next heartbeat brings it first (a timer, cancelled: nothing wakes for it)."""
         mav = self.link.mav
-        while True:
-            self.link.send(
-                mav.heartbeat_encode(
-                    ids.MAV_TYPE_GCS, ids.MAV_AUTOPILOT_INVALID, 0, 0, ids.MAV_STATE_ACTIVE
-                )
+        self.link.send(
+            mav.heartbeat_encode(
+                ids.MAV_TYPE_GCS, ids.MAV_AUTOPILOT_INVALID, 0, 0, ids.MAV_STATE_ACTIVE
             )
-            await asyncio.sleep(HEARTBEAT_S)
+        )
+        self._beat_t = time.monotonic()
+        if self._beat_timer is not None:
+            self._beat_timer.cancel()
+        self._beat_timer = asyncio.get_running_loop().call_later(fallback_s, self._beat)
 
     async def close(self):
         """Stop the vehicle's tasks and close the link."""
         await super().close()
+        if self._beat_timer is not None:
+            self._beat_timer.cancel()
+            self._beat_timer = None
+        if self._follow is not None:
+            self._follow.__exit__(None, None, None)
+            self._follow = None
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:

@@ -72,6 +72,14 @@ def _position_velocity(lat, lon, alt, relative_alt, vx, vy, vz):
     )
 
 
+def _armed(m) -> bool:
+    return bool(m.base_mode & ids.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def _gps_info(m) -> GpsInfo:
+    return GpsInfo(int(m.satellites_visible), int(m.fix_type))
+
+
 class Telemetry:
     """``subscribe_*`` streams of the autopilot's own messages, and their rates."""
 
@@ -133,12 +141,34 @@ class Telemetry:
     async def subscribe_armed(self):
         """Each HEARTBEAT's safety-armed flag."""
         async for m in self._own("HEARTBEAT"):
-            yield bool(m.base_mode & ids.MAV_MODE_FLAG_SAFETY_ARMED)
+            yield _armed(m)
+
+    def _listen(self, name, value, callback):
+        """``callback(value(msg))`` for each of the autopilot's ``name`` messages, as parsed."""
+
+        def handle(m) -> bool:
+            if self.v.from_autopilot(m):
+                callback(value(m))
+            return True
+
+        return self.v.bus.subscribe(name, maxsize=1, handle=handle)
+
+    def listen_flight_mode(self, callback):
+        """``with telemetry.listen_flight_mode(callback):`` each HEARTBEAT's mode, as parsed."""
+        return self._listen("HEARTBEAT", lambda m: flight_mode(m.type, m.custom_mode), callback)
+
+    def listen_armed(self, callback):
+        """``with telemetry.listen_armed(callback):`` each HEARTBEAT's armed flag, as parsed."""
+        return self._listen("HEARTBEAT", _armed, callback)
+
+    def listen_gps_info(self, callback):
+        """``with telemetry.listen_gps_info(callback):`` each GPS_RAW_INT, as parsed."""
+        return self._listen("GPS_RAW_INT", _gps_info, callback)
 
     async def subscribe_gps_info(self):
         """GPS_RAW_INT as :class:`~alphafence.vehicle.values.GpsInfo`."""
         async for m in self._own("GPS_RAW_INT"):
-            yield GpsInfo(int(m.satellites_visible), int(m.fix_type))
+            yield _gps_info(m)
 
     async def subscribe_status_text(self):
         """The autopilot's STATUSTEXTs as :class:`~alphafence.vehicle.values.StatusText`."""
