@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from alphafence.awareness.applicability import active_within, timed
 from alphafence.awareness.fencegrid import FenceGrid
 from alphafence.awareness.rays import FenceEdges
 from alphafence.awareness.references import AMSL_REFERENCES, GROUND_REFERENCES, reference
@@ -97,8 +98,6 @@ class FenceSet:
         self.applicability = [
             ((r.properties or {}).get("zone") or {}).get("applicability") for r in self.records
         ]
-        from alphafence.awareness.applicability import timed
-
         self.timed = [k for k, a in enumerate(self.applicability) if timed(a)]
         self.active = np.ones(len(self.records), dtype=bool)
         self.version = 0  # changes whenever what is in force, or the frame, changes
@@ -243,8 +242,8 @@ class FenceSet:
     def set_time(self, when, slack_s: float = 0.0):
         """Switch time-windowed (ED-269 applicability) fences on or off for ``when`` (aware; in
         force anywhere within ``slack_s`` of it). Inactive ones are neither inside nor nearest."""
-        from alphafence.awareness.applicability import active_within
-
+        if not self.timed:
+            return
         for k in self.timed:
             now = active_within(self.applicability[k], when, slack_s)
             if now != self.active[k]:

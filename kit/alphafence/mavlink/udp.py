@@ -159,6 +159,8 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         if wanted is None:
             self._parse(data, addr)
             return
+        if self.fast and not self._rest and self._one_fast_frame(data, addr):
+            return
         buf = self._rest + data if self._rest else data
         n, i, start = len(buf), 0, 0  # buf[start:i]: frames (and bytes) to parse
         while i < n:
@@ -195,6 +197,17 @@ class MavlinkDatagrams(asyncio.DatagramProtocol):
         if start < i:
             self._parse(buf if start == 0 and i == n else buf[start:i], addr)
         self._rest = bytes(buf[i:]) if i < n else b""
+
+    def _one_fast_frame(self, data, addr) -> bool:
+        """A datagram that is one whole MAVLink 2 frame of a :attr:`fast` id (a vehicle's
+        telemetry at rate, as ArduPilot sends it): taken without the framing loop."""
+        n = len(data)
+        if n < HEADER_V2 or data[0] != MARKER_V2:
+            return False
+        if n != HEADER_V2 + data[1] + CHECKSUM + (SIGNATURE if data[2] & SIGNED else 0):
+            return False
+        take = self.fast.get(data[7] | data[8] << 8 | data[9] << 16)
+        return take is not None and take(data, addr)
 
     def _parse(self, data, addr) -> None:
         """pymavlink parses ``data`` (whole frames, or any bytes when every id is wanted)."""

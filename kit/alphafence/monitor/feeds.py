@@ -70,6 +70,9 @@ class Feed:
     split: tuple[str, ...] | None = None  # each value a tuple of these streams' values
     then: Callable[[], None] | None = None  # called after each value is delivered and observed
     listen: Callable | None = None  # listen(callback) -> context: values pushed as they come
+    # skip(lat, lon, relative_alt, vx, vy) -> bool, as the wire has them (1e-7 degrees, mm,
+    # cm/s): given to a listen that takes it, a position it returns True for is not delivered
+    skip: Callable | None = None
 
 
 def telemetry_feed(vehicle, key: str, deliver) -> Feed:

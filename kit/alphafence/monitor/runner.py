@@ -21,6 +21,7 @@ import math
 import time
 from datetime import datetime, timezone
 
+from alphafence.geo.coords import E7
 from alphafence.monitor.commands import Commands
 from alphafence.monitor.engine import Engine
 from alphafence.monitor.eventlog import EventLog
@@ -37,7 +38,9 @@ from alphafence.monitor.runner_feeds import FeedTasks
 
 TICK_EPSILON_S = 0.005  # the tick wakes this long after its due time (timers may fire early)
 CLOCK_S = 1.0  # fences' time windows and ended telemetry streams are looked at this often
-REARM_S = 0.5  # while positions come, the loop's wake-up is moved on this often
+# while positions come, the clock's work is done and the loop's wake-up moved on this often
+# (within CLOCK_S and the staleness limit, so the wake-up never comes while they do)
+REARM_S = 0.8
 ROLLING_FINISH_S = 20.0  # a fence transfer under way at shutdown may take this long to end
 
 
@@ -205,6 +208,14 @@ class Monitor(FeedTasks):
         self._armed_t = now = time.monotonic()
         self._timer = self._loop.call_at(min(due, now + CLOCK_S), self._wake.set)
 
+    def _loop_work(self, now) -> None:
+        """What the loop would wake for, done by a position instead, every :data:`REARM_S`:
+        the clock's work, and the loop's wake-up moved on."""
+        if now - self._armed_t > REARM_S:
+            for e in self._clock(now):
+                self.handle(e)
+            self._arm()
+
     def _clock(self, now) -> list:
         """Each second: fences' time windows, a live source's windows, ended streams."""
         self._clock_t = now
@@ -228,12 +239,7 @@ class Monitor(FeedTasks):
         if self._loop is None or self._failure is not None:
             return
         try:
-            now = time.monotonic()
-            if now - self._clock_t > CLOCK_S:  # the loop's work, while positions come
-                for e in self._clock(now):
-                    self.handle(e)
-            if now - self._armed_t > REARM_S:
-                self._arm()
+            self._loop_work(time.monotonic())
             if not self.observers and self.rolling is None and self._skip():
                 return  # the last full check proves this position: nothing to do
             sample = latest_sample(self.latest)
@@ -279,6 +285,21 @@ class Monitor(FeedTasks):
             self.rolling.set_fences(fences)
         if self.engine.options.reroute and self._loop is not None:
             self.reroute.planner_task = self._spawn(self.reroute.build_planner())
+
+    def _skip_raw(self, lat, lon, alt, vn, ve) -> bool:
+        """Whether a position, as the wire has it (1e-7 degrees, mm above home, cm/s), needs
+        nothing done: the engine's lazy check takes it (:meth:`Engine.skip
+        <alphafence.monitor.engine.Engine.skip>`) and no loop work is due. Then no value is
+        built for it: ``latest`` keeps the last position delivered, ``engine.last`` has this
+        one. With an observer or a rolling fence every position is delivered."""
+        if self.observers or self.rolling is not None or self._loop is None:
+            return False
+        now = time.monotonic()
+        if not self.engine.skip(now, lat / E7, lon / E7, alt / 1000.0, vn / 100.0, ve / 100.0):
+            return False
+        if now - self._armed_t > REARM_S:
+            self._loop_work(now)
+        return True
 
     async def reload_onboard(self, cause: str = "upload") -> list:
         """Download the vehicle's fence and check against it from now on, as a layer of its

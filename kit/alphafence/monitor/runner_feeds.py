@@ -45,6 +45,7 @@ class FeedTasks:
         if position.split:  # the velocity came with the position: check at once
             self._inline_check = True
             position.then = self._check
+            position.skip = self._skip_raw
         feeds["adsb"] = Feed(lambda: adsb(vehicle), traffic, "adsb_unavailable")
         if self.engine.options.mavlink_traffic:
             # every GLOBAL_POSITION_INT on the link crosses into Python: opt-in, for links
@@ -81,7 +82,7 @@ class FeedTasks:
 
         try:
             if feed.listen is not None:
-                with feed.listen(pushed):
+                with feed.listen(pushed, **({} if feed.skip is None else {"skip": feed.skip})):
                     await asyncio.Event().wait()  # until cancelled
             async for value in feed.open():
                 take(value)

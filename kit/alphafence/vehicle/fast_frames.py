@@ -21,7 +21,10 @@ from __future__ import annotations
 
 import hashlib
 
+from pymavlink.generator import mavcrc
 from pymavlink.generator.mavcrc import x25crc
+
+mcrf4xx = getattr(mavcrc, "mcrf4xx", None)  # fastcrc's, when pymavlink found it
 
 MARKER_V2 = 0xFD
 HEADER_V2 = 10  # marker, length, incompat and compat flags, sequence, system, component, id
@@ -76,7 +79,7 @@ class FrameDecoder:
             or frame[7] | frame[8] << 8 | frame[9] << 16 != self.msgid
         ):
             return None
-        if x25crc(frame[1:end] + self.extra).crc != frame[end] | frame[end + 1] << 8:
+        if _crc(frame, end, self.extra) != frame[end] | frame[end + 1] << 8:
             return None
         if signing is not None and not (signed and _signed_by(frame, signing)):
             return None
@@ -84,6 +87,14 @@ class FrameDecoder:
         if n < self.size:  # MAVLink 2 drops trailing zero bytes
             payload += bytes(self.size - n)
         return self.unpack(payload)
+
+
+def _crc(frame, end, extra) -> int:
+    """CRC-16/MCRF4XX of the header after the marker and the payload, then CRC_EXTRA: by
+    fastcrc straight on the frame where pymavlink uses it, else by pymavlink's own class."""
+    if mcrf4xx is not None:
+        return mcrf4xx(extra, mcrf4xx(memoryview(frame)[1:end], 0xFFFF))
+    return x25crc(frame[1:end] + extra).crc
 
 
 def _signed_by(frame: bytes, signing) -> bool:

@@ -144,6 +144,9 @@ class PymavlinkVehicle(Vehicle):
         self._follow = None  # the subscription to the autopilot's heartbeats, once connected
         self._beat_t = -1e9  # when our last heartbeat went
         self._beat_timer: asyncio.TimerHandle | None = None
+        self._heartbeat = self.link.mav.heartbeat_encode(  # packed anew each time it goes
+            ids.MAV_TYPE_GCS, ids.MAV_AUTOPILOT_INVALID, 0, 0, ids.MAV_STATE_ACTIVE
+        )
 
     async def connect(self, timeout: float) -> PymavlinkVehicle:
         """Open the link and wait for the autopilot's heartbeat.
@@ -195,12 +198,7 @@ class PymavlinkVehicle(Vehicle):
     def _beat(self, fallback_s: float = HEARTBEAT_S) -> None:
         """Send our GCS heartbeat, and the next one in ``fallback_s`` unless the autopilot's
         next heartbeat brings it first (a timer, cancelled: nothing wakes for it)."""
-        mav = self.link.mav
-        self.link.send(
-            mav.heartbeat_encode(
-                ids.MAV_TYPE_GCS, ids.MAV_AUTOPILOT_INVALID, 0, 0, ids.MAV_STATE_ACTIVE
-            )
-        )
+        self.link.send(self._heartbeat)
         self._beat_t = time.monotonic()
         if self._beat_timer is not None:
             self._beat_timer.cancel()

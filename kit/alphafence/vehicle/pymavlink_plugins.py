@@ -62,6 +62,7 @@ async def _command(vehicle, command, *params):
 
 # the fields of GLOBAL_POSITION_INT a position and velocity are made of, in wire order
 POSITION_FIELDS = ("lat", "lon", "alt", "relative_alt", "vx", "vy", "vz")
+SKIP_FIELDS = ("lat", "lon", "relative_alt", "vx", "vy")  # what a skip is decided on
 
 
 def _position_velocity(lat, lon, alt, relative_alt, vx, vy, vz):
@@ -108,12 +109,17 @@ class Telemetry:
             yield _position_velocity(m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz)
 
     @contextlib.contextmanager
-    def listen_position_velocity(self, callback):
+    def listen_position_velocity(self, callback, skip=None):
         """``with telemetry.listen_position_velocity(callback):`` ``callback((Position,
         VelocityNed))`` for each GLOBAL_POSITION_INT of the autopilot, called as the message is
         parsed: no task wakes up for it (the monitor's feed at 10-50 Hz). While nothing else
         follows GLOBAL_POSITION_INT, its frames are decoded straight to these values
-        (:mod:`alphafence.vehicle.fast_frames`), not through pymavlink's message objects."""
+        (:mod:`alphafence.vehicle.fast_frames`), not through pymavlink's message objects.
+
+        ``skip(lat, lon, relative_alt, vx, vy) -> bool``, if given, sees those fields of each
+        such frame first, as the wire has them (1e-7 degrees, mm, cm/s); a position it returns
+        True for is taken as it is, and ``callback`` is not called for it (the monitor's
+        positions that need no check: no value is built for them)."""
         v = self.v
 
         def handle(m) -> bool:
@@ -121,16 +127,17 @@ class Telemetry:
                 callback(_position_velocity(m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz))
             return True
 
-        pick = None
-
         def fast(fields, system, component):
-            if (system, component) == v.target:
+            if (system, component) != v.target:
+                return
+            if skip is None or not skip(*lean(fields)):
                 callback(_position_velocity(*pick(fields)))
 
         name, cls = "GLOBAL_POSITION_INT", mavlink.MAVLink_global_position_int_message
         with v.bus.subscribe(name, maxsize=1, handle=handle):
             with v.link.fast(cls, fast, lambda: v.bus.alone(name)) as decoder:
                 pick = itemgetter(*(decoder.index[f] for f in POSITION_FIELDS))
+                lean = itemgetter(*(decoder.index[f] for f in SKIP_FIELDS))
                 yield
 
     async def subscribe_flight_mode(self):
