@@ -12,6 +12,7 @@ The peer is the same build with its fences written as they were made in the metr
 
 from __future__ import annotations
 
+import sys
 import time
 from contextlib import ExitStack
 from unittest import mock
@@ -118,7 +119,10 @@ def run(Row):
         stack.enter_context(
             mock.patch(
                 "alphafence.fencing.fences.hold_fences",
-                lambda locs, frames, outward=True, regions=None: (list(locs), [False] * len(locs)),
+                lambda locs, frames, outward=True, regions=None, zones=None: (
+                    list(locs),
+                    [False] * len(locs),
+                ),
             )
         )
         stack.enter_context(mock.patch.object(as_read, "split_lonlat", lambda g: None))
@@ -169,3 +173,54 @@ def run(Row):
             )
         )
     return rows
+
+
+# bench.without_as_read's build; imported here it would take the as-read work out of this
+# process's builds too
+WITHOUT_ARGV = [
+    sys.executable, "-c", "import sys, bench.without_as_read as w; sys.exit(w.main(sys.argv[1:]))"
+]  # fmt: skip
+COST_AREAS = 133_000
+COST_ROUNDS = 3
+COST_TARGET = 1.05
+
+
+def cost(osm, Row, console):
+    """The 133,000-area build (``alphafence build --jobs 2``, pinned to 2 cores) against the
+    same build without its as-read work (:mod:`bench.without_as_read`), interleaved, each
+    the least of :data:`COST_ROUNDS` runs (other work on the machine only ever adds): CPU
+    time of the whole process tree (the work, target <= 1.05x) and wall time."""
+    import tempfile
+    from pathlib import Path
+
+    from bench.cli_bench import _command
+    from bench.scale_bench import CORES, measure
+    from bench.synth_db import cached_database
+
+    db, _ = cached_database(osm, COST_AREAS)
+    runs = {"with": [], "without": []}
+    with tempfile.TemporaryDirectory(prefix="as-read-cost-") as tmp:
+        for _ in range(COST_ROUNDS):
+            for way, start in (("with", _command()), ("without", WITHOUT_ARGV)):
+                out = Path(tmp) / f"{way}.geojson"
+                argv = [*start, "build", str(db), "-o", str(out), "-q", "--jobs", str(CORES)]
+                m = measure(argv, 300.0, 8e9)
+                if m["rc"] or m["why"]:
+                    raise RuntimeError(f"{way} as-read: {m['why'] or m['err'][0]}")
+                runs[way].append((m["cpu"], m["wall"]))
+                console.print(f"as-read cost: {way}: {m['cpu']:.1f} s CPU, {m['wall']:.1f} s wall")
+    (cpu, wall), (peer_cpu, peer_wall) = (min(runs[w]) for w in ("with", "without"))
+    ratio = cpu / peer_cpu
+    return [
+        Row(
+            f"build of {COST_AREAS:,} areas (--jobs {CORES}) with its as-read work, CPU",
+            f"{cpu:.1f} s CPU, {wall:.1f} s wall",
+            f"<= {COST_TARGET:g}x without it",
+            f"without: {peer_cpu:.1f} s CPU, {peer_wall:.1f} s wall",
+            f"{ratio:.2f}x",
+            ratio <= COST_TARGET,
+            value=cpu,
+            unit="s",
+            peer_value=peer_cpu,
+        )
+    ]

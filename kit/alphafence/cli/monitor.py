@@ -6,6 +6,7 @@ import asyncio
 import signal
 
 from alphafence.awareness.predict import Braking
+from alphafence.awareness.reach import DEFAULT_ACCEL_MPS2
 from alphafence.cli.common import (
     add_link_option,
     add_signing_option,
@@ -93,6 +94,15 @@ def register(sub):
         default=1.5,
         metavar="S",
         help="reaction time (default 1.5)",
+    )
+    p.add_argument(
+        "--max-accel",
+        type=positive("--max-accel", "m/s²"),
+        default=DEFAULT_ACCEL_MPS2,
+        metavar="M/S2",
+        help="the vehicle's horizontal acceleration at most: far from fences, when the next "
+        f"full check is due (default {DEFAULT_ACCEL_MPS2:g}; each position is still read "
+        "against it)",
     )
     p.add_argument("--log", metavar="EVENTS.jsonl", help="append every event as a JSON line")
     p.add_argument(
@@ -241,6 +251,7 @@ def run(args) -> int:
         on_link_lost=args.on_link_lost,
         mavlink_traffic=args.mavlink_traffic,
         braking=Braking(reaction_s=args.reaction, decel_mps2=args.decel),
+        max_accel_mps2=args.max_accel,
         reroute_clearance_m=args.reroute_clearance,
         onboard=args.onboard,
         rolling=_rolling_options(args),

@@ -17,10 +17,13 @@ import shapely
 from alphafence.geo.alpha import fill_holes
 from alphafence.geo.hold import hold_as_read
 from alphafence.geo.lonlat import (
+    EARTH_RADIUS_M,
+    MAX_LAT,
+    METRES_PER_DEGREE,
     READ_TOLERANCE_M,
     ZONE_TOLERANCE_M,
     as_read,
-    bow_free,
+    bow_free_one,
     frame_scale,
     unwrap_lon,
 )
@@ -28,6 +31,7 @@ from alphafence.geo.rings import clear_of
 
 # what the lon/lat readings may leave: the zone's densified edges and the check's own
 READ_SLACK_M = ZONE_TOLERANCE_M + READ_TOLERANCE_M
+WIDE_REACH_M = 20_000.0  # within this of its frame's origin a margin widens by under 1e-6
 
 
 def ground_margins(geoms, margins):
@@ -47,21 +51,58 @@ def ground_margins(geoms, margins):
     list of float
     """
     out = list(margins)
+    if len(out) == 1:  # the usual call: one site
+        x0, y0, x1, y1 = geoms[0].bounds
+        if not math.hypot(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))) > WIDE_REACH_M:
+            return out
     if not len(out):
         return out
     b = shapely.bounds(np.asarray(geoms, dtype=object))
-    with np.errstate(invalid="ignore"):
-        reach = np.nan_to_num(np.hypot(np.fmax(np.abs(b[:, 0]), np.abs(b[:, 2])),
-                                       np.fmax(np.abs(b[:, 1]), np.abs(b[:, 3]))))  # fmt: skip
-    for i, (m, r) in enumerate(zip(out, reach.tolist())):
-        if m > 0 and r > 20_000.0:
+    reach = np.hypot(np.fmax(np.abs(b[:, 0]), np.abs(b[:, 2])),
+                     np.fmax(np.abs(b[:, 1]), np.abs(b[:, 3])))  # fmt: skip
+    for i in np.flatnonzero(reach > WIDE_REACH_M).tolist():  # NaN (empty): not
+        m, r = out[i], float(reach[i])
+        if m > 0:
             wide = m * frame_scale(r + m)
             if wide - m > 1e-3:
                 out[i] = wide
     return out
 
 
-def hold_fences(locals_, frames, outward=True, regions=None):
+def clear_as_read(local, frame, zone, margin_m) -> bool:
+    """Whether a fence's lon/lat reading is proven to contain ``zone`` with ``margin_m``
+    around it (and the readings' tolerances) without reading it: each edge keeps from the
+    zone the margin plus the most its reading can bow (:func:`bow_bound_length_m`'s bound,
+    ``L^2 (tan|lat| + 1) / 8R`` at the fence's farthest latitude), and the fence covers it.
+
+    Edge by edge, so the long edges of a fence (whose bows are largest) are held only where
+    they run close to the zone: a fence that passes needs no holding and no reading.
+
+    Examples
+    --------
+    >>> from alphafence.geo.frame import LocalFrame
+    >>> frame = LocalFrame(14.5, 35.9)
+    >>> zone = shapely.box(0, 0, 1000, 10)
+    >>> clear_as_read(shapely.box(-50, -50, 1050, 60), frame, zone, 49.8)
+    True
+    >>> clear_as_read(shapely.box(-50, -50, 1050, 60), frame, zone, 49.95)  # bows 4 cm
+    False
+    """
+    if not shapely.covers(local, zone):
+        return False
+    rings = shapely.get_rings(shapely.get_parts(local))
+    coords, which = shapely.get_coordinates(rings, return_index=True)
+    same = which[1:] == which[:-1]
+    a, b = coords[:-1][same], coords[1:][same]
+    reach = float(np.abs(coords).max()) if len(coords) else 0.0
+    lat = min(abs(frame.lat0) + reach / METRES_PER_DEGREE, MAX_LAT)
+    length = np.hypot(*(b - a).T)
+    bow = length**2 * (math.tan(math.radians(lat)) + 1.0) / (8.0 * EARTH_RADIUS_M)
+    edges = shapely.linestrings(np.stack([a, b], axis=1))
+    return bool(np.all(shapely.distance(edges, zone) >= margin_m + READ_SLACK_M + bow))
+
+
+def hold_fences(locals_, frames, outward=True, regions=None, zones=None):
     """Each fence held so that its lon/lat reading contains (``outward``) or stays inside
     what it contains in its frame; fences whose edges cannot bow come back as they are.
 
@@ -77,6 +118,9 @@ def hold_fences(locals_, frames, outward=True, regions=None):
     outward : bool
     regions : sequence of shapely geometry, optional
         What each fence must contain, metres (outward holds only).
+    zones : tuple of sequences, optional
+        ``(geometries, margins)``: each fence's restricted area and margin (outward holds
+        only); a fence :func:`clear_as_read` of them is not held (nor changed).
 
     Returns
     -------
@@ -87,7 +131,9 @@ def hold_fences(locals_, frames, outward=True, regions=None):
     out = list(locals_)
     changed = [False] * len(out)
     for i, (geom, frame) in enumerate(zip(out, frames)):
-        if geom is None or bow_free([geom], frame)[0]:
+        if geom is None or bow_free_one(geom, frame):
+            continue
+        if zones is not None and clear_as_read(geom, frame, zones[0][i], zones[1][i]):
             continue
         if regions is not None and not readable(geom, frame):  # before holding: it cannot
             geom = fill_holes(regions[i])
@@ -119,7 +165,7 @@ def readable_fences(locals_, frames, regions, simplify, budget):
     """
     out = list(locals_)
     for i, (geom, frame) in enumerate(zip(out, frames)):
-        if geom is None or bow_free([geom], frame)[0] or readable(geom, frame):
+        if geom is None or bow_free_one(geom, frame) or readable(geom, frame):
             continue
         n, geom = budget, fill_holes(regions[i])
         for _ in range(8):

@@ -232,7 +232,8 @@ def _fence_sites(sites, opts):
     frames = [sites[k].frame for k in todo]
     if opts.method in ("alpha", "polygon"):
         locals_ = readable_fences(locals_, frames, regions, _resimplify(opts), opts.max_vertices)
-    locals_, held = hold_fences(locals_, frames, regions=regions)  # as lon/lat will read them
+    # as lon/lat will read them (not where the edges' bows are proven clear of the zones)
+    locals_, held = hold_fences(locals_, frames, regions=regions, zones=(geoms, ground))
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, ground)]
     for i in (i for i, bad in enumerate(repaired) if bad):
         locals_[i], circles[i] = _repair(locals_[i], regions[i], frames[i])
@@ -324,7 +325,7 @@ def _warning_layers(mains, geoms, opts, ground):
         simplified = iter(simplify_parts(grown[polygonal], opts))
     locals_ = [circle_polygon(*c) if c is not None else next(simplified) for c in circles]
     frames = [m.frame for m in mains]
-    locals_, held = hold_fences(locals_, frames, regions=list(grown))
+    locals_, held = hold_fences(locals_, frames, regions=list(grown), zones=(geoms, margins))
     repaired = [not ok for ok in _covers_required(locals_, circles, geoms, margins)]
     for i, (bad, h) in enumerate(zip(repaired, held)):
         if bad or (h and not reads_covering(locals_[i], frames[i], geoms[i], margins[i])):

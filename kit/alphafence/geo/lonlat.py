@@ -29,8 +29,8 @@ import shapely
 EARTH_RADIUS_M = 6_371_008.8
 ZONE_TOLERANCE_M = 0.05  # a zone's projected edges follow its lon/lat edges to this
 READ_TOLERANCE_M = 0.01  # as_read polygons follow the lon/lat reading to this
-_METRES_PER_DEGREE = 111_319.49  # on the equator: the most a degree of lon/lat can span
-_MAX_LAT = 89.0  # bows are bounded with tan(lat); beyond this no fence is written
+METRES_PER_DEGREE = 111_319.49  # on the equator: the most a degree of lon/lat can span
+MAX_LAT = 89.0  # bows are bounded with tan(lat); beyond this no fence is written
 
 
 def bow_bound_length_m(lat_deg, tolerance_m):
@@ -48,7 +48,7 @@ def bow_bound_length_m(lat_deg, tolerance_m):
     >>> round(float(bow_bound_length_m(64.0, 0.05)))
     914
     """
-    lat = np.minimum(np.abs(np.asarray(lat_deg, float)), _MAX_LAT)
+    lat = np.minimum(np.abs(np.asarray(lat_deg, float)), MAX_LAT)
     k = np.tan(np.radians(lat)) + 1.0
     return np.sqrt(8.0 * EARTH_RADIUS_M * tolerance_m / k)
 
@@ -116,17 +116,17 @@ def densify_lonlat(geoms, tolerance_m=ZONE_TOLERANCE_M):
     b = shapely.bounds(geoms)
     with np.errstate(invalid="ignore"):
         lat = np.fmax(np.abs(b[:, 1]), np.abs(b[:, 3]))
-        span = np.hypot(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]) * _METRES_PER_DEGREE
+        span = np.hypot(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]) * METRES_PER_DEGREE
     step_m = bow_bound_length_m(np.nan_to_num(lat), tolerance_m)
     need = np.flatnonzero(np.nan_to_num(span) > step_m)
     for i in need.tolist():
         geom = geoms[i]
         if b[i, 2] - b[i, 0] > 180.0:
             geom = shapely.transform(geom, _unwrapped)
-        # segmentize measures in degrees: a degree spans at most _METRES_PER_DEGREE metres
+        # segmentize measures in degrees: a degree spans at most METRES_PER_DEGREE metres
         # GEOS's densifier repairs an invalid polygon by buffer(0), which drops a bow-tie's
         # lobe and a spike: repaired first, keeping every point the outline draws
-        out[i] = shapely.segmentize(repair_keeping_all(geom), step_m[i] / _METRES_PER_DEGREE)
+        out[i] = shapely.segmentize(repair_keeping_all(geom), step_m[i] / METRES_PER_DEGREE)
     return out
 
 
@@ -248,19 +248,50 @@ def as_read(geom_lonlat, frame, tolerance_m=READ_TOLERANCE_M):
 def bow_free(local, frame, tolerance_m=READ_TOLERANCE_M):
     """Whether no edge of ``local`` (metric geometries in ``frame``) can bow more than
     ``tolerance_m`` when read in lon/lat: every edge shorter than the bound at the
-    geometry's latitude. Cheap: no projection but the bounds' corners.
+    geometry's latitude. Cheap: a geometry whose bounds' diagonal is under the bound needs
+    nothing more; the others are measured edge by edge (no projection either way).
 
     Returns
     -------
     ndarray of bool
+
+    Examples
+    --------
+    >>> from alphafence.geo.frame import LocalFrame
+    >>> frame = LocalFrame(14.5, 35.9)  # the bound there: 543 m
+    >>> bottom = [(x, 0.0) for x in range(0, 3001, 300)]
+    >>> top = [(x, 300.0) for x in range(3000, -1, -300)]
+    >>> dotted = shapely.Polygon(bottom + top)  # 3 km long, its edges 300 m
+    >>> bow_free([dotted, shapely.box(0, 0, 3000, 300)], frame).tolist()
+    [True, False]
     """
     local = np.asarray(local, dtype=object).reshape(-1)
     b = shapely.bounds(local)
-    with np.errstate(invalid="ignore"):
-        span = np.hypot(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1])
-        reach = np.fmax.reduce(np.abs(b), axis=1)
-    lat = np.abs(frame.lat0) + np.nan_to_num(reach) / _METRES_PER_DEGREE
-    return ~(np.nan_to_num(span) > bow_bound_length_m(lat, tolerance_m))
+    reach = np.fmax(np.fmax(np.abs(b[:, 0]), np.abs(b[:, 1])),
+                    np.fmax(np.abs(b[:, 2]), np.abs(b[:, 3])))  # fmt: skip
+    bound = bow_bound_length_m(np.abs(frame.lat0) + reach / METRES_PER_DEGREE, tolerance_m)
+    free = ~(np.hypot(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]) > bound)  # NaN (empty): free
+    todo = np.flatnonzero(~free)
+    if todo.size:  # edge by edge (a ring's closing step to the next ring counts too: longer)
+        coords, which = shapely.get_coordinates(local[todo], return_index=True)
+        step = np.hypot(*np.diff(coords, axis=0).T)
+        same = which[1:] == which[:-1]
+        longest = np.zeros(todo.size)
+        np.maximum.at(longest, which[1:][same], step[same])
+        free[todo] = ~(longest > bound[todo])
+    return free
+
+
+def bow_free_one(geom, frame, tolerance_m=READ_TOLERANCE_M) -> bool:
+    """:func:`bow_free` of one geometry, without array work for most (the build asks it of
+    every fence, one at a time)."""
+    x0, y0, x1, y1 = geom.bounds
+    reach = max(abs(x0), abs(y0), abs(x1), abs(y1))
+    lat = min(abs(frame.lat0) + reach / METRES_PER_DEGREE, MAX_LAT)
+    bound = math.sqrt(8.0 * EARTH_RADIUS_M * tolerance_m / (math.tan(math.radians(lat)) + 1.0))
+    if not math.hypot(x1 - x0, y1 - y0) > bound:  # NaN (empty): free
+        return True
+    return bool(bow_free([geom], frame, tolerance_m)[0])
 
 
 def frame_scale(reach_m):
