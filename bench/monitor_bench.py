@@ -38,7 +38,7 @@ def _compare(label, fs, positions, peer_positions, Row, target_us=None):
     calib = calibration_us(positions)
     ours = _p99_us(lambda x, y: fs.check(x, y, 30.0, 7.0, 7.0, 150.0), positions)
     n = len(fs.records)
-    if not peer_positions:
+    if peer_positions is None:
         return Row(
             f"position check p99, {label} ({n:,} fences)",
             f"{ours:.0f} us, {ours / calib:.0f}x the calibration ({calib:.1f} us)",
