@@ -98,7 +98,11 @@ class Engine(RerouteDecisions, LazyChecks):
         """
         s = finite_velocity(s)
         r = self.reach
-        if r is not None and r.stamp == (s.mode, s.armed, s.gps_fix) and self._holds(r, s):
+        if (
+            r is not None
+            and r.stamp == (s.mode, s.armed, s.gps_fix)
+            and self.skip(s.t, s.lat, s.lon, s.alt_m, s.vn, s.ve)
+        ):
             self._skipped, self._last = None, s
             return []
         events = []

@@ -1,6 +1,6 @@
 """The engine's lazy check: a position the last full check still proves CLEAR is not checked
 again (:mod:`alphafence.awareness.reach` says which); a mixin of
-:class:`~alphafence.monitor.engine.Engine`, which calls :meth:`LazyChecks._holds` first in
+:class:`~alphafence.monitor.engine.Engine`, which asks :meth:`LazyChecks.skip` first in
 each step and :meth:`LazyChecks._reach` after each full check.
 
 ``tests/test_monitor_reach.py`` drives an engine with it and one that checks every position
@@ -23,32 +23,13 @@ HOME_DRIFT_M = 1.0  # home's AMSL may move this much between full checks (AMSL b
 class LazyChecks:
     """What the engine needs to skip the checks that cannot matter (see the module)."""
 
-    def _holds(self, r, s) -> bool:
-        """Whether the last full check still decides ``s`` (:mod:`alphafence.awareness.reach`)."""
-        if r.version != self.fences.version or self.stale:
-            return False
-        if not r.holds(s.t, s.lat, s.lon, s.alt_m, s.vn, s.ve):
-            return False
-        self.last_t = s.t
-        self.checks += 1
-        return True
-
     def skip(self, t, lat, lon, alt, vn, ve) -> bool:
         """Whether a position needs no check: the last full check still proves it CLEAR, and
         nothing but the position changed since (the runner calls :meth:`invalidate` when the
         mode, armed state or GPS fix changes). When True it is counted in ``checks`` as a
         step would count it, and nothing else is to be done for it.
 
-        Parameters
-        ----------
-        t : float
-            Monotonic seconds.
-        lat, lon : float
-            Degrees.
-        alt : float
-            Metres above home.
-        vn, ve : float
-            Velocity north and east, m/s.
+        The arguments are those of :meth:`Reach.holds <alphafence.awareness.reach.Reach.holds>`.
         """
         r = self.reach
         if r is None or r.version != self.fences.version or self.stale:
