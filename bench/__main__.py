@@ -56,6 +56,7 @@ def main(argv=None) -> int:
         "--only",
         choices=[
             "as-read",
+            "as-read-cost",
             "build",
             "cli",
             "compile",
@@ -103,7 +104,8 @@ def main(argv=None) -> int:
 
     if args.only in (None, "as-read"):
         take("as-read", as_read_bench.run(build_bench.Row))
-        take("as-read", as_read_bench.cost(args.osm, build_bench.Row, console))
+    if args.only in (None, "as-read-cost"):
+        take("as-read-cost", as_read_bench.cost(args.osm, build_bench.Row, console))
     if args.only in (None, "build"):
         take("build", build_bench.run(args.osm, args.optimize_sites, console))
     if args.only in (None, "cli"):
