@@ -260,18 +260,23 @@ class RawLink:
 
         fence = ids.MAV_MISSION_TYPE_FENCE
         self.c.mav.mission_count_send(1, 1, len(items), fence)
-        marks = {}
+        marks, answered = {}, 0
         kinds = ("MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK")
         while True:
             m = self.pump(lambda m: m.get_type() in kinds and m.mission_type == fence, 10)
             assert m is not None, "the vehicle stopped asking for items"
             if m.get_type() == "MISSION_ACK":
+                if m.type == ids.MAV_MISSION_INVALID_SEQUENCE and "last" not in marks:
+                    continue  # a stale re-request answered twice: ArduPilot keeps the transfer
                 marks["ack"] = time.monotonic()
                 return m.type, marks
+            if m.seq < answered:  # a re-request from before the pause, already answered
+                continue
             if m.seq == pause_at and "pause" not in marks:
                 marks["pause"] = time.monotonic()
                 self.pump(lambda m: False, PAUSE_S)
                 marks["resume"] = time.monotonic()
+            answered = m.seq
             cmd, n, lat, lon = items[m.seq]
             if m.seq == len(items) - 1:
                 marks["last"] = time.monotonic()
