@@ -29,7 +29,7 @@ def test_params_list_prints_every_preset_and_its_parameters(capsys):
         for line in capsys.readouterr().out.splitlines()
         if line.startswith("│") and line.split("│")[1].strip()
     }
-    assert {"copter", "plane", "rover"} == set(VEHICLE.values())
+    assert {"copter", "plane", "rover", "px4"} == set(VEHICLE.values())
     assert set(rows) == set(PROFILES)
     # FENCE_ACTION as AC_Fence.cpp documents it for each vehicle
     assert "FENCE_ACTION=4 (Brake or Land)" in rows["copter-brake"]
@@ -37,11 +37,18 @@ def test_params_list_prints_every_preset_and_its_parameters(capsys):
     assert "FENCE_ACTION=6 (Guided)" in rows["plane-guided"]
     assert "FENCE_ACTION=2 (Hold)" in rows["rover-hold"]
     assert "FENCE_ACTION=1 (RTL)" in rows["plane-rtl"]
+    # GF_ACTION as PX4's geofence_params.yaml documents it
+    assert "GF_ACTION=2 (Hold mode)" in rows["px4-hold"]
+    assert "GF_ACTION=3 (Return mode)" in rows["px4-return"]
+    assert "GF_ACTION=5 (Land mode)" in rows["px4-land"]
 
 
 def test_a_rover_preset_sets_no_altitude_fence():
     for name, vehicle in VEHICLE.items():
         values = PROFILES[name]
+        if vehicle == "px4":
+            assert set(values) >= {"GF_ACTION", "GF_SOURCE"} and values["GF_ACTION"] >= 1
+            continue
         assert values["FENCE_ENABLE"] == 1 and values["FENCE_TYPE"] & 4  # polygons and circles
         if vehicle == "rover":  # Rover's FENCE_TYPE bits are 1 and 2; it has no FENCE_ALT_MAX
             assert values["FENCE_TYPE"] & 1 == 0 and "FENCE_ALT_MAX" not in values

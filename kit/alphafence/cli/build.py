@@ -8,15 +8,14 @@ from rich.table import Table
 
 from alphafence.cli.common import SKIP_HINT, err_console, out_console, progress, union_hint
 from alphafence.cli.maps import add_map_options, check_map_args
-from alphafence.cli.options import (
+from alphafence.cli.options import at_least, non_negative, positive
+from alphafence.cli.source_options import (
     add_database_options,
-    at_least,
+    add_source_options,
     build_options,
     build_wants,
-    non_negative,
-    positive,
+    source_options,
 )
-from alphafence.cli.source_options import add_source_options, source_options
 from alphafence.errors import need
 from alphafence.fencing import METHODS
 

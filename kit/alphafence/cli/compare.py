@@ -6,7 +6,7 @@ import json
 
 from alphafence.cli.common import callback, out_console, progress
 from alphafence.cli.maps import add_map_options, check_map_args
-from alphafence.cli.options import add_database_options, build_options, build_wants
+from alphafence.cli.source_options import add_database_options, build_options, build_wants
 from alphafence.cli.tables import stats_table
 from alphafence.errors import InputError, need
 from alphafence.fencing import METHODS

@@ -1,4 +1,5 @@
-"""alphafence compile: fences -> ArduPilot's fence storage for a mission's flight path (or a box)."""
+"""alphafence compile: fences -> a vehicle's fence storage (ArduPilot's or PX4's) for a mission's
+flight path (or a box)."""
 
 from __future__ import annotations
 

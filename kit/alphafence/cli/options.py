@@ -184,87 +184,9 @@ def add_connect_option(p: argparse.ArgumentParser, required: bool = True) -> Non
 # option groups
 
 
-def add_database_options(p: argparse.ArgumentParser, optional: bool = False) -> None:
-    """Add the geofence database and site-grouping options of ``build`` and ``compare``.
-
-    Their values become ``args.databases``, ``args.rules``, ``args.bbox``, ``args.join``,
-    ``args.margin``, ``args.max_vertices`` and ``args.max_overshoot``; :func:`build_options` turns them into the
-    library's :class:`~alphafence.fencing.pipeline.BuildOptions`.
-    """
-    p.add_argument(
-        "databases",
-        nargs="*" if optional else "+",
-        metavar="DATABASE",
-        help="geofence database(s): .osm.pbf, .osm, GeoJSON or ED-269 JSON",
-    )
-    p.add_argument("--rules", metavar="FILE", help="rules TOML (default: the shipped rules)")
-    p.add_argument(
-        "--bbox",
-        metavar="MINLON,MINLAT,MAXLON,MAXLAT",
-        type=bbox,
-        help="only features intersecting this box",
-    )
-    p.add_argument(
-        "--join",
-        type=non_negative("--join", "metres"),
-        default=25.0,
-        metavar="M",
-        help="features of one category within M metres form one site (default 25)",
-    )
-    p.add_argument(
-        "--margin",
-        type=non_negative("--margin", "metres"),
-        default=None,
-        metavar="M",
-        help="override every rule's margin (0 = the paper's setting)",
-    )
-    p.add_argument(
-        "--max-vertices",
-        type=at_least("--max-vertices", 4),
-        default=32,
-        metavar="N",
-        help="vertex budget per fence polygon (default 32)",
-    )
-    p.add_argument(
-        "--max-overshoot",
-        type=non_negative("--max-overshoot", "metres"),
-        default=None,
-        metavar="M",
-        help="no simplified fence reaches more than M metres beyond the shape its method "
-        "draws (alpha shape, hull): large sites take more vertices than --max-vertices "
-        "where needed (default: the vertex budget alone)",
-    )
-
-
-def build_wants(databases, figure=None):
-    """What ``build`` and ``compare`` need beyond the base install, as
-    :func:`alphafence.errors.need` takes it: pyosmium for OSM files, scipy to build fences,
-    matplotlib to draw ``figure``."""
-    from alphafence.zones.database import osm_wants
-
-    return [*osm_wants(databases), ("scipy", "building fences"), *figure_wants(figure)]
-
-
 def figure_wants(figure):
     """What drawing ``figure`` (a path, or None for no figure) needs: matplotlib."""
     return [("matplotlib", f"drawing {figure}")] if figure else []
-
-
-def build_options(args):
-    """The :class:`~alphafence.fencing.pipeline.BuildOptions` of :func:`add_database_options`'s
-    values, and of ``build``'s ``--method``, ``--alpha-radius`` and ``--warn-distance`` where
-    the verb has them."""
-    from alphafence.fencing.pipeline import BuildOptions
-
-    return BuildOptions(
-        method=getattr(args, "method", "alpha"),
-        alpha_radius=getattr(args, "alpha_radius", None),
-        max_vertices=args.max_vertices,
-        warn_distance_m=getattr(args, "warn_distance", 30.0),
-        margin_m=args.margin,
-        max_overshoot_m=getattr(args, "max_overshoot", None),
-        join_m=args.join,
-    )
 
 
 def add_compile_options(p: argparse.ArgumentParser) -> None:
@@ -273,22 +195,7 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
     The operating area (``--area`` or ``--bbox``) is each verb's own; :func:`compile_from_args`
     reads both.
     """
-    from alphafence.mavlink.storage import PROFILES
-
-    size = p.add_mutually_exclusive_group()
-    size.add_argument(
-        "--profile",
-        choices=sorted(PROFILES),
-        default="copter",
-        help="vehicle fence storage (default copter: 70 items, 560 bytes; navio2: the fence in "
-        "a file of --sd-fence-kb, full resolution)",
-    )
-    p.add_argument(
-        "--sd-fence-kb",
-        type=sd_fence_kb,
-        metavar="N",
-        help="with --profile navio2: the vehicle's BRD_SD_FENCE, 1-64 kB (default 64)",
-    )
+    add_storage_options(p)
     p.add_argument(
         "--items",
         type=at_least("--items", 1),
@@ -313,46 +220,6 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def sd_fence_kb(text: str) -> int:
-    """argparse type of ``--sd-fence-kb``: an integer from 1 to 64 (kB of ``BRD_SD_FENCE``).
-
-    Examples
-    --------
-    >>> sd_fence_kb("32")
-    32
-    """
-    from alphafence.mavlink.storage import SD_FENCE_MAX_KB
-
-    return _number(
-        "--sd-fence-kb", int, lambda v: 1 <= v <= SD_FENCE_MAX_KB, f"1 to {SD_FENCE_MAX_KB} (kB)"
-    )(text)
-
-
-def storage_profile(args):
-    """The :class:`~alphafence.mavlink.storage.Profile` that ``--profile`` (and, for
-    ``navio2``, ``--sd-fence-kb``) name.
-
-    Raises
-    ------
-    InputError
-        ``--sd-fence-kb`` with another profile.
-
-    Examples
-    --------
-    >>> from types import SimpleNamespace
-    >>> storage_profile(SimpleNamespace(profile="navio2", sd_fence_kb=8)).items
-    1024
-    """
-    from alphafence.mavlink.storage import PROFILES, navio2_profile
-
-    kb = getattr(args, "sd_fence_kb", None)
-    if args.profile == "navio2":
-        return navio2_profile(kb) if kb is not None else PROFILES["navio2"]
-    if kb is not None:
-        raise InputError("--sd-fence-kb", "sizes the navio2 profile only: add --profile navio2")
-    return PROFILES[args.profile]
-
-
 def compile_from_args(args, records):
     """Compile ``records`` for where the vehicle flies and the storage that
     :func:`add_compile_options` and the verb's ``--area`` / ``--bbox`` describe: the fences
@@ -372,8 +239,9 @@ def compile_from_args(args, records):
     """
     import shapely
 
-    from alphafence.onboard.compile import compile_fences, require_fence
+    from alphafence.onboard.compile import compile_fences
     from alphafence.onboard.corridor import flight_path_from_plan
+    from alphafence.onboard.rules import require_fence
     from alphafence.zones.mistakes import check_box, check_point
 
     if getattr(args, "area", None):
@@ -397,3 +265,97 @@ def compile_from_args(args, records):
         check_box("--bbox", args.bbox, geoms, args.fences, reach_m=args.distance)
     require_fence(result, args.fences, where)  # no empty plan, for compile as for upload
     return result
+
+
+def add_storage_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--autopilot``, ``--profile`` and ``--sd-fence-kb`` to ``p``."""
+    from alphafence.mavlink.autopilots import AUTOPILOTS
+    from alphafence.mavlink.storage import PROFILES
+
+    p.add_argument(
+        "--autopilot",
+        choices=AUTOPILOTS,
+        help="whose fence rules to compile for (default: the vehicle's own, from its "
+        "HEARTBEAT; without a vehicle, ardupilot)",
+    )
+    p.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        help="vehicle fence storage (default copter for ArduPilot: 70 items, 560 bytes; px4 "
+        "for PX4: 64 items; navio2: ArduPilot's fence in a file of --sd-fence-kb, full "
+        "resolution)",
+    )
+    p.add_argument(
+        "--sd-fence-kb",
+        type=sd_fence_kb,
+        metavar="N",
+        help="with --profile navio2: the vehicle's BRD_SD_FENCE, 1-64 kB (default 64)",
+    )
+
+
+def sd_fence_kb(text: str) -> int:
+    """argparse type of ``--sd-fence-kb``: an integer from 1 to 64 (kB of ``BRD_SD_FENCE``).
+
+    Examples
+    --------
+    >>> sd_fence_kb("32")
+    32
+    """
+    from alphafence.mavlink.storage import SD_FENCE_MAX_KB
+
+    value = int(text)  # ValueError: argparse's "invalid int value: 'x'"
+    if not 1 <= value <= SD_FENCE_MAX_KB:
+        raise InputError("--sd-fence-kb", f"must be 1 to {SD_FENCE_MAX_KB} (kB), not {value}")
+    return value
+
+
+def autopilot_of_args(args) -> str:
+    """The autopilot the work is for: ``--autopilot``, else the ``--profile``'s, else
+    ArduPilot."""
+    from alphafence.mavlink.storage import PROFILES
+
+    if getattr(args, "autopilot", None):
+        return args.autopilot
+    if getattr(args, "profile", None):
+        return PROFILES[args.profile].autopilot
+    return "ardupilot"
+
+
+def storage_profile(args):
+    """The :class:`~alphafence.mavlink.storage.Profile` that ``--autopilot``, ``--profile``
+    (and, for ``navio2``, ``--sd-fence-kb``) name: without ``--profile``, the autopilot's
+    default (copter for ArduPilot, px4 for PX4).
+
+    Raises
+    ------
+    InputError
+        ``--sd-fence-kb`` with another profile, or a profile of another autopilot.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> storage_profile(SimpleNamespace(profile="navio2", sd_fence_kb=8)).items
+    1024
+    >>> storage_profile(SimpleNamespace(profile=None, autopilot="px4")).items
+    64
+    """
+    from alphafence.mavlink.autopilots import NAMES
+    from alphafence.mavlink.storage import DEFAULT_PROFILE, PROFILES, navio2_profile
+
+    autopilot = autopilot_of_args(args)
+    name = getattr(args, "profile", None) or DEFAULT_PROFILE[autopilot]
+    kb = getattr(args, "sd_fence_kb", None)
+    if name == "navio2":
+        profile = navio2_profile(kb) if kb is not None else PROFILES["navio2"]
+    elif kb is not None:
+        raise InputError("--sd-fence-kb", "sizes the navio2 profile only: add --profile navio2")
+    else:
+        profile = PROFILES[name]
+    if profile.autopilot != autopilot:
+        fits = sorted(n for n, p in PROFILES.items() if p.autopilot == autopilot)
+        raise InputError(
+            "--profile",
+            f"{name} is {NAMES[profile.autopilot]}'s fence storage, and the fence is for "
+            f"{NAMES[autopilot]}: take one of {', '.join(fits)}",
+        )
+    return profile

@@ -1,8 +1,12 @@
-"""The live-source options of ``build`` and ``monitor`` (``--source URL`` and how to ask it)."""
+"""Where zones come from: the database files of ``build`` and ``compare`` and their grouping
+options, and the live-source options of ``build`` and ``monitor`` (``--source URL`` and how to
+ask it)."""
 
 from __future__ import annotations
 
-from alphafence.cli.options import positive
+import argparse
+
+from alphafence.cli.options import at_least, bbox, figure_wants, non_negative, positive
 
 
 def add_source_options(p, monitor: bool = False) -> None:
@@ -185,4 +189,82 @@ def trusted_keys(args) -> tuple:
     env = os.environ.get("ALPHAFENCE_TRUSTED_KEYS", "")
     return tuple(getattr(args, "trusted_key", None) or ()) + tuple(
         k for k in env.split(os.pathsep) if k
+    )
+
+
+def add_database_options(p: argparse.ArgumentParser, optional: bool = False) -> None:
+    """Add the geofence database and site-grouping options of ``build`` and ``compare``.
+
+    Their values become ``args.databases``, ``args.rules``, ``args.bbox``, ``args.join``,
+    ``args.margin``, ``args.max_vertices`` and ``args.max_overshoot``; :func:`build_options` turns them into the
+    library's :class:`~alphafence.fencing.pipeline.BuildOptions`.
+    """
+    p.add_argument(
+        "databases",
+        nargs="*" if optional else "+",
+        metavar="DATABASE",
+        help="geofence database(s): .osm.pbf, .osm, GeoJSON or ED-269 JSON",
+    )
+    p.add_argument("--rules", metavar="FILE", help="rules TOML (default: the shipped rules)")
+    p.add_argument(
+        "--bbox",
+        metavar="MINLON,MINLAT,MAXLON,MAXLAT",
+        type=bbox,
+        help="only features intersecting this box",
+    )
+    p.add_argument(
+        "--join",
+        type=non_negative("--join", "metres"),
+        default=25.0,
+        metavar="M",
+        help="features of one category within M metres form one site (default 25)",
+    )
+    p.add_argument(
+        "--margin",
+        type=non_negative("--margin", "metres"),
+        default=None,
+        metavar="M",
+        help="override every rule's margin (0 = the paper's setting)",
+    )
+    p.add_argument(
+        "--max-vertices",
+        type=at_least("--max-vertices", 4),
+        default=32,
+        metavar="N",
+        help="vertex budget per fence polygon (default 32)",
+    )
+    p.add_argument(
+        "--max-overshoot",
+        type=non_negative("--max-overshoot", "metres"),
+        default=None,
+        metavar="M",
+        help="no simplified fence reaches more than M metres beyond the shape its method "
+        "draws (alpha shape, hull): large sites take more vertices than --max-vertices "
+        "where needed (default: the vertex budget alone)",
+    )
+
+
+def build_wants(databases, figure=None):
+    """What ``build`` and ``compare`` need beyond the base install, as
+    :func:`alphafence.errors.need` takes it: pyosmium for OSM files, scipy to build fences,
+    matplotlib to draw ``figure``."""
+    from alphafence.zones.database import osm_wants
+
+    return [*osm_wants(databases), ("scipy", "building fences"), *figure_wants(figure)]
+
+
+def build_options(args):
+    """The :class:`~alphafence.fencing.pipeline.BuildOptions` of :func:`add_database_options`'s
+    values, and of ``build``'s ``--method``, ``--alpha-radius`` and ``--warn-distance`` where
+    the verb has them."""
+    from alphafence.fencing.pipeline import BuildOptions
+
+    return BuildOptions(
+        method=getattr(args, "method", "alpha"),
+        alpha_radius=getattr(args, "alpha_radius", None),
+        max_vertices=args.max_vertices,
+        warn_distance_m=getattr(args, "warn_distance", 30.0),
+        margin_m=args.margin,
+        max_overshoot_m=getattr(args, "max_overshoot", None),
+        join_m=args.join,
     )

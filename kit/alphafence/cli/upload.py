@@ -114,7 +114,7 @@ class _Presets(argparse.Action):
             return
         from alphafence.vehicle.params import VEHICLE, describe
 
-        t = Table(title="--params presets (ArduPilot's AC_Fence parameters)")
+        t = Table(title="--params presets (ArduPilot's AC_Fence, PX4's geofence parameters)")
         for col in ("preset", "vehicle", "parameters set"):
             t.add_column(col)
         for name, vehicle in VEHICLE.items():
@@ -140,7 +140,7 @@ def load_items(args):
     tuple
         ``(items, CompileResult or None)``.
     """
-    from alphafence.fencefiles.ardupilot_fence import read_legacy_items
+    from alphafence.fencefiles.ardupilot_fence import onboard_kind, read_legacy_items
     from alphafence.fencefiles.fence_read import read_fence_file as read_fences
     from alphafence.fencefiles.qgc_plan import read_plan_geofence
     from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
@@ -163,7 +163,7 @@ def load_items(args):
     return result.items, result
 
 
-def _plan_sites(path):
+def plan_sites(path):
     """The sites each polygon and circle of a compiled ``.plan`` stands for (None for other
     files)."""
     from alphafence.fencefiles.qgc_plan import read_plan_geofence
@@ -171,82 +171,18 @@ def _plan_sites(path):
     return read_plan_geofence(path).sites if path.lower().endswith(".plan") else None
 
 
-def onboard_kind(path):
-    """``"waypoints"`` (a QGC WPL file) or ``"legacy"`` (ArduPilot's legacy fence file) for an
-    onboard fence file told by its first bytes, whatever its suffix (both are often ``.txt``),
-    else None (fences to compile, or no such file: their reader says so)."""
-    from alphafence.fencefiles.ardupilot_fence import looks_like_legacy_fence
-
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 16).decode("latin-1")
-    except OSError:
-        return None
-    if head.lstrip().startswith("QGC WPL"):
-        return "waypoints"
-    return "legacy" if looks_like_legacy_fence(head) else None
-
-
-def check_items(path, items, profile, max_items=None):
-    """Check fence items read from a file as ArduPilot's loader checks them and against the
-    storage they are for, as a compilation fits its items to it.
-
-    Parameters
-    ----------
-    path : str
-        The file, for messages.
-    items : list of FenceItem
-    profile : Profile
-        The vehicle's fence storage.
-    max_items : int, optional
-        ``--items``: at most this many.
+def prepare(args):
+    """Compile the fences for ``args.autopilot`` (or check an onboard file's items against
+    its storage and rules), with the reports, figure and map asked for.
 
     Returns
     -------
-    list of OnboardFence
-        The polygons and circles the items make.
-
-    Raises
-    ------
-    InputError
-        One line: an item ArduPilot refuses, no polygon or circle at all (the upload would
-        leave the vehicle without a fence), or more items or bytes than the storage holds.
-    """
-    from alphafence.mavlink.storage import storage_bytes
-    from alphafence.onboard.decode import decode_fence
-
-    fences = decode_fence(items, source=path)
-    if not fences:
-        raise InputError(
-            path, "no polygon or circle: uploading it would leave the vehicle without a fence"
-        )
-    used = storage_bytes(items)
-    if max_items is not None and len(items) > max_items:
-        raise InputError(
-            path, f"{len(items)} fence items: --items allows at most {max_items} items"
-        )
-    if len(items) > profile.items or used > profile.bytes:
-        raise InputError(
-            path,
-            f"{len(items)} fence items, {used} bytes: the {profile.name} profile holds "
-            f"{profile.items} items and {profile.bytes} bytes (choose its --profile, or compile "
-            "the fences for it)",
-        )
-    return fences
-
-
-def run(args) -> int:
-    """Check the fences' signature, compile if needed (or check a plan's or waypoint file's
-    items against the storage), upload, read back, set parameters.
-
-    Exit status 0, or 3 when the vehicle or the link fails (a
-    :class:`~alphafence.errors.VehicleError`, mapped by :func:`alphafence.cli.main`).
+    tuple
+        ``(items, Profile)``.
     """
     from alphafence.onboard.decode import decode_fence
+    from alphafence.onboard.rules import check_for_autopilot, check_items
 
-    need(*figure_wants(args.figure))
-    check_map_args(args)
-    check_trust(args, args.fences)
     profile = storage_profile(args)
     if args.reboot and not profile.file_backed:
         raise InputError(
@@ -260,26 +196,49 @@ def run(args) -> int:
         fences = decode_fence(items, source=args.fences) if args.figure or args.map else None
     else:
         fences = check_items(args.fences, items, profile, args.items)
+        check_for_autopilot(items, profile.autopilot, args.fences)
         if args.dry_run:
-            items_report(items, fences, profile, _plan_sites(args.fences))
+            items_report(items, fences, profile, plan_sites(args.fences))
+    if args.figure or args.map:
+        _pictures(args, items, fences, profile)
+    if getattr(args, "area", None):
+        _mission_outside(args.area, items)
+    return items, profile
+
+
+def _pictures(args, items, fences, profile) -> None:
+    from alphafence.mavlink.items import RETURN_POINT
+
+    ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
+    title = f"{args.fences}: {len(items)} fence items ({profile.name})"
     if args.figure:
-        from alphafence.mavlink.items import RETURN_POINT
         from alphafence.plots.items import fence_items_figure
 
-        ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
-        title = f"{args.fences}: {len(items)} fence items ({profile.name})"
         fence_items_figure(fences, ret, args.figure, title)
     if args.map:
         from alphafence.cli.maps import write_map_page
-        from alphafence.mavlink.items import RETURN_POINT
         from alphafence.plots.webmap import onboard_layers
 
-        ret = next(((i.lon, i.lat) for i in items if i.command == RETURN_POINT), None)
-        title = f"{args.fences}: {len(items)} fence items ({profile.name})"
         out_console.print(f"wrote {write_map_page(args, title, onboard_layers(fences, ret))}")
-    if getattr(args, "area", None):
-        _mission_outside(args.area, items)
+
+
+def run(args) -> int:
+    """Check the fences' signature, compile if needed (or check a plan's or waypoint file's
+    items against the storage), upload, read back, set parameters.
+
+    Without ``--autopilot`` (or a ``--profile`` of one), the fence is compiled once the
+    vehicle has said which autopilot it runs.
+
+    Exit status 0, or 3 when the vehicle or the link fails (a
+    :class:`~alphafence.errors.VehicleError`, mapped by :func:`alphafence.cli.main`).
+    """
+    need(*figure_wants(args.figure))
+    check_map_args(args)
+    check_trust(args, args.fences)
+    known = args.dry_run or args.autopilot or args.profile
+    prepared = prepare(args) if known else None
     if args.dry_run:
+        items = prepared[0]
         union = inclusion_count(items) > 1
         out_console.print(
             f"dry run: {len(items)} fence items ready"
@@ -290,22 +249,41 @@ def run(args) -> int:
     if not args.connect:
         raise InputError("--connect", "needed unless --dry-run")
     args.key = signing_key(args)
-    return asyncio.run(_upload(args, items, profile))
+    return asyncio.run(_upload(args, prepared))
 
 
-async def _upload(args, items, profile) -> int:
+async def _upload(args, prepared) -> int:
+    from alphafence.mavlink.autopilots import NAMES
     from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
     from alphafence.vehicle.link import open_vehicle
     from alphafence.vehicle.params import apply_params, check_preset, check_union_supported
+    from alphafence.vehicle.px4 import check_home, confirm_kept, monotonic
 
     with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
+            if prepared is None:  # compiled for the autopilot the vehicle says it runs
+                args.autopilot = vehicle.autopilot
+                out_console.print(f"the vehicle runs {NAMES[vehicle.autopilot]}")
+                prepared = await asyncio.to_thread(prepare, args)
+            items, profile = prepared
+            if profile.autopilot != vehicle.autopilot:
+                raise VehicleError(
+                    f"the fence is compiled for {NAMES[profile.autopilot]}, and the vehicle runs "
+                    f"{NAMES[vehicle.autopilot]} (its HEARTBEAT): compile it with --autopilot "
+                    f"{vehicle.autopilot}; nothing was sent"
+                )
+            px4 = vehicle.autopilot == "px4"
             if args.params:
                 await check_preset(vehicle, args.params)
             inclusions = inclusion_count(items)
-            options = await check_union_supported(vehicle, inclusions) if inclusions > 1 else None
+            options = None
+            if inclusions > 1 and not px4:
+                options = await check_union_supported(vehicle, inclusions)
+            if px4:
+                await check_home(vehicle, items, args.timeout)
             if profile.file_backed:
                 await _storage(args, vehicle, items, profile)
+            t0 = monotonic()
             try:
                 rep = await upload_fence(vehicle, items, capacity=profile.items)
             except FenceTransferError as exc:
@@ -315,6 +293,9 @@ async def _upload(args, items, profile) -> int:
             out_console.print(
                 f"uploaded {rep.items} fence items and read them back identical ({rep.seconds:.2f} s)"
             )
+            if px4:
+                await confirm_kept(vehicle, items, t0)
+                out_console.print("PX4 keeps every area: home breaches none")
             if options is not None:
                 await _union(vehicle, options, inclusions)
             if args.params:

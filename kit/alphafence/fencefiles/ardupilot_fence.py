@@ -241,3 +241,17 @@ def _polygon_items(path, items, start):
             path, f"a polygon of {int(n)} vertices has fewer items in a row", f"item {start}"
         )
     return ring
+
+
+def onboard_kind(path):
+    """``"waypoints"`` (a QGC WPL file) or ``"legacy"`` (ArduPilot's legacy fence file) for an
+    onboard fence file told by its first bytes, whatever its suffix (both are often ``.txt``),
+    else None (fences to compile, or no such file: their reader says so)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16).decode("latin-1")
+    except OSError:
+        return None
+    if head.lstrip().startswith("QGC WPL"):
+        return "waypoints"
+    return "legacy" if looks_like_legacy_fence(head) else None

@@ -1,4 +1,4 @@
-"""Distances and polygons as ArduPilot reads them, for the fence items a vehicle holds.
+"""Distances and polygons as ArduPilot (and PX4) read them, for the fence items a vehicle holds.
 
 ArduPilot decides a circle breach with ``Location::get_distance`` (``AP_Common/Location.cpp``):
 a flat-earth distance on its integer 1e-7 degrees, the longitude difference scaled by the
@@ -13,6 +13,9 @@ inside (inclusion) the geodesic circle it stands for under **every** one of thes
 
 A polygon is tested with ``Polygon_outside`` on the integers of the position and of the
 vertices: edges straight in lat/lng, no wrap at the antimeridian (:func:`polygon_outside`).
+
+PX4 reads a polygon's edges as straight lat/lon lines too (its PNPOLY test on the vertices'
+degrees), and a circle through its own projection: :func:`px4_radius`.
 """
 
 from __future__ import annotations
@@ -166,3 +169,78 @@ def polygon_outside(lon, lat, ring_lon, ring_lat):
             flip = dx1 * dy2 < dx2 * dy1
         outside ^= crosses & flip
     return outside
+
+
+# -- PX4 ----------------------------------------------------------------------------------
+# PX4's circle test (``Geofence::insideCircle``, navigator/geofence.cpp): both points projected
+# by its MapProjection (azimuthal equidistant on a sphere of CONSTANTS_RADIUS_OF_EARTH, from a
+# reference set where the vehicle was at the first circle check), then a plane distance. The
+# projection's scale is 1 along its radii and c / sin(c) across them (c: the angle from the
+# reference), never below 1: the plane distance is at least the great-circle distance on that
+# sphere, and at most that times c / sin(c) for points within c of the reference.
+PX4_EARTH_M = 6_371_000.0
+PX4_REACH_M = 100_000.0
+"""How far from PX4's projection reference (where the vehicle was when it first checked a
+circle, near home) the radii :func:`px4_radius` gives hold: 100 km."""
+
+
+def px4_stretch(reach_m: float = PX4_REACH_M) -> float:
+    """The most PX4's projection lengthens a distance within ``reach_m`` of its reference
+    (``c / sin c``).
+
+    Examples
+    --------
+    >>> round((px4_stretch() - 1) * 1e6, 1)  # parts per million at 100 km
+    41.1
+    """
+    c = reach_m / PX4_EARTH_M
+    return c / math.sin(c) if c > 0 else 1.0
+
+
+def great_circle_m(lon, lat, clon, clat, radius_m=PX4_EARTH_M):
+    """Great-circle distance on a sphere of ``radius_m`` (haversine), metres.
+
+    Examples
+    --------
+    >>> round(float(great_circle_m(0.0, 0.01, 0.0, 0.0)), 2)
+    1111.95
+    """
+    lo, la = np.radians(np.asarray(lon, float)), np.radians(np.asarray(lat, float))
+    clo, cla = math.radians(clon), math.radians(clat)
+    h = np.sin((la - cla) / 2) ** 2 + np.cos(la) * math.cos(cla) * np.sin((lo - clo) / 2) ** 2
+    return 2 * radius_m * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+
+
+def px4_radius(lon, lat, radius_m, outward=True, reach_m=PX4_REACH_M):
+    """The radius a circle item needs so that PX4's circle around ``(lon, lat)`` contains
+    (``outward``) or lies inside the geodesic (WGS84) circle of ``radius_m``, wherever PX4's
+    projection reference lies within ``reach_m``.
+
+    The geodesic circle is drawn at 720 azimuths and measured on PX4's sphere; outward, the
+    largest distance is lengthened by the projection's most (:func:`px4_stretch`); inward the
+    least is kept (the projection only lengthens); each widened or narrowed by a millionth and
+    a centimetre, as :func:`vehicle_radius` does.
+
+    Examples
+    --------
+    >>> round(px4_radius(0.0, 0.0, 1540.0) - 1540.0, 1)  # at the equator: the sphere reads long
+    8.7
+    >>> round(1540.0 - px4_radius(0.0, 60.0, 1540.0, outward=False), 1)  # at 60°: short
+    5.6
+    """
+    if not radius_m > 0:
+        return float(radius_m)
+    n = len(_AZIMUTHS)
+    plon, plat, _ = GEOD.fwd(np.full(n, float(lon)), np.full(n, float(lat)), _AZIMUTHS,
+                             np.full(n, float(radius_m)))  # fmt: skip
+    d = great_circle_m(plon, plat, lon, lat)
+    if outward:
+        return float(d.max() * px4_stretch(reach_m) * (1 + 1e-6) + 0.01)
+    return float(max(d.min() * (1 - 1e-6) - 0.01, 0.0))
+
+
+def circle_radius(autopilot, lon, lat, radius_m, outward=True):
+    """:func:`vehicle_radius` (ArduPilot) or :func:`px4_radius` (``autopilot == "px4"``)."""
+    if autopilot == "px4":
+        return px4_radius(lon, lat, radius_m, outward)
+    return vehicle_radius(lon, lat, radius_m, outward)

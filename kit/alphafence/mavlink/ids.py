@@ -155,6 +155,7 @@ MAV_MISSION_TYPE_FENCE = 1
 # -- MAV_AUTOPILOT / MAV_TYPE (as QGroundControl plans name the firmware and vehicle) ----
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_INVALID = 8  # not a flight controller (a ground station, a companion)
+MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_FIXED_WING = 1
 MAV_TYPE_QUADROTOR = 2
 MAV_TYPE_GCS = 6

@@ -7,6 +7,11 @@ SITL and a Navio2 without ``BRD_SD_FENCE`` have 560 bytes (at most 70 items); Pl
 Navio2, and SITL) the fence lives in a file, ``fence.stg`` in the vehicle's working directory,
 of ``min(kB * 1024, 65535)`` bytes (``StorageAccess::attach_file``), which holds an eighth as
 many items (``AC_PolyFence_loader::max_items``); a polygon still holds at most 255 vertices.
+
+PX4 keeps each fence item in its own dataman slot, so only the item count is limited:
+``GEOFENCE_MAX_VERTICES`` (64 on Linux boards, SITL and most flight controllers; 16 on the
+memory-constrained ones). Measured on PX4 SITL: 64 items are accepted, 65 and more refused
+with ``MAV_MISSION_NO_SPACE``.
 """
 
 from __future__ import annotations
@@ -121,6 +126,9 @@ class Profile:
         Most vertices of one polygon (ArduPilot's limit is 255).
     sd_fence_kb : int
         The ``BRD_SD_FENCE`` the storage assumes: 0 for the board's own storage.
+    autopilot : str
+        ``"ardupilot"`` or ``"px4"``: whose fence rules the items are compiled for
+        (:mod:`alphafence.mavlink.autopilots`).
     """
 
     name: str
@@ -128,6 +136,7 @@ class Profile:
     bytes: int
     max_polygon_vertices: int = 255
     sd_fence_kb: int = 0
+    autopilot: str = "ardupilot"
 
     @property
     def file_backed(self) -> bool:
@@ -163,6 +172,13 @@ def navio2_profile(sd_fence_kb: int = SD_FENCE_MAX_KB) -> Profile:
     return Profile("navio2", size // ITEM_BYTES, size, sd_fence_kb=sd_fence_kb)
 
 
+PX4_ITEMS = 64
+"""PX4's ``GEOFENCE_MAX_VERTICES`` on Linux boards (the Navio2), SITL and most flight
+controllers: the most fence items it accepts (measured: 65 are refused)."""
+PX4_CONSTRAINED_ITEMS = 16
+"""The same on PX4's memory-constrained boards (``MEMORY_CONSTRAINED_SYSTEM``)."""
+PX4_BYTES = 1 << 20  # no byte budget: one dataman slot an item; the count is the limit
+
 BOARD_PROFILE = "copter"
 """The profile whose storage a vehicle without ``BRD_SD_FENCE`` is assumed to have (the
 smallest: Copter, SITL and a Navio2 alike)."""
@@ -173,8 +189,15 @@ PROFILES = {
     "rover": Profile("rover", 84, 672),
     "sd-fence": Profile("sd-fence", 4096, 32 * 1024, sd_fence_kb=32),  # BRD_SD_FENCE = 32 (kB)
     "navio2": navio2_profile(),  # BRD_SD_FENCE = 64 (kB); other sizes: navio2_profile(kb)
+    "px4": Profile("px4", PX4_ITEMS, PX4_BYTES, autopilot="px4"),
+    "px4-constrained": Profile(
+        "px4-constrained", PX4_CONSTRAINED_ITEMS, PX4_BYTES, autopilot="px4"
+    ),
 }
 """The storage profiles ``compile`` and ``upload --profile`` know."""
+
+DEFAULT_PROFILE = {"ardupilot": "copter", "px4": "px4"}
+"""The profile each autopilot's work assumes when no ``--profile`` is given."""
 
 MAX_FILE_ITEMS = FILE_MAX_BYTES // ITEM_BYTES
 """The most fence items any ArduPilot vehicle holds (8191: ``BRD_SD_FENCE = 64``)."""

@@ -15,6 +15,7 @@ emitted polygon is re-checked after rounding (``onboard.emit``).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,11 +25,13 @@ from alphafence.errors import InputError
 from alphafence.geo.alpha import outer_polygons
 from alphafence.geo.frame import LocalFrame
 from alphafence.geo.lonlat import as_read
+from alphafence.mavlink.items import RETURN_POINT, FenceItem
 from alphafence.mavlink.storage import END_BYTES, HEADER_BYTES, RETURN_BYTES, Profile, storage_bytes
 from alphafence.onboard.corridor import Corridor, LossModel, Overshoot, overshoot
 from alphafence.onboard.emit import emit_items, held_lonlat
 from alphafence.onboard.merge import fit_by_merging, merge_to_upgrade, upgrade
 from alphafence.onboard.options import PAD_M, Piece, own_option, piece_options, with_own
+from alphafence.onboard.rules import check_for_autopilot
 
 
 @dataclass
@@ -186,7 +189,9 @@ def compile_fences(
         Where the vehicle flies (WGS84 lon, lat): a flight path (LineString or Point, e.g.
         :func:`~alphafence.onboard.corridor.flight_path_from_plan`) or an area (Polygon).
     profile : Profile
-        The vehicle's fence storage.
+        The vehicle's fence storage, and the autopilot whose rules the items follow
+        (``profile.autopilot``: circle radii by its distance; for PX4 no return point and at
+        most one inclusion, :func:`~alphafence.onboard.rules.check_for_autopilot`).
     distance_m : float
         Fences farther than this from ``area`` are left out; within it lies the corridor.
     keep_in_m : float, optional
@@ -220,13 +225,13 @@ def compile_fences(
     >>> round(result.overshoot.ratio, 3)  # the 5 cm pad, and a square is no rectangle in metres
     0.002
     """
+    if return_point is not None:
+        check_for_autopilot([FenceItem(RETURN_POINT, 0.0, *return_point)], profile.autopilot)
     frame = LocalFrame.around(area)
     area_local = frame.read_geom(area)
     corridor = Corridor.around(area_local, distance_m)
     if max_items is not None:
-        profile = Profile(
-            profile.name, min(profile.items, max_items), profile.bytes, profile.max_polygon_vertices
-        )
+        profile = dataclasses.replace(profile, items=min(profile.items, max_items))
     pieces, dropped, full = [], [], ([], [])
     for rec in records:
         if rec.kind not in ("keep_out", "keep_in"):
@@ -284,7 +289,7 @@ def compile_fences(
         upgrade(pieces, budget_items, budget_bytes)
         merge_to_upgrade(pieces, budget_items, budget_bytes, profile, merges, model=model)
         try:
-            items = emit_items(pieces, frame, return_point)
+            items = emit_items(pieces, frame, return_point, profile.autopilot)
         except InputError:  # a shape that cannot be held as read: choose again without it
             items = None
             if not _count_as_emitted(pieces, frame):
@@ -303,7 +308,7 @@ def compile_fences(
         for p in pieces:
             p.choice = 0
     if items is None:  # the last choice could not be held either: said as emit says it
-        items = emit_items(pieces, frame, return_point)
+        items = emit_items(pieces, frame, return_point, profile.autopilot)
     onboard = tuple(
         [p.chosen.local for p in pieces if p.inclusion == kind and not (kind and p.grows)]
         for kind in (False, True)
@@ -320,45 +325,16 @@ def compile_fences(
         overshoot(corridor, onboard, full),
         {r.site_id: r.name for r in records if r.name and r.kind in ("keep_out", "keep_in")},
     )
+    check_for_autopilot(items, profile.autopilot)  # PX4: one inclusion at most
     used = storage_bytes(items)
     if len(items) > profile.items or used > profile.bytes:  # a fence split at 180° grew
         raise InputError(
             "compile",
-            f"the fences near the area do not fit a {profile.name} as ArduPilot reads them "
+            f"the fences near the area do not fit a {profile.name} as the autopilot reads them "
             f"({len(items)} items / {used} bytes: edges held as read, parts on each side of "
             "180°); narrow the operating area",
         )
     return result
-
-
-def require_fence(result: CompileResult, path, where) -> None:
-    """Refuse a compilation that holds no polygon or circle, as an onboard file without one
-    is refused: uploaded, it would leave the vehicle without a fence.
-
-    Parameters
-    ----------
-    result : CompileResult
-    path : str or Path
-        The fence file compiled, for the message.
-    where : str
-        The area compiled for (``"the box 7.41,43.72,7.44,43.75"``), for the message.
-
-    Raises
-    ------
-    InputError
-        ``f.geojson: no keep-out or keep-in fence within 2000 m of the box ...: the onboard
-        fence would hold no polygon or circle, leaving the vehicle without a fence``.
-    """
-    from alphafence.onboard.decode import decode_fence
-
-    if decode_fence(result.items, source=str(path)):
-        return
-    reach = result.corridor.distance_m if result.corridor is not None else 0.0
-    raise InputError(
-        path,
-        f"no keep-out or keep-in fence within {reach:g} m of {where}: the onboard fence would "
-        "hold no polygon or circle, leaving the vehicle without a fence",
-    )
 
 
 UNHELD = 1 << 30  # the cost of a shape that cannot be held as read: more than any storage

@@ -13,7 +13,7 @@ from alphafence.fencing.as_read import split_lonlat
 from alphafence.geo.coords import quantize_e7
 from alphafence.geo.hold import hold_as_read
 from alphafence.geo.lonlat import READ_TOLERANCE_M, as_read, frame_scale
-from alphafence.geo.vehicle_distance import vehicle_radius
+from alphafence.geo.vehicle_distance import circle_radius
 from alphafence.mavlink.items import (
     CIRCLE_EXCLUSION,
     POLYGON_EXCLUSION,
@@ -70,7 +70,7 @@ def held_lonlat(local, frame, grows, target):
     return lon, lat, ok
 
 
-def emit_items(pieces, frame, return_point=None):
+def emit_items(pieces, frame, return_point=None, autopilot="ardupilot"):
     """The fence items of the pieces' chosen options, in upload order.
 
     The return point first, then inclusions, then exclusion polygons, then circles. Polygons
@@ -83,6 +83,8 @@ def emit_items(pieces, frame, return_point=None):
         The frame the pieces are in.
     return_point : tuple, optional
         ``(lon, lat)`` of the fence's return point.
+    autopilot : str
+        Whose circle distance the radii are for (``"ardupilot"`` or ``"px4"``).
 
     Returns
     -------
@@ -104,8 +106,8 @@ def emit_items(pieces, frame, return_point=None):
             x, y, r = o.circle
             lon, lat = _round_lonlat(frame, [(x, y)])
             # the geodesic radius (the frame reads a little long off its origin), then the
-            # radius ArduPilot's own distance needs to contain it
-            r = vehicle_radius(lon[0], lat[0], r * frame_scale(math.hypot(x, y) + r))
+            # radius the autopilot's own distance needs to contain it
+            r = circle_radius(autopilot, lon[0], lat[0], r * frame_scale(math.hypot(x, y) + r))
             items.append(
                 FenceItem(
                     CIRCLE_EXCLUSION,

@@ -38,9 +38,13 @@ class Vehicle:
         ``(monotonic time, text)`` of the last 50 STATUSTEXTs.
     bridge : SigningBridge or None
         The loopback signing bridge of a signed MAVSDK link.
+    autopilot : str
+        ``"ardupilot"`` or ``"px4"``, from the autopilot's HEARTBEAT (another autopilot is
+        taken as ArduPilot, as before the kit knew PX4).
     """
 
     kind = ""
+    autopilot = "ardupilot"
 
     def __init__(self, url):
         self.url = url

@@ -189,6 +189,7 @@ async def _open_mavsdk(url: str, shown_url: str, timeout: float, bridge=None):
                 why += f" ({bridge.diagnosis()})"
             raise LinkError(why)
         vehicle = MavsdkVehicle(system, shown_url)
+        await vehicle.identify(timeout)
         await vehicle.start()
         try:
             yield vehicle
@@ -236,6 +237,20 @@ class MavsdkVehicle(Vehicle):
                 continue
             if isinstance(fields, dict):
                 yield Message(name, m.system_id, m.component_id, fields)
+
+    async def identify(self, timeout: float) -> None:
+        """Read which autopilot this is from its HEARTBEAT (``autopilot``); ArduPilot when
+        none comes within ``timeout``."""
+        from alphafence.mavlink.autopilots import autopilot_of
+
+        async def first():
+            async for m in self.messages("HEARTBEAT"):
+                kind = autopilot_of(m.fields.get("autopilot", -1))
+                if kind is not None:
+                    return kind
+
+        with contextlib.suppress(asyncio.TimeoutError):
+            self.autopilot = await asyncio.wait_for(first(), timeout) or self.autopilot
 
     def _command(self, command, params, target_component):
         from mavsdk.plugins.mavlink_direct import MavlinkMessage

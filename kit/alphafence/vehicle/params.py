@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from alphafence.errors import VehicleError
+from alphafence.vehicle.px4 import INTEGER as PX4_INTEGER
+from alphafence.vehicle.px4 import PRESETS as PX4_PRESETS
+from alphafence.vehicle.px4 import describe as px4_describe
 
 # The presets, per vehicle, as ArduPilot's AC_Fence documents its parameters
 # (libraries/AC_Fence/AC_Fence.cpp): FENCE_ENABLE 1 enabled; FENCE_TYPE bits 0 max altitude
@@ -63,8 +66,12 @@ PROFILES = {
     for vehicle, actions in _ACTION_OF.items()
     for what, action in actions.items()
 }
-"""The presets: name -> the parameters each sets, in the order set (``upload --params``)."""
-INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_OPTIONS", "BRD_SD_FENCE"}
+PROFILES.update(PX4_PRESETS)
+VEHICLE.update(dict.fromkeys(PX4_PRESETS, "px4"))
+"""The presets: name -> the parameters each sets, in the order set (``upload --params``);
+ArduPilot's by vehicle, then PX4's (:mod:`alphafence.vehicle.px4`)."""
+INTEGER = {"FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_OPTIONS", "BRD_SD_FENCE",
+           *PX4_INTEGER}  # fmt: skip
 
 # How far a Copter goes past the fence it holds when ArduPilot alone acts on the breach
 # (FENCE_ACTION 4, copter-brake, or 1, copter-rtl), flown straight at the fence at each ground
@@ -94,6 +101,8 @@ def describe(name: str) -> str:
     >>> describe("rover-hold")
     'FENCE_ENABLE=1 FENCE_TYPE=4 FENCE_ACTION=2 (Hold) FENCE_MARGIN=2'
     """
+    if VEHICLE[name] == "px4":
+        return px4_describe(name)
     values, actions = PROFILES[name], ACTIONS[VEHICLE[name]]
     return " ".join(
         f"{k}={v:g}" + (f" ({actions[v]})" if k == "FENCE_ACTION" else "")
@@ -163,8 +172,20 @@ async def check_preset(vehicle, name: str) -> None:
     Raises
     ------
     ParamError
-        ``--params NAME is for a copter; the vehicle is a plane (HEARTBEAT type 1): ...``.
+        ``--params NAME is for a copter; the vehicle is a plane (HEARTBEAT type 1): ...``, or
+        a PX4 preset for an ArduPilot vehicle and the other way round.
     """
+    from alphafence.mavlink.autopilots import NAMES
+
+    wants = "px4" if VEHICLE[name] == "px4" else "ardupilot"
+    if vehicle.autopilot != wants:
+        fits = sorted(n for n, v in VEHICLE.items() if (v == "px4") == (vehicle.autopilot == "px4"))
+        raise ParamError(
+            f"--params {name} is for {NAMES[wants]}; the vehicle runs {NAMES[vehicle.autopilot]} "
+            f"(its HEARTBEAT): use one of {', '.join(fits)}; nothing was sent"
+        )
+    if wants == "px4":
+        return
     mav_type = await heartbeat_type(vehicle)
     kind = vehicle_kind(mav_type)
     if kind != VEHICLE[name]:

@@ -21,6 +21,7 @@ from collections import defaultdict
 from collections.abc import Callable
 
 from alphafence.mavlink import ids
+from alphafence.mavlink.autopilots import ARDUPILOT, autopilot_of
 from alphafence.mavlink.commands import command_long_fields
 from alphafence.vehicle.base import LinkError, Vehicle
 from alphafence.vehicle.bridge import MESSAGE_IDS, BridgeError, VehicleLink
@@ -182,6 +183,7 @@ class PymavlinkVehicle(Vehicle):
                 return
 
     def _heard(self, msg):
+        self.autopilot = autopilot_of(msg.autopilot) or ARDUPILOT
         self.target = (msg.get_srcSystem(), msg.get_srcComponent())
         self.mav_type = int(msg.type)
         self.last_heartbeat = time.monotonic()
