@@ -32,18 +32,33 @@ def _use_shared_sitl():
 
 _use_shared_sitl()
 
+# The same for PX4: ../shared/px4-sitl (a headless SIH build) when $PX4_SITL and
+# ~/PX4-Autopilot have none.
+SHARED_PX4 = Path(__file__).resolve().parents[2] / "shared" / "px4-sitl"
+
+
+def _use_shared_px4():
+    from alphafence.sitl.px4 import find_px4
+
+    if find_px4() is None and (SHARED_PX4 / "bin/px4").is_file():
+        os.environ["PX4_SITL"] = str(SHARED_PX4)
+
+
+_use_shared_px4()
+
 
 def _real_parts():
-    """The skip reasons of tests whose real part is missing (SITL, Chromium, socat, PostGIS,
-    pygeoapi): under
+    """The skip reasons of tests whose real part is missing (ArduPilot or PX4 SITL, Chromium,
+    socat, PostGIS, pygeoapi): under
     ``CI=true`` each is a failure, so CI cannot pass by skipping them."""
     from alphafence.sitl.find import NOT_FOUND_HELP
+    from alphafence.sitl.px4 import PX4_NOT_FOUND_HELP
 
     from .browser import MISSING
     from .live_servers import NO_POSTGIS, NO_PYGEOAPI
     from .serial_fixtures import NO_SOCAT
 
-    return (NOT_FOUND_HELP, MISSING, NO_SOCAT, NO_POSTGIS, NO_PYGEOAPI)
+    return (NOT_FOUND_HELP, PX4_NOT_FOUND_HELP, MISSING, NO_SOCAT, NO_POSTGIS, NO_PYGEOAPI)
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -65,3 +65,47 @@ async def sitl_factory(sitl_binary):
 @pytest.fixture
 async def sitl(request, sitl_factory):
     return await sitl_factory(**getattr(request, "param", {}))
+
+
+# -- PX4 SITL (SIH quadrotor) ------------------------------------------------------------
+PX4_DEFAULTS = {"home": (35.8660, 14.4775, 80.0), "ready_timeout": 120.0}  # malta_airport
+
+
+@pytest.fixture(scope="session")
+def px4_root():
+    from alphafence.sitl.px4 import PX4_NOT_FOUND_HELP, find_px4
+
+    root = find_px4()
+    if root is None:
+        pytest.skip(PX4_NOT_FOUND_HELP)
+    return root
+
+
+@pytest.fixture
+async def px4_factory(px4_root):
+    """``await px4_factory(**options)``: a PX4 SITL ready for takeoff (options: those of
+    ``alphafence.sitl.px4.Px4Instance``, and ``ready_timeout``); all stopped after the test."""
+    from alphafence.sitl.px4 import Px4Instance
+
+    started = []
+
+    async def launch(**options):
+        options = {**PX4_DEFAULTS, "root": px4_root, **options}
+        ready_timeout = options.pop("ready_timeout")
+        instance = Px4Instance(**options)
+        started.append(instance)
+        await instance.start()
+        await instance.wait_ready(ready_timeout)
+        return instance
+
+    try:
+        yield launch
+    finally:
+        for instance in reversed(started):
+            await instance.stop()
+
+
+@pytest.fixture
+async def px4(request, px4_factory):
+    """One PX4 SITL, ready (override options with indirect parametrization, as ``sitl``)."""
+    return await px4_factory(**getattr(request, "param", {}))

@@ -17,7 +17,8 @@ def register(sub):
         "compile",
         help="compile fences into a vehicle's fence storage",
         description="Pick the fences within --distance of a mission's flight path (or of a "
-        "box) and fit them, conservatively simplified, into ArduPilot's fence storage, "
+        "box) and fit them, conservatively simplified, into the fence storage of ArduPilot "
+        "(or PX4, --autopilot px4), "
         "spending the bytes where the path runs close to a fence.",
     )
     p.add_argument("fences", metavar="FENCES.geojson", help="fences from 'alphafence build'")
@@ -67,6 +68,7 @@ def run(args) -> int:
     from alphafence.fencefiles import qgc_wpl as waypoints
     from alphafence.fencefiles.atomic import write_all
     from alphafence.fencefiles.fence_read import read_fence_file as read_fences
+    from alphafence.mavlink import ids
     from alphafence.zones.mistakes import output_format
 
     fmt = output_format(args.output, what="onboard fence output")  # before any work
@@ -80,7 +82,11 @@ def run(args) -> int:
     result = compile_from_args(args, records)
     if fmt == "plan":
         sites = result.fence_sites()  # which site each polygon and circle stands for
-        doc = plan.plan_document(result.items, breach_return=result.return_point, sites=sites)
+        firmware = ids.MAV_AUTOPILOT_PX4 if result.profile.autopilot == "px4" else None
+        doc = plan.plan_document(
+            result.items, breach_return=result.return_point, sites=sites,
+            **({"firmware": firmware} if firmware else {}),
+        )  # fmt: skip
         out = {args.output: plan.dumps(doc)}
     else:
         out = {args.output: waypoints.waypoints_text(result.items)}

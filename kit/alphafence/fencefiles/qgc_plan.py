@@ -62,8 +62,9 @@ def group_polygons(items):
 
 
 def plan_document(
-    items, home_lonlat=None, mission_items=None, breach_return=None, sites=None
-) -> dict:
+    items, home_lonlat=None, mission_items=None, breach_return=None, sites=None,
+    firmware=ids.MAV_AUTOPILOT_ARDUPILOTMEGA,
+) -> dict:  # fmt: skip
     """A QGroundControl plan holding the fence ``items`` (and, optionally, a mission).
 
     Parameters
@@ -80,6 +81,8 @@ def plan_document(
     sites : list of list, optional
         Per polygon, then per circle: the sites it stands for (``{"id", "name"}`` each),
         written in its entry under ``alphafence`` (QGroundControl ignores the key).
+    firmware : int
+        The plan's ``firmwareType`` (MAV_AUTOPILOT: ArduPilot's 3, PX4's 12).
 
     Returns
     -------
@@ -128,7 +131,7 @@ def plan_document(
         },
         "mission": {
             "version": 2,
-            "firmwareType": ids.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            "firmwareType": int(firmware),
             "vehicleType": ids.MAV_TYPE_QUADROTOR,
             "cruiseSpeed": 10,
             "hoverSpeed": 5,

@@ -1,0 +1,130 @@
+"""Fences on a real PX4 (its SITL, SIH quadrotor, from ``../shared/px4-sitl`` or $PX4_SITL),
+on each vehicle link: compiled for PX4, uploaded and read back at its budget and one over it;
+a fence PX4 would drop part of refused before anything is sent; PX4's presets set and read
+back."""
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+
+from alphafence.cli import main
+from alphafence.fencefiles.qgc_wpl import waypoints_text
+from alphafence.geo.frame import LocalFrame
+from alphafence.mavlink.items import (
+    CIRCLE_EXCLUSION,
+    POLYGON_EXCLUSION,
+    POLYGON_INCLUSION,
+    FenceItem,
+)
+from alphafence.mavlink.storage import PX4_ITEMS
+from alphafence.vehicle.fence_transfer import (
+    FenceTransferError,
+    download_fence,
+    same_items,
+    upload_fence,
+)
+from alphafence.vehicle.link import open_vehicle
+from alphafence.vehicle.params import read_params
+
+pytestmark = [pytest.mark.sitl, pytest.mark.px4, pytest.mark.usefixtures("link")]
+HOME = (14.4775, 35.8660)  # the PX4 fixture's home (lon, lat): Luqa, north of the airport
+
+
+def ring_items(command, n, radius, east=0.0, north=0.0):
+    frame = LocalFrame(*HOME)
+    ang = np.linspace(0, 2 * math.pi, n, endpoint=False)
+    lon, lat = frame.to_wgs84(east + radius * np.cos(ang), north + radius * np.sin(ang))
+    return [FenceItem(command, float(n), round(a, 7), round(b, 7)) for a, b in zip(lon, lat)]
+
+
+def budget_items(total):
+    """``total`` items, none holding home: a 60-gon exclusion 1 km east, then circles."""
+    items = ring_items(POLYGON_EXCLUSION, 60, 100.0, east=1000.0)
+    frame = LocalFrame(*HOME)
+    for k in range(total - 60):
+        lon, lat = frame.to_wgs84(-1000.0, 100.0 * k)
+        items.append(FenceItem(CIRCLE_EXCLUSION, 30.0, round(float(lon), 7), round(float(lat), 7)))
+    return items
+
+
+async def test_the_budget_is_accepted_and_one_over_refused_with_the_old_fence_kept(px4):
+    full, over = budget_items(PX4_ITEMS), budget_items(PX4_ITEMS + 1)
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        assert vehicle.autopilot == "px4"
+        report = await upload_fence(vehicle, full, capacity=PX4_ITEMS)
+        assert report.verified and report.items == 64
+        with pytest.raises(FenceTransferError) as err:
+            await upload_fence(vehicle, over, capacity=PX4_ITEMS)
+        assert err.value.result in ("NO_SPACE", "TOO_MANY_MISSION_ITEMS")
+        assert "no room for that many fence items" in str(err.value)
+        assert "still holds its previous fence (64 items)" in str(err.value)
+        assert same_items(full, await download_fence(vehicle)) == []
+
+
+@pytest.fixture(scope="module")
+def malta_fences(malta, tmp_path_factory):
+    out = tmp_path_factory.mktemp("malta-px4") / "fences.geojson"
+    assert main(["build", str(malta), "-o", str(out), "-q"]) == 0
+    return out
+
+
+async def test_a_malta_fence_compiled_for_px4_uploads_and_reads_back_identical(
+    px4, malta_fences, capsys
+):
+    argv = ["upload", str(malta_fences), "--bbox", "14.46,35.84,14.50,35.88", "--distance",
+            "1000", "--connect", px4.connection_url, "--allow-unsigned", "--timeout", "30"]  # fmt: skip
+    assert await asyncio.to_thread(main, argv) == 0
+    out = capsys.readouterr().out
+    assert "the vehicle runs PX4" in out  # from its HEARTBEAT: compiled for PX4's rules
+    assert "read them back identical" in out and "PX4 keeps every area" in out
+    n = int(out.split("uploaded ")[1].split()[0])
+    assert 10 <= n <= PX4_ITEMS
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        held = await download_fence(vehicle)
+    assert len(held) == n and not px4.logged("Geofence invalid")
+
+
+async def test_a_fence_px4_would_drop_part_of_is_refused_and_nothing_is_sent(px4, tmp_path, capsys):
+    keep_out = ring_items(POLYGON_EXCLUSION, 6, 80.0, east=600.0)
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        await upload_fence(vehicle, keep_out)
+    # a keep-in 2 km north: home lies outside it
+    away = ring_items(POLYGON_INCLUSION, 5, 300.0, north=2000.0)
+    path = tmp_path / "away.waypoints"
+    path.write_text(waypoints_text(away + keep_out))
+    argv = ["upload", str(path), "--connect", px4.connection_url, "--allow-unsigned"]
+    assert await asyncio.to_thread(main, argv) == 3
+    err = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("warning:")]
+    assert len(err) == 1, err
+    assert "PX4 would drop 1 area of this fence" in err[0] and "nothing was sent" in err[0]
+    assert "onboard inclusion polygon 1 (items 0-4) (outside)" in err[0]
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        assert same_items(keep_out, await download_fence(vehicle)) == []  # the old fence held
+        # broken case: the same fence sent without the check is taken (ACK 0), and PX4 drops
+        # the keep-in as it loads it, saying so only in its log
+        await upload_fence(vehicle, away + keep_out)
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + 30.0
+    while not px4.logged("Geofence invalid") and loop.time() < deadline:
+        await asyncio.sleep(0.2)
+    assert px4.logged("doesn't contain Home position")
+
+
+async def test_px4_presets_are_set_and_read_back_and_ardupilot_ones_refused(px4, tmp_path, capsys):
+    path = tmp_path / "out.waypoints"
+    path.write_text(waypoints_text(ring_items(POLYGON_EXCLUSION, 4, 50.0, east=500.0)))
+    argv = ["upload", str(path), "--connect", px4.connection_url, "--allow-unsigned",
+            "--timeout", "30"]  # fmt: skip
+    assert await asyncio.to_thread(main, [*argv, "--params", "copter-brake"]) == 3
+    err = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("warning:")]
+    assert len(err) == 1 and "copter-brake is for ArduPilot; the vehicle runs PX4" in err[0]
+    assert "px4-hold" in err[0] and "nothing was sent" in err[0]
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        assert await download_fence(vehicle) == []
+    assert await asyncio.to_thread(main, [*argv, "--params", "px4-return"]) == 0
+    assert "GF_ACTION=3" in capsys.readouterr().out
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        got = await read_params(vehicle, ["GF_ACTION", "GF_SOURCE", "GF_MAX_VER_DIST"])
+    assert got == {"GF_ACTION": 3, "GF_SOURCE": 0, "GF_MAX_VER_DIST": 120.0}
