@@ -28,7 +28,7 @@ from alphafence.vehicle.fence_transfer import (
 from alphafence.vehicle.link import open_vehicle
 from alphafence.vehicle.params import read_params
 
-pytestmark = [pytest.mark.sitl, pytest.mark.px4, pytest.mark.usefixtures("link")]
+pytestmark = [pytest.mark.sitl, pytest.mark.px4]
 HOME = (14.4775, 35.8660)  # the PX4 fixture's home (lon, lat): Luqa, north of the airport
 
 
@@ -49,7 +49,7 @@ def budget_items(total):
     return items
 
 
-async def test_the_budget_is_accepted_and_one_over_refused_with_the_old_fence_kept(px4):
+async def test_the_budget_is_accepted_and_one_over_refused_with_the_old_fence_kept(px4, link):
     full, over = budget_items(PX4_ITEMS), budget_items(PX4_ITEMS + 1)
     async with open_vehicle(px4.connection_url, 30) as vehicle:
         assert vehicle.autopilot == "px4"
@@ -71,7 +71,7 @@ def malta_fences(malta, tmp_path_factory):
 
 
 async def test_a_malta_fence_compiled_for_px4_uploads_and_reads_back_identical(
-    px4, malta_fences, capsys
+    px4, link, malta_fences, capsys
 ):
     argv = ["upload", str(malta_fences), "--bbox", "14.46,35.84,14.50,35.88", "--distance",
             "1000", "--connect", px4.connection_url, "--allow-unsigned", "--timeout", "30"]  # fmt: skip
@@ -86,7 +86,9 @@ async def test_a_malta_fence_compiled_for_px4_uploads_and_reads_back_identical(
     assert len(held) == n and not px4.logged("Geofence invalid")
 
 
-async def test_a_fence_px4_would_drop_part_of_is_refused_and_nothing_is_sent(px4, tmp_path, capsys):
+async def test_a_fence_px4_would_drop_part_of_is_refused_and_nothing_is_sent(
+    px4, link, tmp_path, capsys
+):
     keep_out = ring_items(POLYGON_EXCLUSION, 6, 80.0, east=600.0)
     async with open_vehicle(px4.connection_url, 30) as vehicle:
         await upload_fence(vehicle, keep_out)
@@ -112,7 +114,9 @@ async def test_a_fence_px4_would_drop_part_of_is_refused_and_nothing_is_sent(px4
     assert px4.logged("doesn't contain Home position")
 
 
-async def test_px4_presets_are_set_and_read_back_and_ardupilot_ones_refused(px4, tmp_path, capsys):
+async def test_px4_presets_are_set_and_read_back_and_ardupilot_ones_refused(
+    px4, link, tmp_path, capsys
+):
     path = tmp_path / "out.waypoints"
     path.write_text(waypoints_text(ring_items(POLYGON_EXCLUSION, 4, 50.0, east=500.0)))
     argv = ["upload", str(path), "--connect", px4.connection_url, "--allow-unsigned",
@@ -126,5 +130,22 @@ async def test_px4_presets_are_set_and_read_back_and_ardupilot_ones_refused(px4,
     assert await asyncio.to_thread(main, [*argv, "--params", "px4-return"]) == 0
     assert "GF_ACTION=3" in capsys.readouterr().out
     async with open_vehicle(px4.connection_url, 30) as vehicle:
-        got = await read_params(vehicle, ["GF_ACTION", "GF_SOURCE", "GF_MAX_VER_DIST"])
-    assert got == {"GF_ACTION": 3, "GF_SOURCE": 0, "GF_MAX_VER_DIST": 120.0}
+        got = await read_params(
+            vehicle, ["GF_ACTION", "GF_SOURCE", "GF_PREDICT", "GF_MAX_VER_DIST"]
+        )
+    assert got == {"GF_ACTION": 3, "GF_SOURCE": 0, "GF_PREDICT": 1, "GF_MAX_VER_DIST": 120.0}
+    # and PX4's own shell says so: an integer travels byte-wise on PX4 (a read-back through the
+    # same wrong encoding would agree with itself)
+    assert [await px4.param(n) for n in ("GF_ACTION", "GF_PREDICT")] == ["3", "1"]
+
+
+async def test_px4_integers_written_as_ardupilot_reads_them_land_wrong(px4, monkeypatch):
+    # broken case: the pymavlink link's parameters encoded as for ArduPilot (value in the float)
+    from alphafence.vehicle.params import apply_params
+    from alphafence.vehicle.pymavlink_plugins import Param
+
+    monkeypatch.setattr(Param, "_bytewise", property(lambda self: False))
+    async with open_vehicle(px4.connection_url, 30, link="pymavlink") as vehicle:
+        got = await apply_params(vehicle, {"GF_ACTION": 3})  # its read-back agrees...
+    assert got.values == {"GF_ACTION": 3}
+    assert await px4.param("GF_ACTION") == "1077936128"  # ...and PX4 holds 3.0's bits

@@ -13,6 +13,7 @@ import asyncio
 
 from alphafence.mavlink import ids
 from alphafence.monitor.events import new_event
+from alphafence.vehicle.px4 import pause
 
 SEVERE_LEVELS = ("IMMINENT", "BREACH")  # their alerts are CRITICAL, the others WARNING
 
@@ -56,12 +57,16 @@ class Commands:
         task.add_done_callback(lambda t: t.cancelled() or t.exception())
         return await asyncio.shield(task)
 
-    async def act(self, action: str) -> None:
-        """Command ``action`` (``"brake"``: MAVSDK's hold, ArduPilot's BRAKE; ``"rtl"``;
-        ``"land"``) and log ``action_done`` or ``action_failed``."""
+    async def act(self, action: str, at=None) -> None:
+        """Command ``action`` (``"brake"``: MAVSDK's hold, ArduPilot's BRAKE, on PX4 a stop
+        where it is, :func:`~alphafence.vehicle.px4.pause`; ``"rtl"``; ``"land"``) and log
+        ``action_done`` or ``action_failed``. ``at``: ``(lat, lon, alt_amsl_m)`` where the
+        vehicle was last seen (PX4's stop through MAVSDK goes there)."""
         act = self.vehicle.action
         try:
-            if action == "brake":
+            if action == "brake" and getattr(self.vehicle, "autopilot", "") == "px4":
+                await self.send(pause, self.vehicle, at)
+            elif action == "brake":
                 await self.send(act.hold)
             elif action == "rtl":
                 await self.send(act.return_to_launch)

@@ -337,7 +337,9 @@ class Monitor(FeedTasks):
             if event["action"] == REROUTE:
                 self.reroute.start()
             else:
-                self._spawn(self.commands.act(event["action"]))
+                last = self.engine.last
+                at = (last.lat, last.lon, last.alt_amsl_m) if last is not None else None
+                self._spawn(self.commands.act(event["action"], at))
 
     def _spawn(self, coro):
         task = asyncio.create_task(coro)

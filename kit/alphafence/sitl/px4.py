@@ -75,6 +75,15 @@ def _command_links(root: Path, bin_dir: Path) -> None:
             (bin_dir / cmd.name).symlink_to("px4")
 
 
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the launching process dies (Linux), so a killed
+    test run leaves no PX4 holding its ports (ArduPilot SITL does this itself)."""
+    import ctypes
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
 class Px4Instance:
     """One PX4 SITL (SIH quadrotor) in its own temporary directory.
 
@@ -145,7 +154,7 @@ class Px4Instance:
             str(self.dir / "bin/px4"), "-d", "-i", str(self.instance), "-w", str(work),
             str(self.root / "etc"), cwd=work, env=self._env(), stdin=asyncio.subprocess.DEVNULL,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
-            start_new_session=True,
+            start_new_session=True, preexec_fn=_die_with_parent,
         )  # fmt: skip
         self._reader = asyncio.create_task(self._read_log())
         return self
@@ -180,6 +189,24 @@ class Px4Instance:
                 f"PX4 SITL (instance {self.instance}) not ready within {timeout:g} s; "
                 f"see {self.dir / LOG_NAME}"
             ) from None
+
+    async def shell(self, command: str, *args: str) -> str:
+        """Run one of PX4's own shell commands on this instance (``param``, ``listener``...)
+        and return what it prints: PX4's word, owing nothing to MAVLink."""
+        proc = await asyncio.create_subprocess_exec(
+            str(self.dir / "bin" / f"px4-{command}"), "--instance", str(self.instance), *args,
+            cwd=self.dir / "work", stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT,
+        )  # fmt: skip
+        out, _ = await proc.communicate()
+        return out.decode("utf-8", "replace")
+
+    async def param(self, name: str) -> str:
+        """A parameter's value as PX4's ``param show`` prints it (None when it has none)."""
+        for line in (await self.shell("param", "show", name)).splitlines():
+            if f" {name} [" in line and ":" in line:
+                return line.rsplit(":", 1)[1].strip()
+        return None
 
     def logged(self, text: str) -> list:
         """The lines of PX4's console log holding ``text``."""

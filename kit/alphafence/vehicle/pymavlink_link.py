@@ -20,6 +20,7 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 
+from alphafence.geo.coords import to_e7
 from alphafence.mavlink import ids
 from alphafence.mavlink.autopilots import ARDUPILOT, autopilot_of
 from alphafence.mavlink.commands import command_long_fields
@@ -244,12 +245,29 @@ class PymavlinkVehicle(Vehicle):
     async def command_long(self, command: int, *params, target_component=AUTOPILOT_COMPONENT):
         """Send a COMMAND_LONG and return the COMMAND_ACK's ``result`` (sent again up to
         :data:`COMMAND_TRIES` times without an answer; TimeoutError after that)."""
+        fields = command_long_fields(self.target[0], target_component, command, *params)
+
+        def encode(attempt):
+            fields["confirmation"] = attempt
+            return self.link.mav.command_long_encode(**fields)
+
+        return await self._acked(command, encode)
+
+    async def command_int(self, command: int, frame: int, params, lat: float, lon: float, alt):
+        """Send a COMMAND_INT (``params``: param1-4; the position as MAVLink's integers) and
+        return the COMMAND_ACK's ``result``, as :meth:`command_long`."""
+        p = [float(v) for v in params] + [0.0] * (4 - len(params))
+        sysid, compid = self.target
+        msg = self.link.mav.command_int_encode(
+            sysid, compid, frame, command, 0, 0, *p, to_e7(lat), to_e7(lon), float(alt)
+        )
+        return await self._acked(command, lambda attempt: msg)
+
+    async def _acked(self, command, encode) -> int:
         sysid = self.target[0]
-        fields = command_long_fields(sysid, target_component, command, *params)
         with self.bus.subscribe("COMMAND_ACK", maxsize=16) as queue:
             for attempt in range(COMMAND_TRIES):
-                fields["confirmation"] = attempt
-                self.link.send(self.link.mav.command_long_encode(**fields))
+                self.link.send(encode(attempt))
                 deadline = time.monotonic() + COMMAND_RETRY_S
                 while (left := deadline - time.monotonic()) > 0:
                     try:

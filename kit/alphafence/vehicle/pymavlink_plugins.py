@@ -19,6 +19,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from alphafence.errors import VehicleError
 from alphafence.geo.coords import from_e7, to_e7
 from alphafence.mavlink import ids
+from alphafence.mavlink.param_values import decode, encode
 from alphafence.vehicle.values import (
     GpsInfo,
     MissionProgress,
@@ -27,6 +28,8 @@ from alphafence.vehicle.values import (
     VelocityNed,
     flight_mode,
     mode_set,
+    px4_custom_mode,
+    px4_flight_mode,
 )
 
 PARAM_RETRY_S = 1.0
@@ -140,10 +143,15 @@ class Telemetry:
                 lean = itemgetter(*(decoder.index[f] for f in SKIP_FIELDS))
                 yield
 
+    def _mode(self, m):
+        if self.v.autopilot == "px4":
+            return px4_flight_mode(m.custom_mode)
+        return flight_mode(m.type, m.custom_mode)
+
     async def subscribe_flight_mode(self):
         """Each HEARTBEAT's mode as :class:`~alphafence.vehicle.values.FlightMode`."""
         async for m in self._own("HEARTBEAT"):
-            yield flight_mode(m.type, m.custom_mode)
+            yield self._mode(m)
 
     async def subscribe_armed(self):
         """Each HEARTBEAT's safety-armed flag."""
@@ -162,7 +170,7 @@ class Telemetry:
 
     def listen_flight_mode(self, callback):
         """``with telemetry.listen_flight_mode(callback):`` each HEARTBEAT's mode, as parsed."""
-        return self._listen("HEARTBEAT", lambda m: flight_mode(m.type, m.custom_mode), callback)
+        return self._listen("HEARTBEAT", self._mode, callback)
 
     def listen_armed(self, callback):
         """``with telemetry.listen_armed(callback):`` each HEARTBEAT's armed flag, as parsed."""
@@ -207,23 +215,47 @@ class Action:
             self.v, ids.MAV_CMD_DO_SET_MODE, ids.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode
         )
 
+    async def _px4(self, name: str):
+        """MAV_CMD_DO_SET_MODE with PX4's main and sub mode of ``name``."""
+        c = px4_custom_mode(name)
+        await _command(self.v, ids.MAV_CMD_DO_SET_MODE, ids.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                       (c >> 16) & 0xFF, (c >> 24) & 0xFF)  # fmt: skip
+
     async def hold(self):
-        """Stop where it is: BRAKE (copter), LOITER (plane), HOLD (rover)."""
+        """Stop where it is: BRAKE (copter), LOITER (plane), HOLD (rover); on PX4 Hold where
+        it is (:func:`~alphafence.vehicle.px4.pause`)."""
+        if self.v.autopilot == "px4":
+            from alphafence.vehicle.px4 import pause
+
+            return await pause(self.v)
         await self.set_mode(mode_set(self.v.mav_type).hold)
 
     async def return_to_launch(self):
-        """RTL."""
+        """RTL (PX4's Return)."""
+        if self.v.autopilot == "px4":
+            return await self._px4("AUTO.RTL")
         await self.set_mode(mode_set(self.v.mav_type).rtl)
 
     async def land(self):
-        """LAND (a plane: QLAND; a rover cannot)."""
+        """LAND (a plane: QLAND; a rover cannot; PX4's Land)."""
+        if self.v.autopilot == "px4":
+            return await self._px4("AUTO.LAND")
         land = mode_set(self.v.mav_type).land
         if land is None:
             raise CommandRefused("this vehicle has no land mode")
         await self.set_mode(land)
 
     async def goto_location(self, lat, lon, alt_amsl_m, yaw_deg=math.nan):
-        """GUIDED, then fly to ``(lat, lon)`` at ``alt_amsl_m`` (the heading is kept)."""
+        """GUIDED, then fly to ``(lat, lon)`` at ``alt_amsl_m`` (the heading is kept); on PX4
+        MAV_CMD_DO_REPOSITION (it flies there in Hold), as MAVSDK sends it."""
+        if self.v.autopilot == "px4":
+            result = await self.v.command_int(
+                ids.MAV_CMD_DO_REPOSITION, ids.MAV_FRAME_GLOBAL,
+                (-1, ids.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, yaw_deg), lat, lon, alt_amsl_m,
+            )  # fmt: skip
+            if result != ids.MAV_RESULT_ACCEPTED:
+                raise CommandRefused(f"reposition refused ({_result_name(result)})")
+            return
         await self.set_mode(mode_set(self.v.mav_type).guided)
         sysid, compid = self.v.target
         self.v.link.send(
@@ -242,7 +274,11 @@ class Action:
         self.takeoff_altitude_m = float(alt_m)
 
     async def takeoff(self):
-        """GUIDED, then MAV_CMD_NAV_TAKEOFF to the takeoff altitude."""
+        """GUIDED, then MAV_CMD_NAV_TAKEOFF to the takeoff altitude (PX4: its takeoff
+        altitude parameter, then the command, as MAVSDK does)."""
+        if self.v.autopilot == "px4":
+            await self.v.param.set_param_float("MIS_TAKEOFF_ALT", self.takeoff_altitude_m)
+            return await _command(self.v, ids.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
         await self.set_mode(mode_set(self.v.mav_type).guided)
         await _command(self.v, ids.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, self.takeoff_altitude_m)
 
@@ -252,7 +288,8 @@ class Action:
 
 
 class Param:
-    """Parameters by name, read back from the vehicle's PARAM_VALUE."""
+    """Parameters by name, read back from the vehicle's PARAM_VALUE (PX4's integers byte-wise:
+    :mod:`alphafence.mavlink.param_values`)."""
 
     def __init__(self, vehicle):
         self.v = vehicle
@@ -269,7 +306,7 @@ class Param:
                     except asyncio.TimeoutError:
                         break
                     if self.v.from_autopilot(msg) and msg.param_id == name:
-                        return float(msg.param_value)
+                        return decode(msg.param_value, msg.param_type, self._bytewise)
         raise TimeoutError(f"the vehicle did not answer for parameter {name}")
 
     def _read(self, name):
@@ -282,9 +319,14 @@ class Param:
     def _write(self, name, value, kind):
         sysid, compid = self.v.target
         mav = self.v.link.mav
+        wire = encode(value, kind, self._bytewise)
         return self._exchange(
-            name, lambda key: mav.param_set_encode(sysid, compid, key, float(value), kind)
+            name, lambda key: mav.param_set_encode(sysid, compid, key, wire, kind)
         )
+
+    @property
+    def _bytewise(self) -> bool:  # PX4 copies an integer's bytes into the float
+        return self.v.autopilot == "px4"
 
     async def get_param_int(self, name: str) -> int:
         """The parameter's value as an integer."""

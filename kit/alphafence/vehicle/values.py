@@ -266,3 +266,50 @@ def flight_mode(mav_type: int, custom_mode: int) -> FlightMode:
     ('GUIDED', 'BRAKE', 'UNKNOWN')
     """
     return FlightMode(mode_set(mav_type).names.get(custom_mode, "UNKNOWN"), int(custom_mode))
+
+
+# PX4's modes (px4_custom_mode.h): its name -> main mode, sub mode (carried in a HEARTBEAT's
+# custom_mode as bits 16-23 and 24-31) and the name MAVSDK's FlightMode gives it.
+PX4_MODES = {
+    "MANUAL": (1, 0, "MANUAL"),
+    "ALTCTL": (2, 0, "ALTCTL"),
+    "POSCTL": (3, 0, "POSCTL"),
+    "AUTO.TAKEOFF": (4, 2, "TAKEOFF"),
+    "AUTO.LOITER": (4, 3, "HOLD"),
+    "AUTO.MISSION": (4, 4, "MISSION"),
+    "AUTO.RTL": (4, 5, "RETURN_TO_LAUNCH"),
+    "AUTO.LAND": (4, 6, "LAND"),
+    "ACRO": (5, 0, "ACRO"),
+    "OFFBOARD": (6, 0, "OFFBOARD"),
+    "STABILIZED": (7, 0, "STABILIZED"),
+}
+_PX4_BY_NUMBER = {(main, sub): name for name, (main, sub, _) in PX4_MODES.items()}
+
+
+def px4_custom_mode(name: str) -> int:
+    """A PX4 mode's ``custom_mode`` (``AUTO.LOITER``: main mode 4, sub mode 3).
+
+    Examples
+    --------
+    >>> hex(px4_custom_mode("AUTO.LOITER")), hex(px4_custom_mode("POSCTL"))
+    ('0x3040000', '0x30000')
+    """
+    main, sub, _ = PX4_MODES[name]
+    return main << 16 | sub << 24
+
+
+def px4_flight_mode(custom_mode: int) -> FlightMode:
+    """A PX4 HEARTBEAT's mode as a :class:`FlightMode`, named as the kit names modes on every
+    link (MAVSDK's name read as the ArduPilot mode it stands for, :func:`ardupilot_mode`:
+    PX4's Hold is ``BRAKE``, its Return ``RTL``, its Mission ``AUTO``).
+
+    Examples
+    --------
+    >>> px4_flight_mode(px4_custom_mode("AUTO.LOITER")).name, px4_flight_mode(0x40000).name
+    ('BRAKE', 'UNKNOWN')
+    """
+    main, sub = (int(custom_mode) >> 16) & 0xFF, (int(custom_mode) >> 24) & 0xFF
+    name = _PX4_BY_NUMBER.get((main, sub)) or _PX4_BY_NUMBER.get((main, 0))
+    if name is None or (main == 4 and sub == 0):
+        return FlightMode("UNKNOWN", int(custom_mode))
+    return FlightMode(ardupilot_mode(PX4_MODES[name][2]), int(custom_mode))
