@@ -39,7 +39,7 @@ INTEGER = {"GF_ACTION", "GF_SOURCE", "GF_PREDICT"}
 # flown straight at it at each ground speed (m/s): the deepest position past the fence, metres,
 # measured on PX4 SITL (SIH quadrotor, no wind; tests/test_px4_flight_sitl.py), by GF_PREDICT.
 # With GF_PREDICT 0 (PX4's default): 8.4 m at 5 m/s, 23.3-25.2 m at 10 m/s; with 1 (the
-# presets'): 1.0-2.2 m and 1.6-3.3 m. The keep-out margin needs the overshoot plus what is left
+# presets'): 1.0-2.2 m and 1.6-3.4 m. The keep-out margin needs the overshoot plus what is left
 # for position error and wind.
 STOP_OVERSHOOT_M = {0: {5.0: 9.0, 10.0: 26.0}, 1: {5.0: 3.0, 10.0: 4.0}}
 INVALID_TEXT = "Geofence invalid"  # PX4's words when it discards an area as the fence loads
