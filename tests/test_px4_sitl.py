@@ -51,6 +51,9 @@ def budget_items(total):
 
 async def test_the_budget_is_accepted_and_one_over_refused_with_the_old_fence_kept(px4, link):
     full, over = budget_items(PX4_ITEMS), budget_items(PX4_ITEMS + 1)
+    # the launcher left out PX4's ground-station link: no PX4 talks to whatever listens on
+    # 14550 (a ground station, another test's vehicle), as PX4 says as it starts its links
+    assert px4.logged(f"remote port {14540 + px4.instance}") and not px4.logged("port 14550")
     async with open_vehicle(px4.connection_url, 30) as vehicle:
         assert vehicle.autopilot == "px4"
         report = await upload_fence(vehicle, full, capacity=PX4_ITEMS)

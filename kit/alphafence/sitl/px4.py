@@ -14,8 +14,10 @@ script calls (``px4-param``, ...; made here, so a copy whose links were flattene
 still runs), its parameters, dataman and logs.
 
 PX4's ports are fixed by its instance number N (0-9): it sends MAVLink for an offboard API to
-``127.0.0.1:14540+N`` (:attr:`Px4Instance.connection_url`) and to a ground station on 14550.
-Instance numbers are reserved across processes (an exclusive lock file each, as for ArduPilot).
+``127.0.0.1:14540+N`` (:attr:`Px4Instance.connection_url`). Its start scripts are copied into
+the run's directory with the ground-station link left out: every PX4 instance would otherwise
+send to UDP 14550, where a ground station, or another test's vehicle, listens. Instance numbers
+are reserved across processes (an exclusive lock file each, as for ArduPilot).
 """
 
 from __future__ import annotations
@@ -61,6 +63,25 @@ def find_px4() -> Path | None:
         ):
             return root
     return None
+
+
+GCS_LINK = "# GCS link\n"  # px4-rc.mavlink: the block that starts the link to UDP 14550
+NEXT_LINK = "# API/Offboard link\n"
+
+
+def _start_scripts(root: Path, etc: Path) -> None:
+    """PX4's ``etc/`` copied to ``etc``, its ground-station link (to 14550) left out."""
+    import shutil
+
+    shutil.copytree(root / "etc", etc)
+    rc = etc / "init.d-posix/px4-rc.mavlink"
+    rc.chmod(0o644)
+    text = rc.read_text()
+    if GCS_LINK in text and NEXT_LINK in text:
+        a, b = text.index(GCS_LINK), text.index(NEXT_LINK)
+        rc.write_text(
+            text[:a] + "# (the GCS link to 14550: left out by AlphaFence's launcher)\n\n" + text[b:]
+        )
 
 
 def _command_links(root: Path, bin_dir: Path) -> None:
@@ -147,12 +168,13 @@ class Px4Instance:
         self._reserve()
         self.dir = Path(tempfile.mkdtemp(prefix=f"alphafence-px4-{self.instance}-"))
         _command_links(self.root, self.dir / "bin")
+        _start_scripts(self.root, self.dir / "etc")
         work = self.dir / "work"
         work.mkdir()
         self._ready = asyncio.get_running_loop().create_future()
         self.proc = await asyncio.create_subprocess_exec(
             str(self.dir / "bin/px4"), "-d", "-i", str(self.instance), "-w", str(work),
-            str(self.root / "etc"), cwd=work, env=self._env(), stdin=asyncio.subprocess.DEVNULL,
+            str(self.dir / "etc"), cwd=work, env=self._env(), stdin=asyncio.subprocess.DEVNULL,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
             start_new_session=True, preexec_fn=_die_with_parent,
         )  # fmt: skip
