@@ -79,11 +79,15 @@ def compile_report(result) -> None:
     ----------
     result : alphafence.onboard.compile.CompileResult
     """
+    bytewise = result.profile.autopilot == "ardupilot"  # PX4 counts items, not bytes
+    size = (f"{len(result.items)} items, {result.bytes_used} of {result.profile.bytes} bytes"
+            if bytewise else f"{len(result.items)} of {result.profile.items} items")  # fmt: skip
     t = Table(
-        title=f"{len(result.items)} items, {result.bytes_used} of {result.profile.bytes} bytes "
-        f"({result.profile.name}); area added in the corridor {result.loss_m2 / 1e4:.2f} ha",
+        title=f"{size} ({result.profile.name}); area added in the corridor "
+        f"{result.loss_m2 / 1e4:.2f} ha",
     )
-    for col in ("fence(s)", "kind", "stored as", "items", "bytes", "lost in corridor m²"):
+    cols = ("fence(s)", "kind", "stored as", "items", "bytes", "lost in corridor m²")
+    for col in cols if bytewise else [c for c in cols if c != "bytes"]:
         t.add_column(col, justify="left" if col in ("fence(s)", "kind", "stored as") else "right")
     for p in result.pieces:
         o = p.chosen
@@ -96,14 +100,8 @@ def compile_report(result) -> None:
             + (" (merged)" if p.merged else "")
             + (f" of {full}" if o.kind == "polygon" and o.items < full else "")
         )
-        t.add_row(
-            label,
-            "keep-in" if p.inclusion else "keep-out",
-            how,
-            str(o.items),
-            str(o.bytes),
-            f"{o.loss:.0f}",
-        )
+        row = [label, "keep-in" if p.inclusion else "keep-out", how, str(o.items)]
+        t.add_row(*row, *([str(o.bytes)] if bytewise else []), f"{o.loss:.0f}")
     out_console.print(t)
     if corridor_line(result):
         out_console.print(corridor_line(result), highlight=False)
@@ -122,10 +120,11 @@ def items_report(items, fences, profile, sites=None) -> None:
     from alphafence.mavlink.items import RETURN_POINT
     from alphafence.mavlink.storage import CIRCLE_BYTES, RETURN_BYTES, polygon_bytes, storage_bytes
 
-    t = Table(
-        title=f"{len(items)} items, {storage_bytes(items)} of {profile.bytes} bytes "
-        f"({profile.name}), at most {profile.items} items"
-    )
+    if profile.autopilot == "ardupilot":
+        size = f"{len(items)} items, {storage_bytes(items)} of {profile.bytes} bytes "
+    else:  # PX4 counts items only (the bytes column is what ArduPilot would take)
+        size = f"{len(items)} items "
+    t = Table(title=f"{size}({profile.name}), at most {profile.items} items")
     cols = ("sent as", "fence", "stands for", "size", "bytes", "first position (lat, lon)")
     for col in cols:
         t.add_column(col, justify="right" if col == "bytes" else "left")
