@@ -147,6 +147,58 @@ async def test_px4s_own_fence_action_stops_the_vehicle_outside_the_zone(px4, lin
         assert past > MARGIN_M, past
 
 
+@pytest.mark.parametrize("px4", [{"params": {"SDLOG_MODE": 0}}], indirect=True)
+async def test_check_flight_reads_px4s_own_log_of_a_flight_through_a_zone(px4, tmp_path):
+    # PX4 logs from arming to disarming; the vehicle flies through a keep-out zone that only
+    # the fence file holds, lands, and check-flight reads the ULog
+    import json
+    import shutil
+    import subprocess
+    import sys
+
+    frame = LocalFrame(*HOME)
+    zone = shapely.box(60.0, -100.0, 90.0, 100.0)
+    fences = tmp_path / "fences.geojson"
+    geometry = shapely.geometry.mapping(frame.geom_to_wgs84(zone))
+    feature = {"type": "Feature", "geometry": geometry,
+               "properties": {"site_id": "test/zone", "kind": "keep_out", "name": "zone"}}  # fmt: skip
+    fences.write_text(json.dumps({"type": "FeatureCollection", "features": [feature]}))
+    track = Track(frame)
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+
+        async def fly():
+            await vehicle.action.set_takeoff_altitude(15.0)
+            await vehicle.action.arm()
+            await vehicle.action.takeoff()
+            amsl = None
+            async for p in vehicle.telemetry.subscribe_position():
+                if p.relative_altitude_m > 13.0:
+                    amsl = p.absolute_altitude_m
+                    break
+            lon, lat = frame.to_wgs84(np.array([130.0]), np.array([0.0]))
+            await vehicle.action.goto_location(float(lat[0]), float(lon[0]), amsl, float("nan"))
+            await track.until("past the zone", lambda: track.east and track.east[-1] > 120.0, 60)
+            await vehicle.action.land()
+            async for armed in vehicle.telemetry.subscribe_armed():
+                if not armed:
+                    return
+
+        await _watched(vehicle, track, fly)
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + 30.0
+    while not px4.ulogs() and loop.time() < deadline:  # written as PX4 disarms
+        await asyncio.sleep(0.2)
+    ulg = tmp_path / "flight.ulg"
+    shutil.copy(px4.ulogs()[-1], ulg)
+    argv = [sys.executable, "-m", "alphafence", "check-flight", str(ulg), "--fences", str(fences), "--json"]  # fmt: skip
+    done = await asyncio.to_thread(subprocess.run, argv, capture_output=True, text=True)
+    assert done.returncode == 1, done.stderr  # entered
+    doc = json.loads(done.stdout)
+    (hit,) = [i for i in doc["incursions"] if i["kind"] == "keep_out"]
+    assert hit["fence"] == "test/zone" and hit["positions"] > 10
+    assert hit["depth_m"] == pytest.approx(15.0, abs=1.5)  # the zone is 30 m deep, flown across
+
+
 async def test_the_monitor_brakes_a_px4_vehicle_before_the_fence(px4, link):
     frame = LocalFrame(*HOME)
     zone = zone_local()

@@ -168,6 +168,7 @@ OPTIONAL = {
     "lxml": ("lxml", "kml", "python3-lxml", None),
     "aiohttp": ("aiohttp", "map", "python3-aiohttp", None),
     "psycopg": ("psycopg", "postgis", "python3-psycopg", None),
+    "pyulog": ("pyulog", "ulog", None, None),
 }
 
 

@@ -167,7 +167,7 @@ def run(args) -> int:
     from alphafence.flights.flight_log import FlightLog
     from alphafence.review.postflight import check_flight, load_fences
 
-    need(("pymavlink", f"reading {args.log}"), *figure_wants(args.figure))
+    need(*figure_wants(args.figure))  # the log's reader is asked for by FlightLog
     check_map_args(args)
     fences = load_fences(args.fences)  # first: a map database given for fences is said at once
     log = FlightLog(args.log, sysid=args.sysid)

@@ -1,4 +1,5 @@
-"""Flight logs read as a track: telemetry logs (``.tlog``) and ArduPilot DataFlash logs (``.BIN``).
+"""Flight logs read as a track: telemetry logs (``.tlog``), ArduPilot DataFlash logs (``.BIN``) and
+PX4's ULog (``.ulg``, :mod:`alphafence.flights.ulog`).
 
 A track comes in chunks of arrays (:class:`TrackChunk`: time, latitude, longitude, height above
 home, altitude AMSL, velocity), so a log of any length is read in bounded memory.
@@ -35,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from alphafence.errors import InputError, need
-from alphafence.flights import dataflash
+from alphafence.flights import dataflash, ulog
 
 CHUNK = 2048  # positions per chunk
 PLAUSIBLE_UNIX = 946684800  # 2000-01-01: an earlier tlog timestamp is not a wall clock
@@ -80,7 +81,7 @@ class LogInfo:
     ----------
     path : str
     kind : str
-        ``"tlog"`` or ``"dataflash"``.
+        ``"tlog"``, ``"dataflash"`` or ``"ulog"``.
     source : str
         The message the positions come from (``GLOBAL_POSITION_INT``, ``POS``, ``GPS``).
     clock : str
@@ -143,18 +144,20 @@ class _Chunks:
 
 
 def log_kind(path) -> str:
-    """``"dataflash"`` or ``"tlog"``, told by the first bytes (a DataFlash log starts with a
-    message header), whatever the suffix; InputError for a missing file, a text DataFlash log
-    or a ``.bin`` that is not one."""
+    """``"dataflash"``, ``"ulog"`` or ``"tlog"``, told by the first bytes (a DataFlash log
+    starts with a message header, a ULog with its magic), whatever the suffix; InputError for a
+    missing file, a text DataFlash log or a ``.bin`` that is not one."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(4)
+            head = fh.read(8)
     except OSError as exc:
         raise InputError(path, f"cannot read ({exc.strerror or exc})") from None
     if not head:
         raise InputError(path, "empty file: not a flight log")
     if head[:2] == dataflash.HEAD:
         return "dataflash"
+    if ulog.is_ulog(head):
+        return "ulog"
     if head.startswith(b"FMT,"):
         raise InputError(path, "a text DataFlash log: give the binary log (.BIN) instead")
     if Path(path).suffix.lower() == ".bin":
@@ -168,7 +171,7 @@ class FlightLog:
     Parameters
     ----------
     path : str or Path
-        A ``.tlog`` or a DataFlash ``.BIN`` (told by its first bytes).
+        A ``.tlog``, a DataFlash ``.BIN`` or a ULog ``.ulg`` (told by its first bytes).
     sysid : int, optional
         A tlog's vehicle (MAVLink system id); default the first system reporting a position.
     chunk : int
@@ -191,7 +194,7 @@ class FlightLog:
     def __init__(self, path, sysid: int | None = None, chunk: int = CHUNK):
         self.path = str(path)
         kind = log_kind(path)
-        need(("pymavlink", f"reading {self.path}"))
+        need(("pyulog" if kind == "ulog" else "pymavlink", f"reading {self.path}"))
         self.sysid = sysid
         self.chunk = chunk
         self.info = LogInfo(self.path, kind)
@@ -209,6 +212,9 @@ class FlightLog:
             When the log holds no position (after the last chunk, if any came).
         """
         self.info = LogInfo(self.path, self.info.kind)
+        if self.info.kind == "ulog":
+            yield from ulog.read_ulog(self.path, self.info, self.chunk)
+            return
         reader = _tlog if self.info.kind == "tlog" else _dataflash
         yield from reader(self.path, self.info, self.sysid, self.chunk)
         if self.info.truncated:

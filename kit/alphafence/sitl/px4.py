@@ -230,6 +230,11 @@ class Px4Instance:
                 return line.rsplit(":", 1)[1].strip()
         return None
 
+    def ulogs(self) -> list:
+        """The flight logs PX4 has written (``.ulg``; logging is on with ``SDLOG_MODE`` 0 in
+        ``params``: from arming to disarming), oldest first."""
+        return sorted((self.dir / "work").glob("log/*/*.ulg"))
+
     def logged(self, text: str) -> list:
         """The lines of PX4's console log holding ``text``."""
         return [line for line in self.log_lines if text in line]
