@@ -93,3 +93,21 @@ def kept(items, home, ref):
 
 
 __all__ = ["CIRCLE_INCLUSION", "breached", "inside_circle", "inside_polygon", "kept", "project"]
+
+
+def circle_inradius_m(lon, lat, radius_m, reach_m=100_000.0):
+    """The largest geodesic (WGS84) radius whose circle PX4 reads inside its circle of
+    ``radius_m`` wherever its projection reference lies within ``reach_m``: what an exclusion
+    circle item surely holds (the projection lengthens a distance by c / sin c at most)."""
+    from .ardupilot_model import GEOD
+
+    az = np.arange(0.0, 360.0, 0.25)
+    n = az.size
+    plon, plat, _ = GEOD.fwd(np.full(n, lon), np.full(n, lat), az, np.full(n, float(radius_m)))
+    la, lo = np.radians(plat), np.radians(plon)
+    cla, clo = np.radians(lat), np.radians(lon)
+    h = np.sin((la - cla) / 2) ** 2 + np.cos(la) * np.cos(cla) * np.sin((lo - clo) / 2) ** 2
+    sphere = 2 * EARTH_M * np.arcsin(np.sqrt(h))  # great-circle distance on PX4's sphere
+    c = reach_m / EARTH_M
+    stretch = c / np.sin(c)
+    return float(radius_m / (sphere.max() / radius_m * stretch) * (1 - 1e-6) - 0.01)

@@ -56,7 +56,7 @@ def validate_like_ardupilot(items):
         )
 
 
-def onboard_geometry(items, verify):
+def onboard_geometry(items, verify, inradius=circle_inradius_m):
     polys, circles = group_polygons(items)
     out = []
     for cmd, pts in polys:
@@ -69,7 +69,7 @@ def onboard_geometry(items, verify):
     for c in circles:
         cx, cy = verify.xy(c.lon, c.lat)
         # the geodesic circle that ArduPilot's own distance surely holds
-        disc.append((cx, cy, circle_inradius_m(c.lon, c.lat, c.param1)))
+        disc.append((cx, cy, inradius(c.lon, c.lat, c.param1)))
     return out, disc
 
 

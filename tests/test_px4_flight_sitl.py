@@ -84,15 +84,19 @@ class Track:
                 pass
 
 
-async def _fly_east(vehicle, track):
-    await vehicle.action.set_takeoff_altitude(ALTITUDE)
+async def _take_off(vehicle, altitude):
+    """Arm and take off; once off the ground (whatever the takeoff altitude PX4 took), the
+    height above home to fly at, as AMSL."""
+    await vehicle.action.set_takeoff_altitude(altitude)
     await vehicle.action.arm()
     await vehicle.action.takeoff()
-    amsl = None
     async for p in vehicle.telemetry.subscribe_position():
-        if p.relative_altitude_m > ALTITUDE - 2.0:
-            amsl = p.absolute_altitude_m
-            break
+        if p.relative_altitude_m > 2.0:
+            return p.absolute_altitude_m - p.relative_altitude_m + altitude
+
+
+async def _fly_east(vehicle, track):
+    amsl = await _take_off(vehicle, ALTITUDE)
     lon, lat = track.frame.to_wgs84(np.array([TARGET_EAST]), np.array([0.0]))
     await vehicle.action.goto_location(float(lat[0]), float(lon[0]), amsl, float("nan"))
     await track.until("up to speed", lambda: track.speed and track.speed[-1] > SPEED - 1.0, 60)
@@ -101,11 +105,14 @@ async def _fly_east(vehicle, track):
     )
 
 
-async def _watched(vehicle, track, body):
+async def _watched(vehicle, track, body, px4=None):
     tasks = [asyncio.ensure_future(track.positions(vehicle)),
              asyncio.ensure_future(track.speeds(vehicle))]  # fmt: skip
     try:
         return await asyncio.wait_for(body(), WALL_TIMEOUT)
+    except (asyncio.TimeoutError, AssertionError) as exc:
+        said = " | ".join(px4.log_lines[-12:]) if px4 is not None else ""
+        raise AssertionError(f"{exc!r}; east {track.east[-3:]}; PX4 said: {said}") from None
     finally:
         for t in tasks:
             t.cancel()
@@ -137,7 +144,7 @@ async def test_px4s_own_fence_action_stops_the_vehicle_outside_the_zone(px4, lin
         await upload_fence(vehicle, items)
         params = {**PRESETS["px4-hold"], "GF_PREDICT": predict, "MPC_XY_CRUISE": SPEED}
         await apply_params(vehicle, params)
-        await _watched(vehicle, track, lambda: _fly_east(vehicle, track))
+        await _watched(vehicle, track, lambda: _fly_east(vehicle, track), px4)
     past = max(track.east) - edge
     print(f"\nPX4 GF_ACTION Hold, GF_PREDICT {predict}, {link}: {past:.2f} m past the fence")
     assert px4.logged("Geofence"), "PX4 never saw its fence"
@@ -167,14 +174,7 @@ async def test_check_flight_reads_px4s_own_log_of_a_flight_through_a_zone(px4, t
     async with open_vehicle(px4.connection_url, 30) as vehicle:
 
         async def fly():
-            await vehicle.action.set_takeoff_altitude(15.0)
-            await vehicle.action.arm()
-            await vehicle.action.takeoff()
-            amsl = None
-            async for p in vehicle.telemetry.subscribe_position():
-                if p.relative_altitude_m > 13.0:
-                    amsl = p.absolute_altitude_m
-                    break
+            amsl = await _take_off(vehicle, 15.0)
             lon, lat = frame.to_wgs84(np.array([130.0]), np.array([0.0]))
             await vehicle.action.goto_location(float(lat[0]), float(lon[0]), amsl, float("nan"))
             await track.until("past the zone", lambda: track.east and track.east[-1] > 120.0, 60)
@@ -183,7 +183,7 @@ async def test_check_flight_reads_px4s_own_log_of_a_flight_through_a_zone(px4, t
                 if not armed:
                     return
 
-        await _watched(vehicle, track, fly)
+        await _watched(vehicle, track, fly, px4)
     loop = asyncio.get_running_loop()
     deadline = loop.time() + 30.0
     while not px4.ulogs() and loop.time() < deadline:  # written as PX4 disarms
@@ -214,7 +214,7 @@ async def test_the_monitor_brakes_a_px4_vehicle_before_the_fence(px4, link):
         monitor = Monitor(vehicle, fences, MonitorOptions(enforce=True), log)
         task = asyncio.create_task(monitor.run(stop))
         try:
-            await _watched(vehicle, track, lambda: _fly_east(vehicle, track))
+            await _watched(vehicle, track, lambda: _fly_east(vehicle, track), px4)
         finally:
             stop.set()
             await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 10)

@@ -205,3 +205,16 @@ def test_compile_for_px4_on_the_command_line(tmp_path, demo_fences, capsys):
     assert "px4, px4-constrained" in err[0]
     assert main([*argv, "--profile", "px4-constrained"]) == 0  # the profile says PX4
     assert json.loads(out.read_text())["mission"]["firmwareType"] == 12
+
+
+def test_a_preset_for_the_other_autopilot_is_refused_without_a_vehicle(demo_fences, capsys):
+    argv = ["upload", str(demo_fences), "--bbox", "-0.58,51.42,-0.52,51.44", "--dry-run",
+            "--allow-unsigned"]  # fmt: skip
+    assert main([*argv, "--params", "px4-hold"]) == 2
+    err = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("warning:")]
+    assert err == ["alphafence upload: error: --params: px4-hold is for PX4; the fence is "
+                   "compiled for ArduPilot (--autopilot, --profile)"]  # fmt: skip
+    assert main([*argv, "--params", "copter-brake", "--autopilot", "px4"]) == 2
+    assert "copter-brake is for ArduPilot; the fence is compiled for PX4" in capsys.readouterr().err
+    assert main([*argv, "--params", "px4-hold", "--autopilot", "px4"]) == 0
+    assert "fence items ready; nothing sent" in capsys.readouterr().out

@@ -164,10 +164,10 @@ def run(args) -> int:
     """Check the log against the fences; print the report (or JSON), draw the figure; exit 1
     when the flight entered a keep-out fence in force or left a keep-in fence, else 0."""
     from alphafence.errors import need
-    from alphafence.flights.flight_log import FlightLog
+    from alphafence.flights.flight_log import FlightLog, log_reader
     from alphafence.review.postflight import check_flight, load_fences
 
-    need(*figure_wants(args.figure))  # the log's reader is asked for by FlightLog
+    need((log_reader(args.log), f"reading {args.log}"), *figure_wants(args.figure))
     check_map_args(args)
     fences = load_fences(args.fences)  # first: a map database given for fences is said at once
     log = FlightLog(args.log, sysid=args.sysid)

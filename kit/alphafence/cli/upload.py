@@ -38,8 +38,10 @@ from alphafence.cli.options import (
 from alphafence.cli.source_options import add_source_options, with_source
 from alphafence.cli.tables import compile_report, items_report
 from alphafence.errors import InputError, VehicleError, need
+from alphafence.mavlink.autopilots import NAMES
 from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
 from alphafence.vehicle.params import PROFILES as PARAM_PROFILES
+from alphafence.vehicle.params import VEHICLE
 
 # MAVSDK's results for a fence the vehicle has no room for (too many items; too many bytes)
 NO_ROOM = ("TOO_MANY_MISSION_ITEMS", "PROTOCOL_ERROR")
@@ -236,6 +238,15 @@ def run(args) -> int:
     check_map_args(args)
     check_trust(args, args.fences)
     known = args.dry_run or args.autopilot or args.profile
+    if known and args.params:  # a preset of the other autopilot: before any work
+        autopilot = storage_profile(args).autopilot
+        if (VEHICLE[args.params] == "px4") != (autopilot == "px4"):
+            preset_for = "PX4" if VEHICLE[args.params] == "px4" else "ArduPilot"
+            raise InputError(
+                "--params",
+                f"{args.params} is for {preset_for}; the fence is compiled for "
+                f"{NAMES[autopilot]} (--autopilot, --profile)",
+            )
     prepared = prepare(args) if known else None
     if args.dry_run:
         items = prepared[0]
@@ -253,7 +264,6 @@ def run(args) -> int:
 
 
 async def _upload(args, prepared) -> int:
-    from alphafence.mavlink.autopilots import NAMES
     from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
     from alphafence.vehicle.link import open_vehicle
     from alphafence.vehicle.params import apply_params, check_preset, check_union_supported

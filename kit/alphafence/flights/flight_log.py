@@ -1,4 +1,4 @@
-"""Flight logs read as a track: telemetry logs (``.tlog``), ArduPilot DataFlash logs (``.BIN``) and
+"""Flight logs read as a track: telemetry logs (``.tlog``), ArduPilot DataFlash logs (``.BIN``),
 PX4's ULog (``.ulg``, :mod:`alphafence.flights.ulog`).
 
 A track comes in chunks of arrays (:class:`TrackChunk`: time, latitude, longitude, height above
@@ -17,10 +17,9 @@ home, altitude AMSL, velocity), so a log of any length is read in bounded memory
   written before 2015 have no ``TimeUS`` and no ``POS``: their ``GPS`` messages
   (``Status,TimeMS,Week,...,T``) give the GPS time in ``Week`` and ``TimeMS`` and the
   milliseconds since boot in ``T`` (a ``GPS`` without ``T`` is timed by its own GPS time; one
-  with ``GWk``/``GMS`` beside ``TimeMS`` by ``TimeMS`` since boot). It is
-  streamed with pymavlink's table of DataFlash field types (``DFReader.FORMAT_TO_STRUCT``),
-  decoding only the messages it needs; ``tests/test_check_flight.py`` checks it against
-  pymavlink's own ``DFReader``.
+  with ``GWk``/``GMS`` beside ``TimeMS`` by ``TimeMS`` since boot). It is streamed with
+  pymavlink's DataFlash field types, decoding only the messages it needs (checked against
+  pymavlink's own ``DFReader`` by ``tests/test_check_flight.py``).
 
 A log that ends within a message (logging stopped mid-write) is read up to there and says so
 (:attr:`LogInfo.truncated`); a file that holds no position at all is an :class:`InputError`.
@@ -165,6 +164,15 @@ def log_kind(path) -> str:
     return "tlog"
 
 
+def log_reader(path) -> str:
+    """The package that reads the log: ``"pyulog"`` for a ULog, else (a bad file too)
+    ``"pymavlink"``."""
+    try:
+        return "pyulog" if log_kind(path) == "ulog" else "pymavlink"
+    except InputError:  # the reader says what is wrong with it
+        return "pymavlink"
+
+
 class FlightLog:
     """A flight log, read on demand as :class:`TrackChunk` arrays.
 
@@ -183,18 +191,12 @@ class FlightLog:
         The file is missing, empty or not a flight log.
     MissingDependency
         pymavlink is not installed.
-
-    Examples
-    --------
-    >>> log = FlightLog("flight.tlog")  # doctest: +SKIP
-    >>> sum(len(c) for c in log.chunks()), log.info.clock  # doctest: +SKIP
-    (1800, 'utc')
     """
 
     def __init__(self, path, sysid: int | None = None, chunk: int = CHUNK):
         self.path = str(path)
         kind = log_kind(path)
-        need(("pyulog" if kind == "ulog" else "pymavlink", f"reading {self.path}"))
+        need((log_reader(path), f"reading {self.path}"))
         self.sysid = sysid
         self.chunk = chunk
         self.info = LogInfo(self.path, kind)
@@ -213,10 +215,10 @@ class FlightLog:
         """
         self.info = LogInfo(self.path, self.info.kind)
         if self.info.kind == "ulog":
-            yield from ulog.read_ulog(self.path, self.info, self.chunk)
-            return
-        reader = _tlog if self.info.kind == "tlog" else _dataflash
-        yield from reader(self.path, self.info, self.sysid, self.chunk)
+            yield from (TrackChunk(*c) for c in ulog.read_ulog(self.path, self.info, self.chunk))
+        else:
+            reader = _tlog if self.info.kind == "tlog" else _dataflash
+            yield from reader(self.path, self.info, self.sysid, self.chunk)
         if self.info.truncated:
             self.info.notes.append("the log ends within a message: read up to there")
 

@@ -85,16 +85,15 @@ def _velocity(local, t_us) -> tuple:
 
 
 def read_ulog(path, info, size):
-    """The track of a ULog as ``TrackChunk`` arrays of ``size`` rows (see
-    :class:`~alphafence.flights.flight_log.FlightLog`), filling ``info``.
+    """The track of a ULog in chunks of ``size`` rows, filling ``info``: each chunk the
+    columns of a :class:`~alphafence.flights.flight_log.TrackChunk` (time, lat, lon, height
+    above home, AMSL, velocity north and east).
 
     Raises
     ------
     InputError
         pyulog cannot read it, or it holds no valid position.
     """
-    from alphafence.flights.flight_log import TrackChunk
-
     topics = _topics(path)
     info.source = POSITION
     pos = topics.get(POSITION)
@@ -124,4 +123,4 @@ def read_ulog(path, info, size):
         raise InputError(path, f"no valid position in {POSITION}: nothing to check")
     cols = [a[ok] for a in (t, lat, lon, rel, amsl, vn, ve)]
     for a in range(0, info.positions, size):
-        yield TrackChunk(*(c[a : a + size].copy() for c in cols))
+        yield [c[a : a + size].copy() for c in cols]

@@ -175,6 +175,24 @@ async def pause(vehicle, at=None) -> None:
         raise VehicleError(f"PX4 refused to hold where it is (MAV_RESULT {result})")
 
 
+async def reposition(vehicle, lat, lon, alt_amsl_m, yaw_deg=float("nan")) -> None:
+    """Fly a PX4 vehicle to ``(lat, lon)`` at ``alt_amsl_m``: MAV_CMD_DO_REPOSITION as a
+    COMMAND_INT (the position in MAVLink's integers), as MAVSDK sends its goto; PX4 flies
+    there in Hold.
+
+    Raises
+    ------
+    VehicleError
+        PX4 refused it.
+    """
+    result = await vehicle.command_int(
+        ids.MAV_CMD_DO_REPOSITION, ids.MAV_FRAME_GLOBAL,
+        (-1, ids.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, yaw_deg), lat, lon, alt_amsl_m,
+    )  # fmt: skip
+    if result != ids.MAV_RESULT_ACCEPTED:
+        raise VehicleError(f"PX4 refused the reposition (MAV_RESULT {result})")
+
+
 def monotonic() -> float:
     """The clock :func:`confirm_kept`'s ``t0`` is read on."""
     return time.monotonic()

@@ -4,7 +4,8 @@ Each class offers the methods of MAVSDK's plugin of the same name that the kit c
 same arguments and values of the same attribute names (:mod:`alphafence.vehicle.values`), as
 ArduPilot serves them: modes set with MAV_CMD_DO_SET_MODE (BRAKE for a copter's hold), a goto as
 GUIDED plus SET_POSITION_TARGET_GLOBAL_INT, parameters with PARAM_REQUEST_READ / PARAM_SET and
-their PARAM_VALUE, AUTO's progress from MISSION_CURRENT.
+their PARAM_VALUE, AUTO's progress from MISSION_CURRENT; and as PX4 serves them (its modes, a
+goto as its reposition, its integer parameters byte-wise).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from alphafence.errors import VehicleError
 from alphafence.geo.coords import from_e7, to_e7
 from alphafence.mavlink import ids
 from alphafence.mavlink.param_values import decode, encode
+from alphafence.vehicle.px4 import pause, reposition
 from alphafence.vehicle.values import (
     GpsInfo,
     MissionProgress,
@@ -217,16 +219,13 @@ class Action:
 
     async def _px4(self, name: str):
         """MAV_CMD_DO_SET_MODE with PX4's main and sub mode of ``name``."""
-        c = px4_custom_mode(name)
-        await _command(self.v, ids.MAV_CMD_DO_SET_MODE, ids.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                       (c >> 16) & 0xFF, (c >> 24) & 0xFF)  # fmt: skip
+        c, flag = px4_custom_mode(name), ids.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        await _command(self.v, ids.MAV_CMD_DO_SET_MODE, flag, c >> 16 & 0xFF, c >> 24 & 0xFF)
 
     async def hold(self):
         """Stop where it is: BRAKE (copter), LOITER (plane), HOLD (rover); on PX4 Hold where
         it is (:func:`~alphafence.vehicle.px4.pause`)."""
         if self.v.autopilot == "px4":
-            from alphafence.vehicle.px4 import pause
-
             return await pause(self.v)
         await self.set_mode(mode_set(self.v.mav_type).hold)
 
@@ -249,13 +248,7 @@ class Action:
         """GUIDED, then fly to ``(lat, lon)`` at ``alt_amsl_m`` (the heading is kept); on PX4
         MAV_CMD_DO_REPOSITION (it flies there in Hold), as MAVSDK sends it."""
         if self.v.autopilot == "px4":
-            result = await self.v.command_int(
-                ids.MAV_CMD_DO_REPOSITION, ids.MAV_FRAME_GLOBAL,
-                (-1, ids.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, yaw_deg), lat, lon, alt_amsl_m,
-            )  # fmt: skip
-            if result != ids.MAV_RESULT_ACCEPTED:
-                raise CommandRefused(f"reposition refused ({_result_name(result)})")
-            return
+            return await reposition(self.v, lat, lon, alt_amsl_m, yaw_deg)
         await self.set_mode(mode_set(self.v.mav_type).guided)
         sysid, compid = self.v.target
         self.v.link.send(
@@ -274,11 +267,14 @@ class Action:
         self.takeoff_altitude_m = float(alt_m)
 
     async def takeoff(self):
-        """GUIDED, then MAV_CMD_NAV_TAKEOFF to the takeoff altitude (PX4: its takeoff
-        altitude parameter, then the command, as MAVSDK does)."""
-        if self.v.autopilot == "px4":
-            await self.v.param.set_param_float("MIS_TAKEOFF_ALT", self.takeoff_altitude_m)
-            return await _command(self.v, ids.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 7)
+        """GUIDED, then MAV_CMD_NAV_TAKEOFF to the takeoff altitude (PX4: the command alone,
+        the altitude AMSL in it)."""
+        if self.v.autopilot == "px4":  # (a parameter set first may reach its navigator late)
+            async for p in self.v.telemetry.subscribe_position():
+                home = p.absolute_altitude_m - p.relative_altitude_m
+                break
+            alt = home + self.takeoff_altitude_m
+            return await _command(self.v, ids.MAV_CMD_NAV_TAKEOFF, *[math.nan] * 6, alt)
         await self.set_mode(mode_set(self.v.mav_type).guided)
         await _command(self.v, ids.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, self.takeoff_altitude_m)
 
