@@ -109,6 +109,17 @@ def monaco():
     return MONACO
 
 
+@pytest.fixture(scope="module")
+def demo_fences(tmp_path_factory):
+    """The demo scene's fences, built (a fence GeoJSON's path)."""
+    from alphafence.cli import main
+    from alphafence.cli.demo import scene_path
+
+    out = tmp_path_factory.mktemp("fences") / "f.geojson"
+    assert main(["build", str(scene_path()), "-o", str(out), "-q"]) == 0
+    return out
+
+
 @pytest.fixture(scope="session")
 def rules():
     from alphafence.zones.rules import load_rules

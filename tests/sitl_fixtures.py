@@ -15,6 +15,7 @@ Mark tests that use them ``@pytest.mark.sitl``. ``ALPHAFENCE_SITL_KEEP=1`` keeps
 instance's temporary working directory (its ``sitl.log``) for a post-mortem.
 """
 
+import contextlib
 import os
 
 import pytest
@@ -39,16 +40,16 @@ def sitl_binary():
     return binary
 
 
-@pytest.fixture
-async def sitl_factory(sitl_binary):
-    from alphafence.sitl.instance import SitlInstance
-
+@contextlib.asynccontextmanager
+async def _instances(cls, defaults):
+    """``launch(**options)``: an instance of ``cls`` started (and ready, unless
+    ``ready_timeout=None``); every one stopped at the end, the last first."""
     started = []
 
     async def launch(**options):
-        options = {**_defaults(), "binary": sitl_binary, **options}
+        options = {**defaults, **options}
         ready_timeout = options.pop("ready_timeout")
-        instance = SitlInstance(**options)
+        instance = cls(**options)
         started.append(instance)
         await instance.start()
         if ready_timeout is not None:
@@ -60,6 +61,14 @@ async def sitl_factory(sitl_binary):
     finally:
         for instance in reversed(started):
             await instance.stop()
+
+
+@pytest.fixture
+async def sitl_factory(sitl_binary):
+    from alphafence.sitl.instance import SitlInstance
+
+    async with _instances(SitlInstance, {**_defaults(), "binary": sitl_binary}) as launch:
+        yield launch
 
 
 @pytest.fixture
@@ -87,22 +96,8 @@ async def px4_factory(px4_root):
     ``alphafence.sitl.px4.Px4Instance``, and ``ready_timeout``); all stopped after the test."""
     from alphafence.sitl.px4 import Px4Instance
 
-    started = []
-
-    async def launch(**options):
-        options = {**PX4_DEFAULTS, "root": px4_root, **options}
-        ready_timeout = options.pop("ready_timeout")
-        instance = Px4Instance(**options)
-        started.append(instance)
-        await instance.start()
-        await instance.wait_ready(ready_timeout)
-        return instance
-
-    try:
+    async with _instances(Px4Instance, {**PX4_DEFAULTS, "root": px4_root}) as launch:
         yield launch
-    finally:
-        for instance in reversed(started):
-            await instance.stop()
 
 
 @pytest.fixture

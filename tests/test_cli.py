@@ -190,13 +190,6 @@ def test_console_script_runs_the_demo(tmp_path):
 AREA = "-0.58,51.42,-0.52,51.44"  # the demo scene lies west of Greenwich: negative longitudes
 
 
-@pytest.fixture(scope="module")
-def demo_fences(tmp_path_factory):
-    out = tmp_path_factory.mktemp("fences") / "f.geojson"
-    assert main(["build", str(scene_path()), "-o", str(out), "-q"]) == 0
-    return out
-
-
 def test_a_negative_bbox_after_a_space_is_a_value(tmp_path, demo_fences, capsys):
     spaced = tmp_path / "spaced.geojson"
     joined = tmp_path / "joined.geojson"

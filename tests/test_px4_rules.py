@@ -178,15 +178,6 @@ def test_px4_refuses_two_keep_ins_and_a_return_point():
         check_for_autopilot(two, "px4", "f.plan")
 
 
-@pytest.fixture(scope="module")
-def demo_fences(tmp_path_factory):
-    from alphafence.cli.demo import scene_path
-
-    out = tmp_path_factory.mktemp("fences") / "f.geojson"
-    assert main(["build", str(scene_path()), "-o", str(out), "-q"]) == 0
-    return out
-
-
 def test_compile_for_px4_on_the_command_line(tmp_path, demo_fences, capsys):
     out = tmp_path / "px4.plan"
     argv = ["compile", str(demo_fences), "--bbox", "-0.58,51.42,-0.52,51.44", "-o", str(out)]

@@ -109,12 +109,23 @@ def vehicle_radius(lon, lat, radius_m, outward=True):
     """
     if not radius_m > 0:
         return float(radius_m)
+    return _held(vehicle_distances(*geodesic_rim(lon, lat, radius_m), lon, lat), outward)
+
+
+def geodesic_rim(lon, lat, radius_m):
+    """The geodesic (WGS84) circle of ``radius_m`` around ``(lon, lat)`` at 720 azimuths:
+    ``(lon, lat)`` arrays."""
     n = len(_AZIMUTHS)
     plon, plat, _ = GEOD.fwd(np.full(n, float(lon)), np.full(n, float(lat)), _AZIMUTHS,
                              np.full(n, float(radius_m)))  # fmt: skip
-    d = vehicle_distances(plon, plat, lon, lat)
+    return plon, plat
+
+
+def _held(d, outward, stretch=1.0):
+    """The radius holding (outward) or held by distances ``d`` measured at the rim: widened
+    or narrowed by a millionth and a centimetre for what lies between the azimuths."""
     if outward:
-        return float(d.max() * (1 + 1e-6) + 0.01)
+        return float(d.max() * stretch * (1 + 1e-6) + 0.01)
     return float(max(d.min() * (1 - 1e-6) - 0.01, 0.0))
 
 
@@ -230,13 +241,8 @@ def px4_radius(lon, lat, radius_m, outward=True, reach_m=PX4_REACH_M):
     """
     if not radius_m > 0:
         return float(radius_m)
-    n = len(_AZIMUTHS)
-    plon, plat, _ = GEOD.fwd(np.full(n, float(lon)), np.full(n, float(lat)), _AZIMUTHS,
-                             np.full(n, float(radius_m)))  # fmt: skip
-    d = great_circle_m(plon, plat, lon, lat)
-    if outward:
-        return float(d.max() * px4_stretch(reach_m) * (1 + 1e-6) + 0.01)
-    return float(max(d.min() * (1 - 1e-6) - 0.01, 0.0))
+    d = great_circle_m(*geodesic_rim(lon, lat, radius_m), lon, lat)
+    return _held(d, outward, px4_stretch(reach_m))
 
 
 def circle_radius(autopilot, lon, lat, radius_m, outward=True):
