@@ -152,3 +152,55 @@ async def test_px4_integers_written_as_ardupilot_reads_them_land_wrong(px4, monk
         got = await apply_params(vehicle, {"GF_ACTION": 3})  # its read-back agrees...
     assert got.values == {"GF_ACTION": 3}
     assert await px4.param("GF_ACTION") == "1077936128"  # ...and PX4 holds 3.0's bits
+
+
+async def test_a_mission_starts_on_px4_straight_into_its_mission_mode(px4, link):
+    # the monitor resumes a mission with mission_raw's start; on PX4 that is its Mission mode,
+    # never a pass through another (ArduPilot's AUTO number, 3, is PX4's Position mode: a
+    # pilot's mode, which would make the monitor stand back)
+    from alphafence.mavlink import ids
+    from alphafence.vehicle.values import RawItem, px4_flight_mode
+    from tests.sitl_flight import upload_mission
+
+    frame = LocalFrame(*HOME)
+    lon, lat = frame.to_wgs84(80.0, 0.0)
+    rel = ids.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    def item(seq, command, x=0, y=0):
+        return RawItem(seq, rel, command, int(seq == 0), 1, 0.0, 0.0, 0.0, float("nan"), x, y,
+                       15.0, ids.MAV_MISSION_TYPE_MISSION)  # fmt: skip
+
+    lat_e7, lon_e7 = round(float(lat) * 1e7), round(float(lon) * 1e7)
+    mission = [item(0, ids.MAV_CMD_NAV_TAKEOFF, lat_e7 - 2000, lon_e7 - 9000),
+               item(1, ids.MAV_CMD_NAV_WAYPOINT, lat_e7, lon_e7)]  # fmt: skip
+    modes, sent = [], []
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        await upload_mission(vehicle, mission)
+        watching = asyncio.ensure_future(_modes(vehicle, modes))
+        await vehicle.action.arm()
+        if vehicle.kind == "pymavlink":  # the kit's own commands: which modes it asks for
+            command_long = vehicle.command_long
+
+            async def spy(command, *params, **kw):
+                sent.append((command, *params))
+                return await command_long(command, *params, **kw)
+
+            vehicle.command_long = spy
+        await vehicle.mission_raw.start_mission()
+        async for p in vehicle.telemetry.subscribe_position():
+            if float(frame.to_local(p.longitude_deg, p.latitude_deg)[0]) > 40.0:
+                break
+        watching.cancel()
+        await asyncio.gather(watching, return_exceptions=True)
+    modes_asked = [(int(p[1]), int(p[2])) for c, *p in sent if c == ids.MAV_CMD_DO_SET_MODE]
+    assert vehicle.kind != "pymavlink" or modes_asked == [(4, 4)], sent  # AUTO.MISSION only
+    names = [px4_flight_mode(m).name for m in modes]
+    assert "AUTO" in names, names  # PX4's Mission mode, as the kit names it
+    assert not {"POSHOLD", "ALT_HOLD", "STABILIZE", "MANUAL"} & set(names), names
+
+
+async def _modes(vehicle, out):
+    async for m in vehicle.messages("HEARTBEAT"):
+        if m.component_id == 1 and m.fields["autopilot"] == 12:
+            if not out or out[-1] != m.fields["custom_mode"]:
+                out.append(m.fields["custom_mode"])

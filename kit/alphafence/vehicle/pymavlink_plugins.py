@@ -390,6 +390,9 @@ class MissionRaw:
     async def start_mission(self):
         """AUTO, then MAV_CMD_MISSION_START, as MAVSDK sends them: a copter armed on the ground
         takes off only after MISSION_START (it sets "auto armed"; AUTO alone waits for
-        throttle, and ArduCopter disarms after DISARM_DELAY)."""
-        await self.v.action.set_mode(mode_set(self.v.mav_type).auto)
+        throttle, and ArduCopter disarms after DISARM_DELAY); on PX4 its Mission mode."""
+        if self.v.autopilot == "px4":
+            await self.v.action._px4("AUTO.MISSION")
+        else:
+            await self.v.action.set_mode(mode_set(self.v.mav_type).auto)
         await _command(self.v, ids.MAV_CMD_MISSION_START, 0, 0)
