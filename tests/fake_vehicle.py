@@ -295,12 +295,14 @@ class FakeVehicle:
         reboot_seconds: float = 0.5,
         uptime: float = 60.0,
         mav_type: int = mav.MAV_TYPE_QUADROTOR,
+        autopilot: int = mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
     ):
         self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
         self.params: dict[str, float] = dict(params or {})
         self.armed = armed
         self.mav_type = mav_type  # HEARTBEAT's type: a copter unless told
-        self.custom_mode = 0  # HEARTBEAT's custom_mode (ArduPilot's mode number)
+        self.autopilot = autopilot  # HEARTBEAT's autopilot: ArduPilot unless told
+        self.custom_mode = 0  # HEARTBEAT's custom_mode (the autopilot's mode number)
         self.reboot_seconds = reboot_seconds
         self.reboots = 0  # boots after the first
         self._boot_t0 = time.monotonic() - uptime  # SYSTEM_TIME's clock
@@ -495,7 +497,7 @@ class FakeVehicle:
             self._send(
                 mav.MAVLink_heartbeat_message(
                     self.mav_type,
-                    mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    self.autopilot,
                     mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
                     | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
                     | armed,

@@ -52,17 +52,23 @@ def zone_local():
 
 
 class Track:
-    """Positions (east metres) and ground speeds as the vehicle reports them."""
+    """Positions (east and north metres, height above home) and ground speeds as the vehicle
+    reports them."""
 
     def __init__(self, frame):
         self.frame = frame
         self.east: list[float] = []
+        self.north: list[float] = []
+        self.height: list[float] = []
         self.speed: list[float] = []
         self.changed = asyncio.Event()
 
     async def positions(self, vehicle):
         async for p in vehicle.telemetry.subscribe_position():
-            self.east.append(float(self.frame.to_local(p.longitude_deg, p.latitude_deg)[0]))
+            x, y = self.frame.to_local(p.longitude_deg, p.latitude_deg)
+            self.east.append(float(x))
+            self.north.append(float(y))
+            self.height.append(float(p.relative_altitude_m))
             self.changed.set()
 
     async def speeds(self, vehicle):

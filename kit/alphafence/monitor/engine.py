@@ -21,12 +21,14 @@ from alphafence.monitor.onboard import Decision, OnboardLayer, load_layer, unrea
 from alphafence.monitor.options import REROUTE, MonitorOptions
 
 COMMAND_SETTLE_S = 3.0  # a mode change this soon after a monitor action is the monitor's own
-# modes in which the pilot flies the vehicle (ArduPilot's names: Copter, Plane, Rover):
-# switching into one of them, or out of a mode the monitor commanded, is the pilot taking over
+# modes in which the pilot flies the vehicle (ArduPilot's names: Copter, Plane, Rover; PX4's
+# as MAVSDK names them, none of which names another ArduPilot mode): switching into one of
+# them, or out of a mode the monitor commanded, is the pilot taking over
 PILOT_MODES = {
     *("STABILIZE", "ACRO", "ALT_HOLD", "POSHOLD", "SPORT", "DRIFT", "FLOWHOLD"),
     *("MANUAL", "TRAINING", "FBWA", "FBWB", "CRUISE", "QSTABILIZE", "QHOVER", "QACRO"),
     "STEERING",
+    *("POSCTL", "ALTCTL", "STABILIZED"),  # PX4's Position, Altitude, Stabilized (and ACRO, MANUAL)
 }
 
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from alphafence.geo.coords import from_e7_float
 from alphafence.mavlink import ids
 from alphafence.monitor.engine import Sample
-from alphafence.vehicle.values import ardupilot_mode, fields_of
+from alphafence.vehicle.values import fields_of, mode_name
 
 TELEMETRY = {
     "position": "subscribe_position",
@@ -130,20 +130,22 @@ async def set_rates(telemetry, rate_hz: float) -> None:
             await setter(rate_hz)
 
 
-def latest_sample(latest: dict) -> Sample | None:
+def latest_sample(latest: dict, autopilot: str = "ardupilot") -> Sample | None:
     """The engine's input from the latest telemetry values, or None before the first position.
 
     Parameters
     ----------
     latest : dict
         ``{key: (arrival time, value) or None}`` for every key of :data:`TELEMETRY`.
+    autopilot : str
+        The vehicle's (``Vehicle.autopilot``): how its modes are named.
 
     Returns
     -------
     Sample or None
         At the position's arrival time; a missing velocity counts as zero, a missing mode,
-        armed state or GPS fix as unknown; the mode by ArduPilot's name (MAVSDK's link names
-        them its own way: read as a copter's, :func:`~alphafence.vehicle.values.ardupilot_mode`).
+        armed state or GPS fix as unknown; the mode as the autopilot names it
+        (:func:`~alphafence.vehicle.values.mode_name`).
     """
     pos = latest["position"]
     if pos is None:
@@ -160,7 +162,7 @@ def latest_sample(latest: dict) -> Sample | None:
         p.relative_altitude_m,
         vn,
         ve,
-        ardupilot_mode(mode[1].name) if mode else None,
+        mode_name(mode[1].name, autopilot) if mode else None,
         armed[1] if armed else None,
         alt_amsl_m=p.absolute_altitude_m,
         gps_fix=int(latest["gps"][1].fix_type) if latest["gps"] else None,

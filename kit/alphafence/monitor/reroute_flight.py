@@ -2,9 +2,10 @@
 the legs, for the runner.
 
 :class:`RerouteFlight` builds the route planner once (in a worker thread, when the monitor
-starts), follows what the vehicle is flying to (its GUIDED target, its AUTO mission) and, when
-the engine asks for a re-route, plans one (:mod:`alphafence.monitor.reroute`) and flies it
-leg by leg, then hands control back (AUTO resumes at the next mission item). Whatever goes
+starts), follows what the vehicle is flying to (its GUIDED target, its AUTO mission; on PX4
+the target of its reposition, in Hold, and its Mission) and, when the engine asks for a
+re-route, plans one (:mod:`alphafence.monitor.reroute`) and flies it leg by leg with gotos,
+then hands control back (the mission resumes at the next item). Whatever goes
 wrong (no planner, no goal, no route, a leg not flown in time) ends in the engine's fallback,
 the brake, through ``reroute_failed``.
 """
@@ -17,8 +18,12 @@ import math
 import time
 
 from alphafence.geo.frame import short_distance_m
+from alphafence.mavlink.autopilots import ARDUPILOT
 from alphafence.monitor.events import new_event
 from alphafence.monitor.feeds import Feed, download_mission, guided_targets, mission_progress
+from alphafence.vehicle.values import GOTO_MODE, MISSION_MODE
+
+TARGET_NAMES = {"GUIDED": "guided target", "HOLD": "reposition target"}  # by the goto mode
 
 
 class RerouteFlight:
@@ -77,6 +82,13 @@ class RerouteFlight:
         self.mission = None
         self._mission_fetch = None
         self._mission_tried = -math.inf
+
+    @property
+    def modes(self) -> tuple:
+        """The vehicle's goto mode and mission mode, by its names (ArduPilot's ``GUIDED`` and
+        ``AUTO``; on PX4 ``HOLD``, where a reposition flies, and ``MISSION``)."""
+        autopilot = getattr(self.vehicle, "autopilot", ARDUPILOT)
+        return GOTO_MODE[autopilot], MISSION_MODE[autopilot]
 
     def feeds(self) -> dict:
         """The streams a re-route needs: ``{"target": Feed, "mission_progress": Feed}``."""
@@ -179,10 +191,10 @@ class RerouteFlight:
             plan = await asyncio.to_thread(self.rerouter.plan, s.lon, s.lat, s.ve, s.vn, goal, lead)
         except NoRoute as exc:
             raise RerouteFailed(str(exc)) from None
-        was_auto = s.mode == "AUTO"
+        was_auto = s.mode == self.modes[1]
         for e in self.engine.reroute_started(
             time.monotonic(),
-            mode_change=s.mode != "GUIDED",
+            mode_change=s.mode != self.modes[0],
             goal=[round(goal[1], 7), round(goal[0], 7)],
             goal_source=source,
             waypoints=[list(w) for w in plan.waypoints],
@@ -216,12 +228,13 @@ class RerouteFlight:
 
     async def _goal(self, s):
         """(goal (lon, lat), where it came from, mission item to resume at) or Nones."""
-        if s.mode == "GUIDED" and self.target is not None:
+        goto_mode, mission_mode = self.modes
+        if s.mode == goto_mode and self.target is not None:
             t, lon, lat = self.target
             if time.monotonic() - t <= self.TARGET_FRESH_S:
-                return (lon, lat), "guided target", None
+                return (lon, lat), TARGET_NAMES[goto_mode], None
         resume_at = None
-        if s.mode == "AUTO":
+        if s.mode == mission_mode:
             goal, resume_at = await self._mission_goal()
             if goal is not None:
                 return goal, f"mission item {resume_at - 1}", resume_at

@@ -242,7 +242,7 @@ class Monitor(FeedTasks):
             self._loop_work(time.monotonic())
             if not self.observers and self.rolling is None and self._skip():
                 return  # the last full check proves this position: nothing to do
-            sample = latest_sample(self.latest)
+            sample = latest_sample(self.latest, getattr(self.vehicle, "autopilot", "ardupilot"))
             if sample is None:
                 return
             events = self._step(sample)

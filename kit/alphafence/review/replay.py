@@ -20,12 +20,13 @@ from dataclasses import dataclass, field
 
 from alphafence.awareness.fenceset import FenceSet
 from alphafence.errors import InputError
+from alphafence.mavlink.autopilots import ARDUPILOT, AUTOPILOTS
 from alphafence.mavlink.items import FenceItem
 from alphafence.monitor.engine import Engine, Sample
 from alphafence.monitor.events import WALL, UtcClock
 from alphafence.monitor.observe import Observer, Step
 from alphafence.monitor.options import MonitorOptions
-from alphafence.vehicle.values import ardupilot_mode
+from alphafence.vehicle.values import mode_name
 from alphafence.zones.jsonfile import read_limited
 
 TRACE_FORMAT = "alphafence-trace-1"
@@ -50,6 +51,8 @@ class Trace:
     clock : dict, optional
         ``{"t": monotonic seconds, "utc": ISO 8601, "source": where UTC came from}``: the
         samples' times in UTC (None: the trace does not say).
+    autopilot : str
+        The vehicle's, which names its modes (``"ardupilot"``, ``"px4"``).
     """
 
     recorded: str
@@ -57,6 +60,7 @@ class Trace:
     onboard_items: list = field(default_factory=list)
     samples: list = field(default_factory=list)
     clock: dict | None = None
+    autopilot: str = ARDUPILOT
 
     def utc_clock(self) -> UtcClock:
         """The :class:`UtcClock` of the samples' times: the trace's own (source ``trace``)
@@ -77,6 +81,8 @@ class Trace:
         }
         if self.clock:
             header["clock"] = self.clock
+        if self.autopilot != ARDUPILOT:  # traces without it are ArduPilot's
+            header["autopilot"] = self.autopilot
         lines = [json.dumps(header)]
         lines += [json.dumps(_rounded(dataclasses.asdict(s))) for s in self.samples]
         return "\n".join(lines) + "\n"
@@ -90,6 +96,9 @@ class Trace:
         header = _line(lines[0], source, 1)
         if not isinstance(header, dict) or header.get("trace") != TRACE_FORMAT:
             raise InputError(source, f"line 1: not an AlphaFence trace ({TRACE_FORMAT})")
+        autopilot = header.get("autopilot", ARDUPILOT)
+        if autopilot not in AUTOPILOTS:
+            raise InputError(source, f"line 1: autopilot {autopilot!r} is none of {AUTOPILOTS}")
         try:
             items = [
                 FenceItem(int(c), float(p), float(x), float(y))
@@ -97,7 +106,7 @@ class Trace:
             ]
             samples = [Sample(**_line(line, source, n)) for n, line in enumerate(lines[1:], 2)]
             for s in samples:  # a trace recorded through MAVSDK's link names modes its way
-                s.mode = ardupilot_mode(s.mode)
+                s.mode = mode_name(s.mode, autopilot)
         except (TypeError, ValueError) as exc:
             raise InputError(source, f"malformed sample or item: {exc}") from None
         try:
@@ -107,7 +116,8 @@ class Trace:
         except (TypeError, ValueError, KeyError) as exc:
             raise InputError(source, f"line 1: malformed clock ({exc})") from None
         recorded = str(header.get("recorded", ""))
-        return cls(recorded, float(header.get("speedup", 1.0)), items, samples, clock)
+        speedup = float(header.get("speedup", 1.0))
+        return cls(recorded, speedup, items, samples, clock, autopilot)
 
     @classmethod
     def read(cls, path) -> Trace:

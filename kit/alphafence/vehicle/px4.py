@@ -193,6 +193,36 @@ async def reposition(vehicle, lat, lon, alt_amsl_m, yaw_deg=float("nan")) -> Non
         raise VehicleError(f"PX4 refused the reposition (MAV_RESULT {result})")
 
 
+SET_CURRENT_TRIES = 3
+SET_CURRENT_WAIT_S = 1.5  # for the MISSION_CURRENT that says it (PX4 streams it at 1 Hz too)
+
+
+async def set_current(v, index: int) -> None:
+    """Make mission item ``index`` the one PX4 flies to next, through the pymavlink link
+    ``v``: MISSION_SET_CURRENT until PX4's MISSION_CURRENT says so, as MAVSDK does (PX4 does not
+    take MAV_CMD_DO_SET_MISSION_CURRENT: "command 224 unsupported").
+
+    Raises
+    ------
+    VehicleError
+        PX4 never said it.
+    """
+    sysid, compid = v.target
+
+    async def said(queue):
+        while not (v.from_autopilot(m := await queue.get()) and int(m.seq) == index):
+            pass
+
+    with v.bus.subscribe("MISSION_CURRENT") as queue:
+        for _ in range(SET_CURRENT_TRIES):
+            v.link.send(v.link.mav.mission_set_current_encode(sysid, compid, index))
+            try:
+                return await asyncio.wait_for(said(queue), SET_CURRENT_WAIT_S)
+            except asyncio.TimeoutError:
+                pass
+    raise VehicleError(f"PX4 did not make mission item {index} its current one")
+
+
 def monotonic() -> float:
     """The clock :func:`confirm_kept`'s ``t0`` is read on."""
     return time.monotonic()

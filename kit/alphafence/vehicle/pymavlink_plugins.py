@@ -21,7 +21,7 @@ from alphafence.errors import VehicleError
 from alphafence.geo.coords import from_e7, to_e7
 from alphafence.mavlink import ids
 from alphafence.mavlink.param_values import decode, encode
-from alphafence.vehicle.px4 import pause, reposition
+from alphafence.vehicle.px4 import pause, reposition, set_current
 from alphafence.vehicle.values import (
     GpsInfo,
     MissionProgress,
@@ -36,16 +36,6 @@ from alphafence.vehicle.values import (
 
 PARAM_RETRY_S = 1.0
 PARAM_TRIES = 3
-POSITION_ONLY = (
-    ids.POSITION_TARGET_TYPEMASK_VX_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_VY_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_VZ_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_AX_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_AY_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_AZ_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_YAW_IGNORE
-    | ids.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
-)
 
 
 class CommandRefused(VehicleError):
@@ -253,7 +243,7 @@ class Action:
         sysid, compid = self.v.target
         self.v.link.send(
             self.v.link.mav.set_position_target_global_int_encode(
-                0, sysid, compid, ids.MAV_FRAME_GLOBAL_INT, POSITION_ONLY,
+                0, sysid, compid, ids.MAV_FRAME_GLOBAL_INT, ids.POSITION_TARGET_POSITION_ONLY,
                 to_e7(lat), to_e7(lon), float(alt_amsl_m), 0, 0, 0, 0, 0, 0, 0, 0,
             )
         )  # fmt: skip
@@ -362,11 +352,12 @@ class MissionRaw:
 
         ``current``: the item after the last MISSION_ITEM_REACHED (ArduPilot sends those on
         every link) or MISSION_CURRENT's item (streamed only when asked for; after the last
-        item it stays on the reached one). ``total``: the mission's items, home included: the
-        count of this link's last upload or download of it, else MISSION_CURRENT's total + 1
-        (ArduPilot's leaves home out), else 0.
+        item it stays on the reached one). ``total``: the mission's items (ArduPilot's with
+        home): the count of this link's last upload or download of it, else MISSION_CURRENT's
+        total (+ 1 on ArduPilot, whose total leaves home out; 65535 is no mission), else 0.
         """
         reached, current, heard, last = -1, None, 0, None
+        home = 0 if self.v.autopilot == "px4" else 1
         async for m in self.v.bus.stream("MISSION_CURRENT", "MISSION_ITEM_REACHED"):
             if not self.v.from_autopilot(m):
                 continue
@@ -375,7 +366,7 @@ class MissionRaw:
                 current = reached + 1
             else:
                 n = int(getattr(m, "total", 0) or 0)  # 0: no total (an older MAVLink)
-                heard = n + 1 if n else heard
+                heard = 0 if n == ids.MISSION_CURRENT_NO_MISSION else n + home if n else heard
                 if int(m.seq) != reached:
                     current = int(m.seq)
             total = self.v.mission.counts.get(ids.MAV_MISSION_TYPE_MISSION, heard)
@@ -384,15 +375,17 @@ class MissionRaw:
                 yield MissionProgress(current, total)
 
     async def set_current_mission_item(self, index: int):
-        """Make item ``index`` the one AUTO flies to next."""
+        """Make item ``index`` the one AUTO flies to next (on PX4 :func:`~.px4.set_current`)."""
+        if self.v.autopilot == "px4":
+            return await set_current(self.v, index)
         await _command(self.v, ids.MAV_CMD_DO_SET_MISSION_CURRENT, index)
 
     async def start_mission(self):
         """AUTO, then MAV_CMD_MISSION_START, as MAVSDK sends them: a copter armed on the ground
         takes off only after MISSION_START (it sets "auto armed"; AUTO alone waits for
-        throttle, and ArduCopter disarms after DISARM_DELAY); on PX4 its Mission mode."""
+        throttle, and ArduCopter disarms after DISARM_DELAY). On PX4 its Mission mode alone,
+        as MAVSDK sends it (PX4 would take MISSION_START's first item, 0, as the current one)."""
         if self.v.autopilot == "px4":
-            await self.v.action._px4("AUTO.MISSION")
-        else:
-            await self.v.action.set_mode(mode_set(self.v.mav_type).auto)
+            return await self.v.action._px4("AUTO.MISSION")
+        await self.v.action.set_mode(mode_set(self.v.mav_type).auto)
         await _command(self.v, ids.MAV_CMD_MISSION_START, 0, 0)

@@ -4,10 +4,13 @@ MAVLink messages, flight-mode names, and the one error a transfer raises.
 The monitor, the fence transfer and the parameter code read these attributes and nothing
 else, so the native MAVSDK link (whose own values have the same attribute names) and the
 pymavlink link (:mod:`alphafence.vehicle.pymavlink_link`, which builds these) run the same code.
-Flight modes are named as ArduPilot names them (``GUIDED``, ``AUTO``, ``BRAKE``, ``LOITER``,
-``RTL``, ...), from the HEARTBEAT's ``custom_mode`` by pymavlink's mode maps for the vehicle's
-type; MAVSDK's own names (``OFFBOARD``, ``MISSION``, ``HOLD``, from MAVSDK's link and traces
-recorded through it) are read as the ArduPilot mode they stand for (:func:`ardupilot_mode`).
+Flight modes are named as the autopilot names them (:func:`mode_name`). ArduPilot's as ArduPilot
+names them (``GUIDED``, ``AUTO``, ``BRAKE``, ``LOITER``, ``RTL``, ...), from the HEARTBEAT's
+``custom_mode`` by pymavlink's mode maps for the vehicle's type; MAVSDK's names for them
+(``OFFBOARD``, ``MISSION``, ``HOLD``, from MAVSDK's link and traces recorded through it) are
+read as the ArduPilot mode they stand for (:func:`ardupilot_mode`). PX4's by the names MAVSDK,
+PX4's own SDK, gives them (``HOLD``, ``MISSION``, ``RETURN_TO_LAUNCH``, ``POSCTL``, ...), on
+either link (:func:`px4_flight_mode`).
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import json
 from dataclasses import dataclass
 
 from alphafence.mavlink import ids
+from alphafence.mavlink.autopilots import ARDUPILOT, PX4
 
 
 @dataclass(frozen=True, slots=True)
@@ -299,17 +303,35 @@ def px4_custom_mode(name: str) -> int:
 
 
 def px4_flight_mode(custom_mode: int) -> FlightMode:
-    """A PX4 HEARTBEAT's mode as a :class:`FlightMode`, named as the kit names modes on every
-    link (MAVSDK's name read as the ArduPilot mode it stands for, :func:`ardupilot_mode`:
-    PX4's Hold is ``BRAKE``, its Return ``RTL``, its Mission ``AUTO``).
+    """A PX4 HEARTBEAT's mode as a :class:`FlightMode`, named as MAVSDK names it (so the
+    pymavlink link names PX4's modes as MAVSDK's does: Hold is ``HOLD``, Mission
+    ``MISSION``, Return ``RETURN_TO_LAUNCH``, Position ``POSCTL``).
 
     Examples
     --------
     >>> px4_flight_mode(px4_custom_mode("AUTO.LOITER")).name, px4_flight_mode(0x40000).name
-    ('BRAKE', 'UNKNOWN')
+    ('HOLD', 'UNKNOWN')
     """
     main, sub = (int(custom_mode) >> 16) & 0xFF, (int(custom_mode) >> 24) & 0xFF
     name = _PX4_BY_NUMBER.get((main, sub)) or _PX4_BY_NUMBER.get((main, 0))
     if name is None or (main == 4 and sub == 0):
         return FlightMode("UNKNOWN", int(custom_mode))
-    return FlightMode(ardupilot_mode(PX4_MODES[name][2]), int(custom_mode))
+    return FlightMode(PX4_MODES[name][2], int(custom_mode))
+
+
+# the mode a goto flies in (ArduPilot's GUIDED; PX4's reposition holds at the target) and the
+# mode that flies the mission, by autopilot (``Vehicle.autopilot``), as :func:`mode_name` names them
+GOTO_MODE = {ARDUPILOT: "GUIDED", PX4: "HOLD"}
+MISSION_MODE = {ARDUPILOT: "AUTO", PX4: "MISSION"}
+
+
+def mode_name(name: str | None, autopilot: str = ARDUPILOT) -> str | None:
+    """A flight mode as the kit names it on a vehicle of ``autopilot``: ArduPilot's name on
+    ArduPilot (MAVSDK's names read by :func:`ardupilot_mode`, as a copter's), MAVSDK's on PX4.
+
+    Examples
+    --------
+    >>> mode_name("HOLD"), mode_name("HOLD", "px4"), mode_name("MISSION", "px4")
+    ('BRAKE', 'HOLD', 'MISSION')
+    """
+    return name if autopilot == PX4 else ardupilot_mode(name)
