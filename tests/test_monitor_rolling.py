@@ -406,8 +406,8 @@ def test_cli_rolling_options(tmp_path, capsys):
     class Args:
         onboard, profile, sd_fence_kb, speed_limit, reach_time = "rolling", None, None, 12.0, 20.0
 
-    o = _rolling_options(Args)
-    assert o.profile.name == "copter" and o.speed_mps == 12.0 and o.lookahead_s == 20.0
+    o = _rolling_options(Args)  # the profile is the vehicle's autopilot's, once connected
+    assert o.profile is None and o.speed_mps == 12.0 and o.lookahead_s == 20.0
     Args.profile, Args.sd_fence_kb = "navio2", 8
     assert _rolling_options(Args).profile.items == 1024
     Args.onboard = "watch"
@@ -417,3 +417,22 @@ def test_cli_rolling_options(tmp_path, capsys):
     code = main([*argv, "--profile", "plane"])
     assert code == 2
     assert "--onboard rolling" in capsys.readouterr().err
+
+
+def test_the_rolling_fence_compiles_for_the_vehicles_autopilot():
+    from types import SimpleNamespace
+
+    from alphafence.monitor.rolling import RollingFence
+
+    def rolling(autopilot, profile):
+        vehicle = SimpleNamespace(autopilot=autopilot)
+        options = RollingOptions(profile=profile)
+        return RollingFence(vehicle, FenceSet(squares([(0.0, 0.0)])), options, BRAKING, print, None)
+
+    assert rolling("px4", None).profile.name == "px4"
+    assert rolling("ardupilot", None).profile.name == "copter"
+    assert rolling("px4", PROFILES["px4-constrained"]).profile.items == 16
+    with pytest.raises(
+        InputError, match="copter is ArduPilot's fence storage, and the vehicle runs PX4"
+    ):
+        rolling("px4", PROFILES["copter"])

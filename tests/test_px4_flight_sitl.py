@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 
 import numpy as np
 import pytest
@@ -57,6 +58,7 @@ class Track:
 
     def __init__(self, frame):
         self.frame = frame
+        self.times: list[float] = []  # monotonic, as the monitor's events
         self.east: list[float] = []
         self.north: list[float] = []
         self.height: list[float] = []
@@ -66,6 +68,7 @@ class Track:
     async def positions(self, vehicle):
         async for p in vehicle.telemetry.subscribe_position():
             x, y = self.frame.to_local(p.longitude_deg, p.latitude_deg)
+            self.times.append(time.monotonic())
             self.east.append(float(x))
             self.north.append(float(y))
             self.height.append(float(p.relative_altitude_m))

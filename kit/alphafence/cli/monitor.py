@@ -176,7 +176,8 @@ def _add_rolling_options(p):
     g.add_argument(
         "--profile",
         choices=sorted(PROFILES),
-        help="the vehicle's fence storage (default copter: 70 items, 560 bytes)",
+        help="the vehicle's fence storage (default: copter, 70 items in 560 bytes, on "
+        "ArduPilot; px4, 64 items, on PX4)",
     )
     g.add_argument(
         "--sd-fence-kb",
@@ -215,13 +216,13 @@ def _rolling_options(args) -> RollingOptions:
         if given:
             raise InputError(given[0], "sizes the rolling onboard fence: add --onboard rolling")
         return RollingOptions()
-    args.profile = args.profile or "copter"
     extra = {}
     if args.speed_limit is not None:
         extra["speed_mps"] = args.speed_limit
     if args.reach_time is not None:
         extra["lookahead_s"] = args.reach_time
-    return RollingOptions(profile=storage_profile(args), **extra)
+    given = args.profile is not None or args.sd_fence_kb is not None
+    return RollingOptions(profile=storage_profile(args) if given else None, **extra)
 
 
 def _not_reroute(flag):

@@ -199,5 +199,34 @@ PROFILES = {
 DEFAULT_PROFILE = {"ardupilot": "copter", "px4": "px4"}
 """The profile each autopilot's work assumes when no ``--profile`` is given."""
 
+
+def vehicle_profile(profile: Profile | None, autopilot: str) -> Profile:
+    """The storage to compile for on a vehicle running ``autopilot``: ``profile``, or without
+    one the autopilot's default (:data:`DEFAULT_PROFILE`).
+
+    Raises
+    ------
+    InputError
+        ``profile`` is another autopilot's storage.
+
+    Examples
+    --------
+    >>> vehicle_profile(None, "px4").name, vehicle_profile(PROFILES["navio2"], "ardupilot").name
+    ('px4', 'navio2')
+    """
+    from alphafence.errors import InputError
+    from alphafence.mavlink.autopilots import NAMES
+
+    profile = profile or PROFILES[DEFAULT_PROFILE[autopilot]]
+    if profile.autopilot != autopilot:
+        fits = sorted(n for n, p in PROFILES.items() if p.autopilot == autopilot)
+        raise InputError(
+            "--profile",
+            f"{profile.name} is {NAMES[profile.autopilot]}'s fence storage, and the vehicle runs "
+            f"{NAMES[autopilot]}: take one of {', '.join(fits)}",
+        )
+    return profile
+
+
 MAX_FILE_ITEMS = FILE_MAX_BYTES // ITEM_BYTES
 """The most fence items any ArduPilot vehicle holds (8191: ``BRD_SD_FENCE = 64``)."""

@@ -13,7 +13,7 @@ from alphafence.awareness.predict import Braking, stopping_distance
 from alphafence.awareness.reach import DEFAULT_ACCEL_MPS2
 from alphafence.awareness.traffic import TrafficOptions
 from alphafence.errors import InputError
-from alphafence.mavlink.storage import PROFILES, Profile
+from alphafence.mavlink.storage import Profile
 
 # the vehicle's own fence: watched as a layer, kept equal to the fences within reach and
 # watched ("rolling": alphafence.monitor.rolling), or not
@@ -51,7 +51,7 @@ class RollingOptions:
     (337, 84, 471)
     """
 
-    profile: Profile = PROFILES["copter"]
+    profile: Profile | None = None  # the vehicle's autopilot's default (copter; px4 on PX4)
     speed_mps: float = 10.0  # the vehicle's speed limit (ArduCopter's WPNAV_SPEED default)
     lookahead_s: float = 30.0
     hysteresis: float = 0.25  # re-centre after moving this fraction of the reach

@@ -8,7 +8,9 @@ where the vehicle is (the reach, plus the hysteresis, plus what it flies while a
 under way), uploads them, reads them back, and does it again once the vehicle is the
 hysteresis away from that centre. So the fence in force always holds every fence within reach
 of the vehicle, the previous one until the new one is written (ArduPilot keeps its fence until
-the last item of an upload arrives, and keeps it when an upload fails).
+the last item of an upload arrives, and keeps it when an upload fails; PX4 writes an upload
+beside the fence in force and switches at its end). On PX4 a fence is compiled for PX4 and
+checked against its home before it is sent (PX4 would drop an area its home breaches).
 
 :class:`RollingPlan` is the pure part (which fences, when to re-upload); :class:`RollingFence`
 does it on the event loop: the compile in a worker thread, the upload and read-back as a task
@@ -30,8 +32,10 @@ import numpy as np
 import shapely
 
 from alphafence.awareness.fenceset import KEEP_IN, KEEP_OUT
+from alphafence.mavlink.autopilots import NAMES
 from alphafence.mavlink.inclusions import inclusion_count, needs_union
 from alphafence.monitor.events import new_event, rounded
+from alphafence.vehicle.px4 import check_home, confirm_kept
 
 RADIUS_SLACK_M = 1.0  # the compile selects this much farther than the plan (frames differ)
 
@@ -185,8 +189,12 @@ class RollingFence:
     """
 
     def __init__(self, vehicle, fences, options, braking, handle, reload):
+        from alphafence.mavlink.storage import vehicle_profile
+
         self.vehicle = vehicle
         self.options = options
+        self.autopilot = getattr(vehicle, "autopilot", "ardupilot")
+        self.profile = vehicle_profile(options.profile, self.autopilot)  # InputError if not its
         self.plan = RollingPlan(
             fences, options.reach_m(braking), options.trigger_m(braking), options.radius_m(braking)
         )
@@ -267,7 +275,7 @@ class RollingFence:
                 compile_fences,
                 plan.records(target),
                 shapely.Point(target.lon, target.lat),
-                self.options.profile,
+                self.profile,
                 target.radius_m + RADIUS_SLACK_M,
             )
         except asyncio.CancelledError:
@@ -283,6 +291,11 @@ class RollingFence:
             return True
         if self.after is not None:  # the monitor's first download: one transfer at a time
             await asyncio.wait([self.after])
+        if self.autopilot == "px4":  # PX4 would drop an area its home breaches, silently
+            try:
+                await check_home(self.vehicle, compiled.items)
+            except Exception as exc:  # noqa: BLE001 - an event, never a crash
+                return self._failed(t0, "home", str(exc), None, fields)
         ok = await self._upload(compiled.items, t0, target, fields)
         if self.plan is not plan:  # new fences came meanwhile: compile again
             self.coverage = None
@@ -293,13 +306,18 @@ class RollingFence:
         from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
 
         try:
-            report = await upload_fence(self.vehicle, items, capacity=self.options.profile.items)
+            report = await upload_fence(self.vehicle, items, capacity=self.profile.items)
         except asyncio.CancelledError:
             raise
         except FenceTransferError as exc:
             return self._failed(t0, "upload", str(exc), exc.holds, fields)
         except Exception as exc:  # the link failed under MAVSDK: an event, never a crash
             return self._failed(t0, "upload", f"{type(exc).__name__}: {exc}", None, fields)
+        if self.autopilot == "px4":  # and PX4 keeps every area (home, and its own words)
+            try:
+                await confirm_kept(self.vehicle, items, t0)
+            except Exception as exc:  # noqa: BLE001 - it says what the vehicle holds
+                return self._failed(t0, "confirm", str(exc), str(exc), fields)
         self.coverage, self.held = target, list(items)
         self.uploads += 1
         self._uncovered = False
@@ -338,7 +356,7 @@ class RollingFence:
             self.held = None  # what it holds now is read back by the reload, not assumed
         self._retry_at = time.monotonic() + self.options.retry_s
         kept = holds or (
-            "the previous fence (ArduPilot keeps it when an upload fails)"
+            f"the previous fence ({NAMES[self.autopilot]} keeps it when an upload fails)"
             if stage == "upload"
             else "the previous fence (nothing was sent)"
         )

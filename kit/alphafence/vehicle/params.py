@@ -291,9 +291,12 @@ def _call(vehicle, verb, kind, name, value=None):
 
 async def vehicle_union(vehicle) -> bool:
     """Whether the vehicle reads its inclusions as their union (``FENCE_OPTIONS`` bit 1);
-    False when it has no such parameter (firmware that always intersects them)."""
+    False when it has no such parameter (firmware that always intersects them, as PX4)."""
+    from alphafence.mavlink.autopilots import inclusion_union_possible
     from alphafence.mavlink.inclusions import FENCE_OPTIONS, union_of
 
+    if not inclusion_union_possible(getattr(vehicle, "autopilot", "ardupilot")):
+        return False
     try:
         return union_of(await _get(vehicle, FENCE_OPTIONS))
     except Exception:
