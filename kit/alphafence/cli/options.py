@@ -339,8 +339,12 @@ def storage_profile(args):
     >>> storage_profile(SimpleNamespace(profile=None, autopilot="px4")).items
     64
     """
-    from alphafence.mavlink.autopilots import NAMES
-    from alphafence.mavlink.storage import DEFAULT_PROFILE, PROFILES, navio2_profile
+    from alphafence.mavlink.storage import (
+        DEFAULT_PROFILE,
+        PROFILES,
+        navio2_profile,
+        vehicle_profile,
+    )
 
     autopilot = autopilot_of_args(args)
     name = getattr(args, "profile", None) or DEFAULT_PROFILE[autopilot]
@@ -351,11 +355,4 @@ def storage_profile(args):
         raise InputError("--sd-fence-kb", "sizes the navio2 profile only: add --profile navio2")
     else:
         profile = PROFILES[name]
-    if profile.autopilot != autopilot:
-        fits = sorted(n for n, p in PROFILES.items() if p.autopilot == autopilot)
-        raise InputError(
-            "--profile",
-            f"{name} is {NAMES[profile.autopilot]}'s fence storage, and the fence is for "
-            f"{NAMES[autopilot]}: take one of {', '.join(fits)}",
-        )
-    return profile
+    return vehicle_profile(profile, autopilot, "the fence is for")

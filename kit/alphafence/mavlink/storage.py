@@ -200,9 +200,12 @@ DEFAULT_PROFILE = {"ardupilot": "copter", "px4": "px4"}
 """The profile each autopilot's work assumes when no ``--profile`` is given."""
 
 
-def vehicle_profile(profile: Profile | None, autopilot: str) -> Profile:
+def vehicle_profile(
+    profile: Profile | None, autopilot: str, whose: str = "the vehicle runs"
+) -> Profile:
     """The storage to compile for on a vehicle running ``autopilot``: ``profile``, or without
-    one the autopilot's default (:data:`DEFAULT_PROFILE`).
+    one the autopilot's default (:data:`DEFAULT_PROFILE`). ``whose`` says in the error what
+    runs ``autopilot`` (``"the fence is for"``).
 
     Raises
     ------
@@ -222,7 +225,7 @@ def vehicle_profile(profile: Profile | None, autopilot: str) -> Profile:
         fits = sorted(n for n, p in PROFILES.items() if p.autopilot == autopilot)
         raise InputError(
             "--profile",
-            f"{profile.name} is {NAMES[profile.autopilot]}'s fence storage, and the vehicle runs "
+            f"{profile.name} is {NAMES[profile.autopilot]}'s fence storage, and {whose} "
             f"{NAMES[autopilot]}: take one of {', '.join(fits)}",
         )
     return profile
