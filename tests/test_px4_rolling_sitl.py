@@ -11,6 +11,8 @@ the pymavlink link).
   fence, so the monitor sends nothing (``onboard_upload_failed``, stage ``home``) and PX4 keeps
   the fence it had. Broken case: without the home check the upload goes through, PX4 says
   "Geofence invalid", and the check after the upload (stage ``confirm``) reports it.
+* An upload stopped halfway (a plain pymavlink client that stops answering PX4's requests)
+  leaves PX4's previous fence whole; the control, the same upload completed, replaces it.
 """
 
 from __future__ import annotations
@@ -149,3 +151,62 @@ async def test_px4s_rolling_fence_never_sends_an_area_home_breaches(
     else:  # sent: PX4 stored it and drops the area; the check after the upload says so
         assert failed["stage"] == "confirm" and "PX4 discards" in failed["error"], failed
         assert len(after) == 4 and px4.logged("Geofence invalid")
+
+
+def _raw_upload(c, items, stop_at=None):
+    """Upload fence ``items`` ((command, vertices, lat e7, lon e7)) with a plain pymavlink link,
+    answering PX4's requests; stop answering at item ``stop_at`` until PX4 gives up. Returns
+    the MISSION_ACK's result, or None when stopped."""
+    from alphafence.mavlink import ids
+
+    fence = ids.MAV_MISSION_TYPE_FENCE
+    c.mav.mission_count_send(1, 1, len(items), fence)
+    kinds = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"]
+    while (m := c.recv_match(type=kinds, blocking=True, timeout=10)) is not None:
+        if m.get_type() == "MISSION_ACK":
+            return m.type
+        if m.seq == stop_at:  # PX4 re-asks, then drops the transfer (no ACK to us)
+            while c.recv_match(type=kinds, blocking=True, timeout=3) is not None:
+                pass
+            return None
+        cmd, n, lat, lon = items[m.seq]
+        c.mav.mission_item_int_send(1, 1, m.seq, 0, cmd, 0, 1, n, 0, 0, 0, lat, lon, 0, fence)
+    raise AssertionError("PX4 stopped answering the upload")
+
+
+@pytest.mark.parametrize("complete", [False, True], ids=["stopped-halfway", "control-complete"])
+async def test_px4_keeps_its_whole_fence_when_an_upload_stops_halfway(px4, complete):
+    # the rolling fence's premise on PX4: a failed re-upload leaves the fence in force whole
+    # (control: a complete upload does replace it, so the comparison can see a change)
+    from pymavlink import mavutil
+
+    from alphafence.geo.coords import to_e7
+    from alphafence.mavlink import ids
+
+    frame = LocalFrame(*HOME)
+
+    def polygon(east, n):
+        a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+        lon, lat = frame.to_wgs84(east + 30.0 * np.cos(a), 30.0 * np.sin(a))
+        cmd = ids.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+        return [(cmd, n, to_e7(float(y)), to_e7(float(x))) for x, y in zip(lon, lat)]
+
+    old, new = polygon(200.0, 4) + polygon(400.0, 4), polygon(600.0, 10) + polygon(800.0, 10)
+
+    def run():
+        c = mavutil.mavlink_connection(px4.connection_url, source_system=255)
+        try:
+            assert c.wait_heartbeat(timeout=30) is not None
+            assert _raw_upload(c, old) == ids.MAV_MISSION_ACCEPTED
+            return _raw_upload(c, new, None if complete else len(new) // 2 - 3)
+        finally:
+            c.close()
+
+    result = await asyncio.to_thread(run)
+    async with open_vehicle(px4.connection_url, 30, link="pymavlink") as vehicle:
+        items = await download_fence(vehicle)
+    held = [(i.command, int(i.param1), to_e7(i.lat), to_e7(i.lon)) for i in items]
+    if complete:
+        assert result == ids.MAV_MISSION_ACCEPTED and held == new
+    else:
+        assert result is None and held == old, (len(held), held[:2])

@@ -9,7 +9,7 @@ under way), uploads them, reads them back, and does it again once the vehicle is
 hysteresis away from that centre. So the fence in force always holds every fence within reach
 of the vehicle, the previous one until the new one is written (ArduPilot keeps its fence until
 the last item of an upload arrives, and keeps it when an upload fails; PX4 writes an upload
-beside the fence in force and switches at its end). On PX4 a fence is compiled for PX4 and
+into its other fence slot and switches at its end). On PX4 a fence is compiled for PX4 and
 checked against its home before it is sent (PX4 would drop an area its home breaches).
 
 :class:`RollingPlan` is the pure part (which fences, when to re-upload); :class:`RollingFence`
