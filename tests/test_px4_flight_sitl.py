@@ -236,3 +236,41 @@ async def test_the_monitor_brakes_a_px4_vehicle_before_the_fence(px4, link):
     short = ZONE_EDGE - max(track.east)
     print(f"\nmonitor brake on PX4 ({link}): stopped {short:.1f} m before the zone")
     assert short > 0.0 and track.speed[-1] < STOPPED_MPS
+
+
+@pytest.mark.parametrize("action, mode", [("rtl", "RETURN_TO_LAUNCH"), ("land", "LAND")])
+async def test_the_monitors_breach_action_on_px4(px4, link, action, mode):
+    # a BREACH (the monitor does nothing before it) is met with PX4's Return or Land mode
+    frame = LocalFrame(*HOME)
+    zone = shapely.box(60.0, -100.0, 160.0, 100.0)
+    fences = FenceSet([FenceRecord("test/zone", "keep_out", frame.geom_to_wgs84(zone))])
+    track, log, modes = Track(frame), EventLog(), []
+    options = MonitorOptions(enforce=True, imminent_action="none", breach_action=action)
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        await apply_params(vehicle, {"GF_ACTION": 0, "MPC_XY_CRUISE": SPEED})
+        stop = asyncio.Event()
+        task = asyncio.create_task(Monitor(vehicle, fences, options, log).run(stop))
+
+        async def fly():
+            amsl = await _take_off(vehicle, ALTITUDE)
+            lon, lat = frame.to_wgs84(np.array([300.0]), np.array([0.0]))
+            await vehicle.action.goto_location(float(lat[0]), float(lon[0]), amsl, float("nan"))
+            async for m in vehicle.telemetry.subscribe_flight_mode():
+                if not modes or modes[-1] != m.name:
+                    modes.append(m.name)
+                if m.name == mode:
+                    break
+            if action == "rtl":  # back towards home
+                await track.until("heading home", lambda: track.east[-1] < max(track.east) - 20, 60)
+            else:  # down where it was
+                await track.until("descending", lambda: track.height[-1] < ALTITUDE - 5.0, 60)
+
+        try:
+            await _watched(vehicle, track, fly, px4)
+        finally:
+            stop.set()
+            await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 10)
+    kinds = [(e["event"], e.get("level") or e.get("action")) for e in log.events]
+    assert ("level", "BREACH") in kinds and ("action", action) in kinds, kinds
+    assert ("action_done", action) in kinds, log.events
+    assert modes[-1] == mode and "POSCTL" not in modes, modes
