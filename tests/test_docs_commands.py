@@ -38,6 +38,7 @@ must hold no ``$ `` command line.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import re
@@ -363,13 +364,39 @@ def _params():
     return out
 
 
+def _ports(page) -> list:
+    """The fixed ports a page's run blocks listen on or connect to (``--port 14550``,
+    ``udpin://127.0.0.1:14550``, ``0.0.0.0:8765``), in order."""
+    text = "\n".join(b.text for b in _read(page) if b.lang in RUN and not b.not_run)
+    return sorted({int(p) for p in re.findall(r"(?:--port |:)(\d{4,5})\b", text)})
+
+
+@contextlib.contextmanager
+def _port_lock(port: int):
+    """Exclusive use of ``port`` among the test processes (pytest-xdist's workers): a lock
+    file, waited on."""
+    import fcntl
+    import tempfile
+
+    path = Path(tempfile.gettempdir()) / f"alphafence-docs-port-{port}.lock"
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
 @pytest.mark.parametrize("page", _params())
 def test_the_pages_commands_run(page, tmp_path):
     if not MALTA.is_file():
         pytest.skip(f"Malta extract not found at {MALTA} (../shared beside the checkout)")
     from alphafence.sitl.find import find_sitl_binary
 
-    left_out = run_page(page, tmp_path, find_sitl_binary() is not None)
+    with contextlib.ExitStack() as held:  # one page at a time on each port the pages name
+        for port in _ports(page):
+            held.enter_context(_port_lock(port))
+        left_out = run_page(page, tmp_path, find_sitl_binary() is not None)
     if left_out:
         pytest.skip(f"{len(left_out)} block(s) not run: " + "; ".join(left_out))
 

@@ -36,6 +36,9 @@ from alphafence.vehicle.values import (
 
 PARAM_RETRY_S = 1.0
 PARAM_TRIES = 3
+IGNORED = ("VX", "VY", "VZ", "AX", "AY", "AZ", "YAW", "YAW_RATE")  # a position target's
+POSITION_ONLY = sum(getattr(ids, f"POSITION_TARGET_TYPEMASK_{k}_IGNORE") for k in IGNORED)
+NO_MISSION = 0xFFFF  # MISSION_CURRENT's total when the vehicle has no mission (UINT16_MAX)
 
 
 class CommandRefused(VehicleError):
@@ -243,7 +246,7 @@ class Action:
         sysid, compid = self.v.target
         self.v.link.send(
             self.v.link.mav.set_position_target_global_int_encode(
-                0, sysid, compid, ids.MAV_FRAME_GLOBAL_INT, ids.POSITION_TARGET_POSITION_ONLY,
+                0, sysid, compid, ids.MAV_FRAME_GLOBAL_INT, POSITION_ONLY,
                 to_e7(lat), to_e7(lon), float(alt_amsl_m), 0, 0, 0, 0, 0, 0, 0, 0,
             )
         )  # fmt: skip
@@ -366,7 +369,7 @@ class MissionRaw:
                 current = reached + 1
             else:
                 n = int(getattr(m, "total", 0) or 0)  # 0: no total (an older MAVLink)
-                heard = 0 if n == ids.MISSION_CURRENT_NO_MISSION else n + home if n else heard
+                heard = 0 if n == NO_MISSION else n + home if n else heard
                 if int(m.seq) != reached:
                     current = int(m.seq)
             total = self.v.mission.counts.get(ids.MAV_MISSION_TYPE_MISSION, heard)
