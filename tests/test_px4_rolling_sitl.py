@@ -153,14 +153,14 @@ async def test_px4s_rolling_fence_never_sends_an_area_home_breaches(
         assert len(after) == 4 and px4.logged("Geofence invalid")
 
 
-def _raw_upload(c, items, stop_at=None):
+def _raw_upload(c, to, items, stop_at=None):
     """Upload fence ``items`` ((command, vertices, lat e7, lon e7)) with a plain pymavlink link,
     answering PX4's requests; stop answering at item ``stop_at`` until PX4 gives up. Returns
     the MISSION_ACK's result, or None when stopped."""
     from alphafence.mavlink import ids
 
     fence = ids.MAV_MISSION_TYPE_FENCE
-    c.mav.mission_count_send(1, 1, len(items), fence)
+    c.mav.mission_count_send(*to, len(items), fence)
     kinds = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"]
     while (m := c.recv_match(type=kinds, blocking=True, timeout=10)) is not None:
         if m.get_type() == "MISSION_ACK":
@@ -170,7 +170,7 @@ def _raw_upload(c, items, stop_at=None):
                 pass
             return None
         cmd, n, lat, lon = items[m.seq]
-        c.mav.mission_item_int_send(1, 1, m.seq, 0, cmd, 0, 1, n, 0, 0, 0, lat, lon, 0, fence)
+        c.mav.mission_item_int_send(*to, m.seq, 0, cmd, 0, 1, n, 0, 0, 0, lat, lon, 0, fence)
     raise AssertionError("PX4 stopped answering the upload")
 
 
@@ -196,9 +196,11 @@ async def test_px4_keeps_its_whole_fence_when_an_upload_stops_halfway(px4, compl
     def run():
         c = mavutil.mavlink_connection(px4.connection_url, source_system=255)
         try:
-            assert c.wait_heartbeat(timeout=30) is not None
-            assert _raw_upload(c, old) == ids.MAV_MISSION_ACCEPTED
-            return _raw_upload(c, new, None if complete else len(new) // 2 - 3)
+            px4_beat = f"HEARTBEAT.autopilot=={ids.MAV_AUTOPILOT_PX4}"
+            hb = c.recv_match(type="HEARTBEAT", condition=px4_beat, blocking=True, timeout=30)
+            to = (hb.get_srcSystem(), hb.get_srcComponent())  # instance N is system N + 1
+            assert _raw_upload(c, to, old) == ids.MAV_MISSION_ACCEPTED
+            return _raw_upload(c, to, new, None if complete else len(new) // 2 - 3)
         finally:
             c.close()
 
