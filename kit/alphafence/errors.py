@@ -144,7 +144,7 @@ class SourceError(AlphaFenceError):
     exit_code = 4
 
     def __init__(self, url, message, retry: bool = False):
-        self.url, self.retry = str(url), retry
+        self.url, self.retry = " ".join(str(url).split())[:300], retry  # a server's link too
         self.message = " ".join(str(message).split())[:300]
         super().__init__(f"{self.url}: {self.message}")
 

@@ -10,6 +10,7 @@ was made from. Runs in the monitor's worker process (:mod:`alphafence.monitor.li
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 
@@ -98,28 +99,30 @@ def read_answer(url, features, rules, options, known) -> tuple:
     -------
     tuple
         ``(entries, bad, fences)``: per zone, in order, ``("known", id, hash)`` or
-        ``("new", Zone)``; one line per feature that is not a zone; ``{hash: [(properties,
+        ``("new", Zone)``, then ``("held", id, None)`` for each feature that is not a zone (or
+        cannot be fenced), to be kept as it was if it is in force; one line per such feature; ``{hash: [(properties,
         WKB)]}`` of the new zones' fences, each checked here as a fence file's feature is
         (:func:`unpack` makes them fence records: plain data crosses the process boundary
         cheaply, where shapely objects would be rebuilt one by one in the monitor).
     """
-    from alphafence.sources.answers import canonical_hash, read_zones, zone_id
+    from alphafence.sources.answers import canonical_hash, read_zones, served_id
+    from alphafence.sources.request import loads
 
     if features and isinstance(features[0], (bytes, bytearray)):
-        import json
-
-        features = [f for page in features for f in json.loads(page)["features"]]
+        features = [f for page in features for f in loads(url, page)["features"]]
     entries, fresh, order = [], [], []
     for feature in features:
         digest = canonical_hash(feature)
         if digest in known:
-            order.append(("known", zone_id(feature, digest), digest))
+            order.append(("known", served_id(feature, digest), digest))
         else:
             order.append(None)
             fresh.append(feature)
-    zones, bad = read_zones(url, fresh, rules)
-    zones = [z for z in zones if not z.fence or _fence_ok(url, z, bad)]
-    by_hash = {z.hash: z for z in zones}
+    held = []
+    zones, bad = read_zones(url, fresh, rules, held=held)
+    zones = [z for z in zones if not z.fence or _fence_ok(url, z, bad, held)]
+    fences = _fenced(url, zones, rules, options, bad, held)
+    by_hash = {z.hash: z for z in zones if z.hash in fences}
     fresh_hashes = iter(canonical_hash(f) for f in fresh)
     for item in order:
         if item is not None:
@@ -128,8 +131,31 @@ def read_answer(url, features, rules, options, known) -> tuple:
         digest = next(fresh_hashes)
         if digest in by_hash:
             entries.append(("new", by_hash.pop(digest)))
-    fences = zone_fence_features([e[1] for e in entries if e[0] == "new"], rules, options)
-    return entries, bad, {h: _records(url, h, feats) for h, feats in fences.items()}
+    entries += [("held", ident, None) for ident in held]
+    return entries, bad, fences
+
+
+def _fenced(url, zones, rules, options, bad, held) -> dict:
+    """``{hash: [(properties, WKB)]}`` of ``zones``' fences: all at once, or, when that fails,
+    zone by zone, a zone that cannot be fenced named in ``bad`` and held (never lifted by it)."""
+    from alphafence.errors import InputError
+
+    def fence(some):
+        return {
+            h: _records(url, h, f) for h, f in zone_fence_features(some, rules, options).items()
+        }
+
+    with contextlib.suppress(Exception):  # else one zone's fault: found below, zone by zone
+        return fence(zones)
+    out = {}
+    for z in zones:
+        try:
+            out.update(fence([z]))
+        except Exception as exc:  # noqa: BLE001 - whatever the fencing raised, one line
+            bad.append(str(InputError(url, f"cannot be fenced ({type(exc).__name__}: {exc})",
+                                      f"zone {z.id}")))  # fmt: skip
+            held.append(z.id)
+    return out
 
 
 def _records(url, digest, features) -> list:
@@ -160,7 +186,7 @@ def unpack(url, packed) -> list:
             for k, ((p, _), g) in enumerate(zip(packed, geoms))]  # fmt: skip
 
 
-def _fence_ok(url, zone, bad) -> bool:
+def _fence_ok(url, zone, bad, held) -> bool:
     """Whether a served fence reads as a fence file's feature does (else its line in ``bad``)."""
     import shapely
 
@@ -171,7 +197,10 @@ def _fence_ok(url, zone, bad) -> bool:
     try:
         fence_record(url, props, shapely.geometry.shape(zone.feature["geometry"]),
                      f"fence {zone.id}", 0)  # fmt: skip
-    except InputError as exc:
+    except Exception as exc:  # noqa: BLE001 - whatever the check raised, one line
+        if not isinstance(exc, InputError):
+            exc = InputError(url, f"unreadable ({type(exc).__name__}: {exc})", f"fence {zone.id}")
         bad.append(str(exc))
+        held.append(zone.id)
         return False
     return True

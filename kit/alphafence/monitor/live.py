@@ -33,6 +33,7 @@ from alphafence.monitor.live_zones import LiveZones, copied_zones, window_state
 
 SWITCH_S = 0.0002  # the interpreter's thread switch interval while a fence set is rebuilt
 CLOCK_SKEW_S = 30.0  # this clock and the server's differ by more: said, and windows widened
+MAX_SKEW_S = 24 * 3600.0  # a server's clock off by more is refused, not applied
 BAD_SHOWN = 10  # features that are not zones named one event each, up to this many per answer
 
 
@@ -99,6 +100,7 @@ class LiveSource:
         self.last_good = time.monotonic()
         self.stale = False
         self.skew_s = 0.0
+        self._skew_refused = False
         self.windows = {}  # zone hash -> the window state last said
         self._timed = None  # (the zone set's revision, its zones with a window)
         self.answers = 0
@@ -111,25 +113,31 @@ class LiveSource:
         self._wake.set()
 
     async def run(self, stop: asyncio.Event) -> None:
-        """Ask the source until ``stop`` is set (the monitor runs it as a task)."""
-        async with self.opened():
-            while not stop.is_set():
-                await self.refresh()
-                self._wake.clear()
-                with contextlib.suppress(asyncio.TimeoutError):
-                    await asyncio.wait_for(self._wake.wait(), self.options.refresh_s)
+        """Ask the source until ``stop`` is set (the monitor runs it as a task). Supervised:
+        whatever a refresh raises is one ``source_failed`` and the next refresh comes as due;
+        a worker or session that cannot be opened is tried again at the next refresh."""
+        while not stop.is_set():
+            try:
+                async with self.opened():
+                    while not stop.is_set():
+                        await self.refresh()
+                        await self._pause()
+            except Exception as exc:  # noqa: BLE001 - the loop outlives anything it meets
+                self._failed(f"the source's worker or session failed: {_line(exc)}")
+                await self._pause()
+
+    async def _pause(self) -> None:
+        self._wake.clear()
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(self._wake.wait(), self.options.refresh_s)
 
     @contextlib.asynccontextmanager
     async def opened(self):
         """The worker process (spawned, not forked: the monitor has threads) and the HTTP
         session, for :meth:`refresh`; both closed at the end."""
-        import multiprocessing
-
-        from alphafence.fencing.zone_fences import worker_start
         from alphafence.sources.ogc import session
 
-        context = multiprocessing.get_context("spawn")
-        self.pool = ProcessPoolExecutor(1, mp_context=context, initializer=worker_start)
+        self.pool = _pool()
         self._http = session(self.options.source)
         try:
             yield self
@@ -166,27 +174,33 @@ class LiveSource:
 
     async def refresh(self) -> None:
         """One answer: asked, read and fenced in the worker, taken, the fences swapped if
-        anything changed. Never raises but for cancellation."""
+        anything changed. Never raises but for cancellation: any failure, the source's or a
+        bug's, is one ``source_failed`` and removes nothing."""
+        try:
+            await self._refresh()
+        except Exception as exc:  # noqa: BLE001 - what a server sent must not end the polling
+            self._failed(f"refresh failed: {_line(exc)}")
+
+    def _failed(self, error: str) -> None:
+        self.monitor.handle(new_event("source_failed", error=error, kept=len(self.zones.versions)))
+        self._check_stale()
+
+    async def _refresh(self) -> None:
+        from concurrent.futures.process import BrokenProcessPool
+
         from alphafence.errors import SourceError
         from alphafence.sources.ogc import fetch
 
         put = self.monitor.handle  # logged, and alerted when it says something to the GCS
         bbox = self.area()
         try:
-            answer = await fetch(
-                self._http, self.options.source, bbox, self.etag, self.last_modified
-            )
-        except SourceError as exc:
-            put(new_event("source_failed", error=str(exc), kept=len(self.zones.versions)))
-            self._check_stale()
-            return
-        if answer.raw is not None and self.options.trusted_keys:
-            try:
+            answer = await fetch(self._http, self.options.source, bbox, self.etag,
+                                 self.last_modified, keep="raw")  # fmt: skip
+            if answer.raw is not None and self.options.trusted_keys:
                 await self._verify(answer)
-            except SourceError as exc:
-                put(new_event("source_failed", error=str(exc), kept=len(self.zones.versions)))
-                self._check_stale()
-                return
+        except SourceError as exc:
+            self._failed(str(exc))
+            return
         self.answers += 1
         self._clock(answer)
         if answer.not_modified:
@@ -198,13 +212,29 @@ class LiveSource:
             entries, bad, fences = await loop.run_in_executor(
                 self.pool, _read_answer, self.options, answer.pages_raw, set(self.fenced)
             )
-        except Exception as exc:  # noqa: BLE001 - a worker that failed removes nothing
-            put(new_event("source_failed", error=f"reading the answer: {exc}"))
+        except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            self.pool = _pool()
+            self._failed("reading the answer: the worker process died (a new one is started)")
             return
-        zones = self._zones(entries, fences)
+        except Exception as exc:  # noqa: BLE001 - a worker that failed removes nothing
+            self._failed(f"reading the answer: {_line(exc)}")
+            return
+        zones, held = self._zones(entries, fences)
         for line in bad[:BAD_SHOWN]:
             put(new_event("source_zone_invalid", problem=line))
-        change = self.zones.answer(zones, answer.complete, bbox)
+        if answer.count and not zones:  # every feature malformed: no answer, never an empty one
+            self._failed(f"{answer.url}: none of its {answer.count} features is a zone: taken as "
+                         "a failed answer")  # fmt: skip
+            return
+        change = self.zones.answer(zones, answer.complete, bbox, held)
+        self._said(answer, zones, bad, change)
+        if change:
+            await self._swap()
+
+    def _said(self, answer, zones, bad, change) -> None:
+        """The events of an answer taken: what came, the zones new, changed, kept or lifted."""
+        put = self.monitor.handle
         put(new_event("source_answer", zones=len(zones), invalid=len(bad), pages=answer.pages,
                       complete=answer.complete, seconds=round(answer.seconds, 3),
                       bytes=answer.bytes))  # fmt: skip
@@ -221,6 +251,9 @@ class LiveSource:
         if change.kept_empty:
             put(new_event("source_empty", kept=[z.id for z in change.kept_empty][:20],
                           reason="an empty answer where zones were: kept until a second one"))  # fmt: skip
+        for z in change.held:
+            put(new_event("source_zone_kept", zone=z.id, name=z.name,
+                          reason="served malformed: kept as it was"))  # fmt: skip
         now = datetime.now(timezone.utc)
         for z in change.added + change.changed:
             state = window_state(z.applicability, now, self.options.announce_s, self.skew_s)
@@ -231,8 +264,6 @@ class LiveSource:
         for z in change.removed:
             self.windows.pop(z.hash, None)
             put(new_event("source_zone_removed", zone=z.id, name=z.name))
-        if change:
-            await self._swap()
 
     async def _verify(self, answer) -> None:
         """The document's detached signature (``URL.sig.json``) checked against the trusted
@@ -267,7 +298,10 @@ class LiveSource:
             windowed = [z for z in self.zones.zones if timed(z.applicability)]
             self._timed = (self.zones.revision, windowed)
         for z in self._timed[1]:
-            state = window_state(z.applicability, now_utc, self.options.announce_s, self.skew_s)
+            try:
+                state = window_state(z.applicability, now_utc, self.options.announce_s, self.skew_s)
+            except Exception as exc:  # noqa: BLE001 - a served window this clock cannot take
+                state = f"unreadable ({_line(exc)}): in force"
             if self.windows.get(z.hash) != state:
                 self.windows[z.hash] = state
                 self.monitor.handle(
@@ -320,18 +354,21 @@ class LiveSource:
                                        seconds=round(time.monotonic() - t0, 3)))  # fmt: skip
 
     def _zones(self, entries, fences):
-        zones, by_hash = [], {z.hash: z for z in self.zones.zones}
+        """The zones of the worker's entries, and the ids it held (served malformed)."""
+        zones, held, by_hash = [], [], {z.hash: z for z in self.zones.zones}
         for entry in entries:
-            if entry[0] == "known":
+            if entry[0] == "held":
+                held.append(entry[1])
+            elif entry[0] == "known":
                 z = by_hash.get(entry[2]) or self._known.get(entry[2])
                 if z is not None:
                     zones.append(z)
-                continue
-            z = entry[1]
-            self.fenced[z.hash] = fences.get(z.hash, [])  # read in the worker
-            self._known[z.hash] = z
-            zones.append(z)
-        return zones
+            else:
+                z = entry[1]
+                self.fenced[z.hash] = fences.get(z.hash, [])  # read in the worker
+                self._known[z.hash] = z
+                zones.append(z)
+        return zones, held
 
     @property
     def _known(self) -> dict:
@@ -353,9 +390,21 @@ class LiveSource:
                                           kept=len(self.zones.versions)))  # fmt: skip
 
     def _clock(self, answer) -> None:
+        """The server's clock against this one: windows widened by a difference over
+        :data:`CLOCK_SKEW_S`; one over :data:`MAX_SKEW_S` is the server's fault, refused (said
+        once, nothing widened)."""
         skew = answer.server_skew_s
-        if skew is None:
+        if skew is None or skew != skew:
             return
+        if abs(skew) > MAX_SKEW_S:
+            if not self._skew_refused:
+                self._skew_refused = True
+                self.monitor.handle(new_event("source_clock", skew_s=round(max(-1e12, min(1e12, skew)), 1),
+                                              refused=True, reason="the source's clock is off by "
+                                              f"more than {MAX_SKEW_S / 3600:g} h: its Date is not "
+                                              "applied"))  # fmt: skip
+            return
+        self._skew_refused = False
         doubt = abs(skew) if abs(skew) > CLOCK_SKEW_S else 0.0
         if doubt and not self.skew_s:
             self.monitor.handle(new_event("source_clock", skew_s=round(skew, 1),
@@ -363,6 +412,21 @@ class LiveSource:
                                           "windows are widened by the difference"))  # fmt: skip
         self.skew_s = doubt
         self.monitor.clock_slack_s = doubt
+
+
+def _pool():
+    """The fencing worker: one process, spawned (not forked: the monitor has threads)."""
+    import multiprocessing
+
+    from alphafence.fencing.zone_fences import worker_start
+
+    context = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(1, mp_context=context, initializer=worker_start)
+
+
+def _line(exc) -> str:
+    """One line for any exception: its type and its first 300 characters."""
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"[:300]
 
 
 @contextlib.contextmanager

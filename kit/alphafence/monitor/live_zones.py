@@ -8,6 +8,9 @@ Pure (no I/O): :class:`LiveZones` takes each answer of the source and says what 
   geometry meets and that no longer holds it; an answer for another area says nothing of it.
   A changed zone's old version goes the same way, when a complete answer holds the new one.
 * A failed or incomplete answer removes nothing.
+* A zone in force that an answer serves malformed (a feature that is not a zone, or cannot be
+  fenced: ``held``) is kept as it was, and said to be; only a complete answer without it at
+  all removes it.
 * A complete answer that is empty where zones were in force in its area is reported and
   removes nothing; only a second such answer in a row removes them.
 * Time windows are the fences' own (``properties["zone"]["applicability"]``): the monitor's
@@ -36,9 +39,12 @@ class Change:
         New zones, new versions of zones in force (the new version), zones no longer in force.
     kept_empty : list of Zone
         Zones an empty answer would have removed, kept until a second one confirms it.
+    held : list of Zone
+        Zones in force that the answer served malformed: kept as they were.
     """
 
     added: list = field(default_factory=list)
+    held: list = field(default_factory=list)
     changed: list = field(default_factory=list)
     removed: list = field(default_factory=list)
     kept_empty: list = field(default_factory=list)
@@ -84,7 +90,7 @@ class LiveZones:
         """The zones in force (every version), in the order they came."""
         return list(self.versions.values())
 
-    def answer(self, zones, complete: bool, bbox=None) -> Change:
+    def answer(self, zones, complete: bool, bbox=None, held=()) -> Change:
         """Take one answer.
 
         Parameters
@@ -95,17 +101,20 @@ class LiveZones:
             Every page was read.
         bbox : tuple, optional
             The area it was asked for (lon, lat); None: everything.
+        held : iterable of str
+            Ids of the zones it served malformed: what is in force of them is kept.
 
         Returns
         -------
         Change
         """
-        change = self._answer(zones, complete, bbox)
+        change = self._answer(zones, complete, bbox, set(held))
         self.revision += bool(change)
         return change
 
-    def _answer(self, zones, complete, bbox) -> Change:
+    def _answer(self, zones, complete, bbox, held) -> Change:
         change = Change()
+        change.held = [z for k, z in self.versions.items() if k[0] in held]
         ids_in_force = {k[0] for k in self.versions}
         served = {(z.id, z.hash) for z in zones}
         for z in zones:
@@ -116,7 +125,8 @@ class LiveZones:
             self.versions[key] = z
         if not complete:
             return change
-        gone = [k for k, z in self.versions.items() if k not in served and zone_meets(z, bbox)]
+        gone = [k for k, z in self.versions.items()
+                if k not in served and k[0] not in held and zone_meets(z, bbox)]  # fmt: skip
         if not zones and gone:
             if not self.empty_pending:
                 self.empty_pending = True

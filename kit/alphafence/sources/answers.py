@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from alphafence.errors import InputError
 from alphafence.zones.ed269 import read_ed269_doc
 from alphafence.zones.ed318 import looks_like_ed318
+from alphafence.zones.features import geometry_problem
 from alphafence.zones.geojson import read_geojson_doc
 
 
@@ -112,7 +113,7 @@ def fence_properties(feature) -> dict | None:
     return None
 
 
-def read_zones(url, features, rules, known=None):
+def read_zones(url, features, rules, known=None, held=None):
     """The zones among a source's ``features``.
 
     Parameters
@@ -125,6 +126,9 @@ def read_zones(url, features, rules, known=None):
         What a plain GeoJSON feature restricts (ED-318 zones restrict by their type).
     known : dict, optional
         ``{hash: Zone}`` already read: a feature with one of these hashes is not read again.
+    held : list, optional
+        Given, the id of each feature that is not a zone is appended to it: a zone in force
+        that comes back malformed is kept as it was, never lifted by it.
 
     Returns
     -------
@@ -141,8 +145,13 @@ def read_zones(url, features, rules, known=None):
         if zone is None:
             try:
                 zone = _read_one(url, i, feature, digest, rules)
-            except InputError as exc:
+            except Exception as exc:  # noqa: BLE001 - whatever a feature does, one line
+                if not isinstance(exc, InputError):
+                    exc = InputError(url, f"unreadable ({type(exc).__name__}: {exc})",
+                                     f"feature {i}")  # fmt: skip
                 bad.append(str(exc))
+                if held is not None:
+                    held.append(served_id(feature, digest))
                 continue
         if zone.id in ids:
             bad.append(f"{url}: zone {zone.id}: served twice in one answer (the first is kept)")
@@ -156,6 +165,12 @@ def _read_one(url, i, feature, digest, rules) -> Zone:
     ident = zone_id(feature, digest)
     if not isinstance(feature, dict) or feature.get("type") != "Feature":
         raise InputError(url, "not a GeoJSON Feature", f"feature {i}")
+    if not isinstance(feature.get("properties") or {}, dict):
+        raise InputError(url, "properties must be an object", f"zone {ident}")
+    if feature.get("geometry") is not None:  # its shape checked before GEOS reads it
+        problem = geometry_problem(feature["geometry"])
+        if problem:
+            raise InputError(url, problem, f"zone {ident}")
     fence = fence_properties(feature)
     if fence is not None:
         return _read_fence(url, feature, fence, digest)
@@ -173,12 +188,27 @@ def _read_one(url, i, feature, digest, rules) -> Zone:
     return Zone(ident, digest, feature, tuple(restricted), window)
 
 
+def served_id(feature, digest: str) -> str:
+    """The id a feature's zone has when read: a served fence's (its ``id``, else
+    ``site_id#kind``), else :func:`zone_id`'s.
+
+    Examples
+    --------
+    >>> served_id({"properties": {"site_id": "x/1", "kind": "keep_out", "method": "alpha"}}, "ab")
+    'x/1#keep_out'
+    """
+    fence = fence_properties(feature)
+    if fence is None:
+        return zone_id(feature, digest)
+    return str(feature.get("id") or f"{fence['site_id']}#{fence['kind']}")
+
+
 def _read_fence(url, feature, props, digest) -> Zone:
     """A served fence (checked as a fence file's feature is where it is fenced:
     :func:`alphafence.fencing.zone_fences.read_answer`)."""
     import shapely
 
-    ident = str(feature.get("id") or f"{props['site_id']}#{props['kind']}")
+    ident = served_id(feature, digest)
     try:
         geometry = shapely.geometry.shape(feature.get("geometry") or {})
     except Exception as exc:  # noqa: BLE001 - GEOS's or shapely's words, in one line

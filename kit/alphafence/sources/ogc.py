@@ -19,15 +19,17 @@ import ssl
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from email.utils import parsedate_to_datetime
-from urllib.parse import parse_qsl, urlencode, urljoin, urlsplit, urlunsplit
+from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from alphafence.errors import SourceError
-from alphafence.sources.request import get
+from alphafence.sources.request import follow, get, origin
 
 ACCEPT = "application/geo+json, application/json;q=0.9"
 PAGE_LIMIT = 500  # features asked per page
 MAX_PAGES = 200  # pages followed in one answer (100,000 zones at the page size)
 MAX_PAGE_BYTES = 32 * 2**20  # one page's body, inflated
+MAX_ANSWER_BYTES = 64 * 2**20  # every page of one answer, inflated
+MAX_FEATURES = 20_000  # features in one answer
 TIMEOUT_S = 10.0  # one request, connection to last byte
 RETRIES = 2  # more tries after the first, for what may pass
 BACKOFF_S = 0.5  # the first retry's ceiling; doubled each time (full jitter below it)
@@ -50,6 +52,12 @@ class SourceOptions:
     timeout_s, max_bytes, max_pages, limit, retries, backoff_s
         One request's time, one page's size, the pages of an answer, the features asked per
         page, the retries and the first backoff.
+    max_answer_bytes, max_features : int
+        One answer's budget, over all its pages: its bodies' bytes (inflated) and its
+        features. An answer over either is incomplete.
+    also_origins : tuple of str
+        Origins besides the source's own (``https://host:port``) that its ``next`` links and
+        redirects may lead to, the token with them; any other is refused.
     """
 
     url: str
@@ -61,6 +69,22 @@ class SourceOptions:
     limit: int = PAGE_LIMIT
     retries: int = RETRIES
     backoff_s: float = BACKOFF_S
+    max_answer_bytes: int = MAX_ANSWER_BYTES
+    max_features: int = MAX_FEATURES
+    also_origins: tuple = ()
+
+    @property
+    def origins(self) -> tuple:
+        """The origins the source may be asked at (and its token sent to): its own, then the
+        ones named.
+
+        Examples
+        --------
+        >>> o = SourceOptions("https://z.example/collections/uas", also_origins=("https://cdn.z",))
+        >>> o.origins
+        ('https://z.example:443', 'https://cdn.z:443')
+        """
+        return (origin(self.url), *(origin(o) for o in self.also_origins))
 
     @property
     def items_url(self) -> str:
@@ -121,9 +145,13 @@ class Answer:
     bbox : tuple or None
         The area asked (lon, lat), or None for everything.
     features : list of dict or None
-        The GeoJSON Features read (None when ``not_modified``).
+        The GeoJSON Features read (None when ``not_modified``; empty when only the pages'
+        bytes were kept).
     complete : bool
-        Every page was read (the answer may remove zones); False: ``error`` says why not.
+        Every page was read, none twice, and the counts the server gave agree with the
+        features read (the answer may remove zones); False: ``error`` says why not.
+    count : int
+        The features read.
     not_modified : bool
         The server said nothing changed since the last answer (HTTP 304).
     etag, last_modified : str or None
@@ -150,6 +178,7 @@ class Answer:
     fetched_utc: str = ""
     server_skew_s: float | None = None
     pages: int = 0
+    count: int = 0
     error: SourceError | None = None
     seconds: float = 0.0
     bytes: int = 0
@@ -182,9 +211,7 @@ def session(options: SourceOptions):
 
     connector = aiohttp.TCPConnector(ssl=ssl_context(options.ca_file), limit=4)
     timeout = aiohttp.ClientTimeout(total=options.timeout_s)
-    headers = {"Accept": ACCEPT, "User-Agent": "alphafence"}
-    if options.token:
-        headers["Authorization"] = f"Bearer {options.token}"
+    headers = {"Accept": ACCEPT, "User-Agent": "alphafence"}  # the token: per request, by origin
     return aiohttp.ClientSession(connector=connector, timeout=timeout, headers=headers)
 
 
@@ -195,7 +222,9 @@ def _with_query(url: str, **params) -> str:
     return urlunsplit(parts._replace(query=urlencode(query, safe=",:/")))
 
 
-async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modified=None) -> Answer:
+async def fetch(
+    http, options: SourceOptions, bbox=None, etag=None, last_modified=None, keep="features"
+) -> Answer:
     """Every zone the source holds in ``bbox`` (lon, lat), page by page.
 
     Parameters
@@ -207,12 +236,17 @@ async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modifie
         ``(min lon, min lat, max lon, max lat)``; None asks for everything.
     etag, last_modified : str, optional
         The last answer's validators: an unchanged source answers 304 (``not_modified``).
+    keep : {"features", "raw"}
+        Keep the features read (``Answer.features``), or only each page's bytes
+        (``Answer.pages_raw``, for a worker process to read: one page parsed at a time here).
 
     Returns
     -------
     Answer
-        Complete, not modified, or incomplete with its ``error`` (a page after the first
-        failed, was cut short, or the pages ran over ``max_pages``).
+        Complete, not modified, or incomplete with its ``error``: a page after the first
+        failed or was not a collection; a ``next`` link looped, or led to another origin or
+        scheme; a page's ``numberReturned`` or the answer's ``numberMatched`` disagrees with
+        the features read; the pages, bytes or features ran over their budget.
 
     Raises
     ------
@@ -235,77 +269,133 @@ async def fetch(http, options: SourceOptions, bbox=None, etag=None, last_modifie
     asked = None if bbox is None or not options.paged else tuple(bbox)  # a document: all of it
     answer = Answer(url, asked, [], True,
                     fetched_utc=fetched.isoformat(timespec="milliseconds").replace("+00:00", "Z"))  # fmt: skip
-    page_url, seen = first, set()
-    while page_url is not None:
-        try:
-            status, headers, doc, raw = await get(http, options, page_url, conditional)
-            size = len(raw or b"")
-        except SourceError as exc:
-            if answer.pages == 0:
-                raise
-            answer.complete, answer.error = False, exc
-            break
-        answer.pages += 1
-        answer.bytes += size
-        if answer.pages == 1:
-            answer.etag, answer.last_modified = headers.get("ETag"), headers.get("Last-Modified")
-            answer.server_skew_s = _skew(headers.get("Date"), fetched)
-            if status == 304:
-                answer.not_modified, answer.features = True, None
-                break
-        conditional = {}
-        if not options.paged:
-            answer.raw = raw
-        answer.pages_raw.append(raw)
-        features, next_url, matched = _page(options, page_url, doc)
-        answer.features.extend(features)
-        if answer.pages == 1 and matched is not None:
-            answer.matched = matched
-        seen.add(page_url)
-        if next_url in seen:
-            next_url = None  # a server whose next link loops: the pages so far are all
-        if next_url is not None and answer.pages >= options.max_pages:
-            answer.complete = False
-            answer.error = SourceError(
-                url, f"more than {options.max_pages} pages: the rest was not read"
-            )
-            break
-        page_url = next_url
-    if answer.complete and answer.matched is not None and len(answer.features) < answer.matched:
-        answer.complete = False
-        answer.error = SourceError(
-            url, f"{len(answer.features)} features read of the {answer.matched} it matched"
-        )
+    page_url, seen = first, {}
+    try:
+        while page_url is not None:
+            page_url = await _read_page(http, options, answer, page_url, conditional, seen, keep)
+            conditional = {}
+        _check_matched(answer)
+    except _Incomplete as stop:
+        answer.complete, answer.error = False, stop.error
     answer.seconds = loop.time() - t0
     return answer
 
 
-def _skew(date_header, fetched) -> float | None:
+class _Incomplete(Exception):
+    """What stops an answer after its first page: it comes back incomplete."""
+
+    def __init__(self, error):
+        self.error = error
+
+
+def _fail(answer, error):
+    if answer.pages == 0:
+        raise error
+    raise _Incomplete(error)
+
+
+async def _read_page(http, options, answer, page_url, conditional, seen, keep):
+    """Ask one page and take it into ``answer``: the next page's URL, or None after the last."""
+    left = options.max_answer_bytes - answer.bytes
+    limit, over = options.max_bytes, None
+    if left < limit:
+        limit = left
+        over = (f"answer larger than {options.max_answer_bytes / 2**20:g} MiB over "
+                f"{answer.pages + 1} pages: the rest was not read")  # fmt: skip
+    try:
+        status, headers, doc, raw, answered = await get(
+            http, options, page_url, conditional, limit, over
+        )
+    except SourceError as exc:
+        _fail(answer, exc)
+    answer.pages += 1
+    answer.bytes += len(raw or b"")
+    if answer.pages == 1:
+        answer.etag, answer.last_modified = headers.get("ETag"), headers.get("Last-Modified")
+        answer.server_skew_s = _skew(headers.get("Date"), answer.fetched_utc)
+    if status == 304:
+        if answer.pages > 1:  # only the first page is asked conditionally
+            _fail(answer, SourceError(page_url, "HTTP 304 to a page that was not conditional"))
+        answer.not_modified, answer.features = True, None
+        return None
+    try:
+        features, href, matched, returned = _page(options, answered, doc)
+    except SourceError as exc:
+        answer.pages -= 1  # not a page of the answer
+        _fail(answer, exc)
+    n = answer.pages
+    seen[page_url] = seen[answered] = n
+    if not options.paged:
+        answer.raw = raw
+    if keep == "raw":
+        answer.pages_raw.append(raw)
+    else:
+        answer.features.extend(features)
+    answer.count += len(features)
+    if answer.matched is None and matched is not None:
+        answer.matched = matched
+    if returned is not None and returned != len(features):
+        raise _Incomplete(SourceError(page_url, f"page {n} says numberReturned {returned} but "
+                                      f"holds {len(features)} features"))  # fmt: skip
+    if answer.count > options.max_features:
+        raise _Incomplete(SourceError(answer.url, f"more than {options.max_features} features: "
+                                      "the rest was not read"))  # fmt: skip
+    if href is None:
+        return None
+    try:
+        next_url = follow(options, answered, href, f"page {n}'s next link")
+    except SourceError as exc:
+        raise _Incomplete(exc) from None
+    if next_url in seen:
+        raise _Incomplete(SourceError(page_url, f"page {n}'s next link leads back to page "
+                                      f"{seen[next_url]}: the pages loop"))  # fmt: skip
+    if n >= options.max_pages:
+        raise _Incomplete(SourceError(answer.url, f"more than {options.max_pages} pages: the "
+                                      "rest was not read"))  # fmt: skip
+    return next_url
+
+
+def _check_matched(answer) -> None:
+    if answer.matched is not None and not answer.not_modified and answer.count != answer.matched:
+        raise _Incomplete(SourceError(answer.url, f"{answer.count} features read of the "
+                                      f"{answer.matched} it matched"))  # fmt: skip
+
+
+def _skew(date_header, fetched_utc) -> float | None:
+    """The server's ``Date`` less ``fetched_utc`` (ISO 8601), in seconds; None when there is
+    no date, or none this computer can represent."""
     if not date_header:
         return None
     try:
         server = parsedate_to_datetime(date_header)
-    except (TypeError, ValueError):
+        if server.tzinfo is None:
+            server = server.replace(tzinfo=timezone.utc)
+        fetched = datetime.fromisoformat(fetched_utc.replace("Z", "+00:00"))
+        return (server - fetched).total_seconds()
+    except (TypeError, ValueError, OverflowError, IndexError):
         return None
-    if server.tzinfo is None:
-        server = server.replace(tzinfo=timezone.utc)
-    return (server - fetched).total_seconds()
 
 
 def _page(options, page_url, doc):
-    """The features of one page, its ``next`` link and ``numberMatched``."""
+    """The features of one page, its ``next`` link (as served), ``numberMatched`` and
+    ``numberReturned`` (None where not given as counts)."""
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
         what = doc.get("type") if isinstance(doc, dict) else type(doc).__name__
-        raise SourceError(page_url, f"answer is not a GeoJSON FeatureCollection (a {what})")
+        raise SourceError(
+            page_url, f"answer is not a GeoJSON FeatureCollection (a {str(what)[:40]})"
+        )
     features = doc.get("features")
     if not isinstance(features, list):
         raise SourceError(page_url, "answer's FeatureCollection has no 'features' list")
-    next_url = None
+    href = None
     if options.paged:
-        for link in doc.get("links") or []:
+        links = doc.get("links")
+        for link in links if isinstance(links, list) else ():
             if isinstance(link, dict) and link.get("rel") == "next" and link.get("href"):
-                next_url = urljoin(page_url, str(link["href"]))
+                href = link["href"]
                 break
-    matched = doc.get("numberMatched")
-    matched = matched if isinstance(matched, int) and not isinstance(matched, bool) else None
-    return features, next_url, matched
+    return features, href, _count(doc.get("numberMatched")), _count(doc.get("numberReturned"))
+
+
+def _count(value):
+    return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else None

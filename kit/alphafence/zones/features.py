@@ -251,3 +251,58 @@ def parse_bbox(text: str, name: str = "bounding box"):
     if minlon >= maxlon or minlat >= maxlat:
         raise InputError(name, f"min must be below max in {text!r}")
     return (minlon, minlat, maxlon, maxlat)
+
+
+_DEPTHS = {"Point": 1, "MultiPoint": 2, "LineString": 2, "MultiLineString": 3, "Polygon": 3,
+           "MultiPolygon": 4}  # fmt: skip
+
+
+def geometry_problem(gj, inside: bool = False) -> str | None:
+    """What is wrong with the shape of a GeoJSON geometry object, before GEOS reads it, or
+    None: its type, its coordinates nested exactly as deep as the type says (a hostile answer
+    can nest them hundreds deep), and each position two to four finite numbers (JSON's
+    ``NaN`` and ``1e999`` are not). Iterative: no input makes it recurse more than once.
+
+    Examples
+    --------
+    >>> geometry_problem({"type": "Polygon", "coordinates": [[[14.5, 35.9], [14.6, 35.9],
+    ...                                                        [14.5, 36.0], [14.5, 35.9]]]})
+    >>> geometry_problem({"type": "Polygon", "coordinates": [[[[14.5, 35.9]]]]})
+    'Polygon coordinates nested deeper than a Polygon nests them'
+    >>> geometry_problem({"type": "Point", "coordinates": [14.5, float("nan")]})
+    'Point coordinate is not a finite number (nan)'
+    """
+    if not isinstance(gj, dict) or not isinstance(gj.get("type"), str):
+        return "geometry must be an object with a type"
+    kind = gj["type"]
+    if kind == "GeometryCollection":
+        parts = gj.get("geometries")
+        if inside or not isinstance(parts, list):
+            return "GeometryCollection without a 'geometries' list, or within another"
+        return next((p for p in (geometry_problem(g, True) for g in parts) if p), None)
+    depth = _DEPTHS.get(kind)
+    if depth is None:
+        return f"unknown geometry type {kind[:40]!r}"
+    level = [gj.get("coordinates")]
+    for _ in range(depth - 1):
+        if not all(isinstance(item, list) for item in level):
+            return f"{kind} coordinates not nested as a {kind} nests them"
+        level = [x for item in level for x in item]
+    return _position_problem(kind, level)
+
+
+def _position_problem(kind, positions) -> str | None:
+    """A geometry's positions: each a list of two to four finite numbers."""
+    if not all(isinstance(p, list) for p in positions):
+        return f"{kind} coordinates not nested as a {kind} nests them"
+    values = [v for p in positions for v in p]
+    if any(isinstance(v, list) for v in values):
+        return f"{kind} coordinates nested deeper than a {kind} nests them"
+    if not all(2 <= len(p) <= 4 for p in positions):
+        return f"{kind} position without two to four numbers"
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in values):
+        return f"{kind} coordinate is not a number"
+    numbers = np.asarray(values, dtype=float)
+    if not np.isfinite(numbers).all():
+        return f"{kind} coordinate is not a finite number ({numbers[~np.isfinite(numbers)][0]})"
+    return None
