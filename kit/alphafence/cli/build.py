@@ -271,7 +271,9 @@ def summary(db, result, opts, written):
         )
     for n in notes:  # names read from the files are text, not rich markup
         err_console.print(f"[yellow]note:[/] {escape(n)}")
-    out_console.print("wrote " + ", ".join(written))
+    shown = [str(w) for w in written if str(w) != getattr(args, "hidden_output", None)]
+    if shown:  # a PostGIS build's temporary file is not named: its table is, when written
+        out_console.print("wrote " + ", ".join(shown))
 
 
 def _build(args, stream, rules, opts, meta, keep):

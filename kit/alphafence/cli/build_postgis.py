@@ -23,12 +23,12 @@ def run_postgis(args, build) -> int:
     need(("psycopg", f"writing {target if is_postgis_url(target) else zones}"))
     with tempfile.TemporaryDirectory(prefix="alphafence-") as tmp:
         if is_postgis_url(target):
-            args.output = str(Path(tmp) / "fences.geojson")
+            args.output = args.hidden_output = str(Path(tmp) / "fences.geojson")
         args.zones_table = None
         try:
             status = build(args)
         finally:
-            args.output, args.zones_table = target, zones
+            args.output, args.zones_table, args.hidden_output = target, zones, None
         if status:
             return status
         if is_postgis_url(target):

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from collections import Counter
 
+from rich.markup import escape
+
 from alphafence.cli.common import err_console, out_console
 from alphafence.errors import InputError, InputErrors, SourceError, need
 
@@ -37,12 +39,15 @@ def run_source(args, options, source) -> int:
         raise SourceError(answer.url, f"incomplete answer, nothing written: {answer.error}")
     zones, bad = read_zones(answer.url, answer.features, rules)
     invalid = []
+    if bad and not zones:
+        raise SourceError(answer.url, f"none of its {answer.count} features is a zone, nothing "
+                          f"written (the first: {_problem(bad[0])})")  # fmt: skip
     if bad and not args.skip_invalid:
-        faults = [InputError(answer.url, line.split(": ", 1)[-1]) for line in bad]
+        faults = [InputError(answer.url, _problem(line)) for line in bad]
         raise faults[0] if len(faults) == 1 else InputErrors(answer.url, faults, SKIP_HINT)
     for line in bad:
         invalid.append({"file": answer.url, "airspace": None, "line": None, "problem": line})
-    if not any(z.restricted or z.fence for z in zones):
+    if zones and not any(z.restricted or z.fence for z in zones):
         raise InputError(answer.url, f"serves no restricted zone in the area ({len(zones)} "
                          f"zones, rules: {rules.source})")  # fmt: skip
     db = Database([f for z in zones for f in z.restricted], [answer.url], [], Counter(),
@@ -52,12 +57,20 @@ def run_source(args, options, source) -> int:
     count = _write(args.output, zones, rules, options, meta)
     if not args.quiet:
         for entry in invalid:
-            err_console.print(f"[yellow]note:[/] left out (--skip-invalid): {entry['problem']}")
+            err_console.print(f"[yellow]note:[/] left out (--skip-invalid): {escape(entry['problem'])}")
+        if not zones:
+            err_console.print(f"note: {answer.url} serves no zone in the area (a complete, empty "
+                              "answer): the copy holds none, and the monitor starts from it")  # fmt: skip
         out_console.print(
             f"{len(zones)} zones from {answer.url} ({answer.pages} pages, fetched "
             f"{answer.fetched_utc}): {count} fences; wrote {args.output}"
         )
     return 0
+
+
+def _problem(line: str) -> str:
+    """A reading's line less its leading URL (the error names the source once)."""
+    return line.split(": ", 1)[-1]
 
 
 async def _fetch(options, bbox):

@@ -25,8 +25,18 @@ from alphafence.errors import InputError, VehicleError
 SKIP_HINT = "nothing was written; --skip-invalid leaves these zones out and builds the rest"
 
 # piped or captured output gets a table-friendly width instead of rich's default 80 columns
-err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
-out_console = Console(width=None if sys.stdout.isatty() else 120)
+class _Console(Console):
+    """Rich's console; where it is not a terminal (a pipe, journald, a log file) a message
+    is one line, never wrapped, and tables are drawn 120 columns wide."""
+
+    def print(self, *objects, **kw):
+        if not self.is_terminal and all(isinstance(o, str) for o in objects):
+            kw.setdefault("soft_wrap", True)
+        super().print(*objects, **kw)
+
+
+err_console = _Console(stderr=True, width=None if sys.stderr.isatty() else 120)
+out_console = _Console(width=None if sys.stdout.isatty() else 120)
 
 
 class DefaultsFormatter(argparse.HelpFormatter):

@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import signal
 
+from rich.markup import escape
+
 from alphafence.awareness.predict import Braking
 from alphafence.awareness.reach import DEFAULT_ACCEL_MPS2
 from alphafence.cli.common import (
@@ -380,7 +382,7 @@ def _echo(event):
             soft_wrap=True,
         )
     elif event["event"].startswith("source_"):
-        out_console.print(f"{when} {source_line(event)}", soft_wrap=True)
+        out_console.print(f"{when} {escape(source_line(event))}", soft_wrap=True)
     elif event["event"] != "telemetry_resumed":
         out_console.print(
             f"{when} {event['event']} "

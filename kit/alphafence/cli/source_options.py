@@ -8,6 +8,8 @@ import argparse
 
 from alphafence.cli.options import at_least, bbox, figure_wants, non_negative, positive
 
+MIB = 2**20
+
 
 def add_source_options(p, monitor: bool = False) -> None:
     """Add ``--source`` and its options to the sub-parser ``p`` (with ``monitor``, also how
@@ -43,6 +45,29 @@ def add_source_options(p, monitor: bool = False) -> None:
         metavar="S",
         help="seconds for one request, connection to last byte (default 10)",
     )
+    g.add_argument(
+        "--source-origin",
+        action="append",
+        metavar="URL",
+        help="another origin (https://host:port) the source's next links and redirects may "
+        "lead to, its token sent there too (repeatable; default: the source's own alone, any "
+        "other refused)",
+    )
+    g.add_argument(
+        "--source-max-bytes",
+        type=positive("--source-max-bytes", "MiB"),
+        default=64.0,
+        metavar="MIB",
+        help="one answer's budget over all its pages, inflated (default 64 MiB; past it the "
+        "answer is incomplete: it writes nothing, removes nothing)",
+    )
+    g.add_argument(
+        "--source-max-features",
+        type=at_least("--source-max-features", 1),
+        default=20_000,
+        metavar="N",
+        help="one answer's budget of features (default 20,000; past it, as for bytes)",
+    )
     if not monitor:
         return
     g.add_argument(
@@ -75,13 +100,26 @@ def source_options(args):
     ``--source``); a token file that cannot be read is one line."""
     if not getattr(args, "source", None):
         return None
-    from alphafence.sources.ogc import SourceOptions, read_token
+    from alphafence.errors import InputError
+    from alphafence.sources.ogc import MAX_PAGE_BYTES, SourceOptions, read_token
+    from alphafence.sources.request import origin
 
+    if not origin(args.source):
+        raise InputError("--source", f"{args.source!r} is not an http:// or https:// URL")
+    also = tuple(getattr(args, "source_origin", None) or ())
+    for url in also:
+        if not origin(url):
+            raise InputError("--source-origin", f"{url!r} is not an http:// or https:// origin")
+    budget = int(args.source_max_bytes * MIB)
     return SourceOptions(
         args.source,
         token=read_token(args.source_token_file),
         ca_file=args.source_ca_file,
         timeout_s=args.source_timeout,
+        max_bytes=min(MAX_PAGE_BYTES, budget),
+        max_answer_bytes=budget,
+        max_features=args.source_max_features,
+        also_origins=also,
     )
 
 
