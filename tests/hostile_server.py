@@ -37,6 +37,7 @@ CASES = {
     "clock-far-off": "a Date two days ahead",
     "deep-body": "a body of JSON arrays nested 200,000 deep",
     "deep-coordinates": "the first zone's coordinates nested 500 deep",
+    "nested-coordinates": "the first zone's coordinates nested 40 deep (the body within depth)",
     "not-modified-unasked": "HTTP 304 to a request without If-None-Match",
     # the operator's token
     "next-other-origin": "a next link to another port of this host",
@@ -250,6 +251,8 @@ class HostileServer:
             zones[0] = nan_zone(zones[0])
         if case == "deep-coordinates" and zones:
             zones[0] = deep_zone(zones[0])
+        if case == "nested-coordinates" and zones:
+            zones[0] = deep_zone(zones[0], 40)
         if case == "all-malformed":
             zones = [nan_zone(z) for z in zones]
         if case == "huge-pages":
@@ -270,10 +273,14 @@ class HostileServer:
             doc["numberMatched"] = max(0, len(zones) - 1)
         if case == "next-self":
             more, nxt = True, f"{path}?offset={offset}&limit={limit}"
-        if case == "next-back" and page >= 2:
-            more, nxt = True, f"{path}?offset=0&limit={limit}"
+        if case == "next-back":  # page 2 (empty when one page holds all) leads back
+            more = True
+            if page >= 2:
+                nxt = f"{path}?offset=0&limit={limit}"
         if case == "next-other-origin":
             more, nxt = True, f"{self.other}{path}?offset={offset + limit}&limit={limit}"
+        if case == "partial":  # a page 2, whatever the page size
+            more = more or page == 1
         if case == "next-file":
             more, nxt = True, "file:///etc/passwd"
         if case == "not-collection":

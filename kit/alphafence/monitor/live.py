@@ -106,6 +106,8 @@ class LiveSource:
         self.answers = 0
         self.pool = None
         self._wake = asyncio.Event()
+        self.refreshes = 0  # refreshes ended, whatever came of them
+        self._refreshed = asyncio.Condition()
         self._http = None
 
     def hint(self) -> None:
@@ -120,16 +122,23 @@ class LiveSource:
             try:
                 async with self.opened():
                     while not stop.is_set():
+                        self._wake.clear()  # a hint during the refresh asks again at once
                         await self.refresh()
                         await self._pause()
             except Exception as exc:  # noqa: BLE001 - the loop outlives anything it meets
                 self._failed(f"the source's worker or session failed: {_line(exc)}")
+                self._wake.clear()
                 await self._pause()
 
     async def _pause(self) -> None:
-        self._wake.clear()
         with contextlib.suppress(asyncio.TimeoutError):
             await asyncio.wait_for(self._wake.wait(), self.options.refresh_s)
+
+    async def next_refresh(self) -> None:
+        """Wait for the end of the next refresh (the one under way, or the next to start)."""
+        done = self.refreshes
+        async with self._refreshed:
+            await self._refreshed.wait_for(lambda: self.refreshes > done)
 
     @contextlib.asynccontextmanager
     async def opened(self):
@@ -180,6 +189,10 @@ class LiveSource:
             await self._refresh()
         except Exception as exc:  # noqa: BLE001 - what a server sent must not end the polling
             self._failed(f"refresh failed: {_line(exc)}")
+        finally:
+            self.refreshes += 1
+            async with self._refreshed:
+                self._refreshed.notify_all()
 
     def _failed(self, error: str) -> None:
         self.monitor.handle(new_event("source_failed", error=error, kept=len(self.zones.versions)))
