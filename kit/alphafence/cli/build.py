@@ -162,7 +162,10 @@ def run(args) -> int:
         from alphafence.mavlink.items import fence_items
 
         union_hint(fence_items(result.fences))
-    written = [args.output, *extra]
+    # a PostGIS build's temporary file is not named: its table is, once written
+    written = [
+        str(w) for w in [args.output, *extra] if str(w) != getattr(args, "hidden_output", None)
+    ]
     if args.figure:
         from alphafence.plots.fences import fence_map
 
@@ -271,9 +274,8 @@ def summary(db, result, opts, written):
         )
     for n in notes:  # names read from the files are text, not rich markup
         err_console.print(f"[yellow]note:[/] {escape(n)}")
-    shown = [str(w) for w in written if str(w) != getattr(args, "hidden_output", None)]
-    if shown:  # a PostGIS build's temporary file is not named: its table is, when written
-        out_console.print("wrote " + ", ".join(shown))
+    if written:
+        out_console.print("wrote " + ", ".join(written))
 
 
 def _build(args, stream, rules, opts, meta, keep):
