@@ -143,3 +143,49 @@ async def test_a_telemetry_stream_that_ends_is_an_event_once_and_checks_go_on():
     assert len(ended) == 1, ended
     assert ended[0]["task"] == "telemetry:armed" and "stream broke" in ended[0]["error"]
     assert monitor.engine.checks > 20  # the monitor kept checking positions
+
+
+async def test_a_live_source_polling_that_ends_is_an_event_and_an_alert():
+    """The polling outlives anything a server sends (tests/test_hostile_source.py); were it to
+    end all the same (a fault of the kit's own, made here), the monitor says so and goes on."""
+    from types import SimpleNamespace
+
+    import shapely
+
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.fencefiles.fence_geojson import FenceRecord
+    from alphafence.fencing.pipeline import BuildOptions
+    from alphafence.monitor.events import alert_text
+    from alphafence.monitor.live import LiveOptions
+    from alphafence.monitor.options import MonitorOptions
+    from alphafence.monitor.runner import Monitor
+    from alphafence.sources.ogc import SourceOptions
+
+    fences = FenceSet([FenceRecord("sq", "keep_out", shapely.box(14.50, 35.90, 14.51, 35.91))])
+    vehicle = SimpleNamespace(telemetry=_Telemetry(), system=None)
+    log = EventLog(None)
+    live = LiveOptions(SourceOptions("http://127.0.0.1:9/collections/z"), None, BuildOptions())
+    monitor = Monitor(vehicle, fences, MonitorOptions(), log, live=live)
+    monitor.feeds.pop("adsb")
+    monitor.commands.alert = _no_alert
+
+    async def broken(stop):
+        raise RuntimeError("a fault of the kit's own")
+
+    monitor.live.run = broken
+    stop = asyncio.Event()
+    task = asyncio.create_task(monitor.run(stop))
+    await until(lambda: [e for e in log.events if e["event"] == "source_ended"] or task.done(),
+                "the ended polling reported")  # fmt: skip
+    assert not task.done()
+    checks = monitor.engine.checks
+    await until(lambda: monitor.engine.checks > checks + 10, "positions checked after it")
+    stop.set()
+    await asyncio.wait_for(task, 5)
+    (ended,) = [e for e in log.events if e["event"] == "source_ended"]
+    assert "a fault of the kit's own" in ended["error"]
+    assert alert_text(ended) == "AF ZONE SOURCE ENDED: zones kept, none new"
+
+
+async def _no_alert(text, event=None):
+    return None

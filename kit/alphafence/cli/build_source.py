@@ -57,7 +57,9 @@ def run_source(args, options, source) -> int:
     count = _write(args.output, zones, rules, options, meta)
     if not args.quiet:
         for entry in invalid:
-            err_console.print(f"[yellow]note:[/] left out (--skip-invalid): {escape(entry['problem'])}")
+            err_console.print(
+                f"[yellow]note:[/] left out (--skip-invalid): {escape(entry['problem'])}"
+            )
         if not zones:
             err_console.print(f"note: {answer.url} serves no zone in the area (a complete, empty "
                               "answer): the copy holds none, and the monitor starts from it")  # fmt: skip

@@ -24,6 +24,7 @@ from alphafence.errors import InputError, VehicleError
 # what a build with several malformed zones ends with (each a zone --skip-invalid leaves out)
 SKIP_HINT = "nothing was written; --skip-invalid leaves these zones out and builds the rest"
 
+
 # piped or captured output gets a table-friendly width instead of rich's default 80 columns
 class _Console(Console):
     """Rich's console; where it is not a terminal (a pipe, journald, a log file) a message

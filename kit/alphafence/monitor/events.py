@@ -207,8 +207,11 @@ def _source_text(event) -> str | None:
     'AF ZONE SOON fire'
     >>> _source_text({"event": "source_stale", "seconds": 95.2})
     'AF zone source stale 95s: zones kept'
+    >>> _source_text({"event": "source_zone_removed", "name": "fire\\nPOWER OFF"})
+    'AF zone lifted fire POWER OFF'
     """
     kind, name = event["event"], str(event.get("name") or event.get("zone") or "")
+    name = "".join(c if c.isprintable() else " " for c in name[:50])  # a server's text
     if kind == "source_zone":
         what = {"active": "NEW ZONE", "always": "NEW ZONE", "upcoming": "ZONE SOON"}.get(
             event.get("window"), "zone"
@@ -226,7 +229,11 @@ def _source_text(event) -> str | None:
     if kind == "source_empty":
         return "AF zone source empty: zones kept"
     if kind == "source_clock":
+        if event.get("refused"):
+            return "AF zone source clock refused: over 24 h off"
         return f"AF clock off {event.get('skew_s', 0):+.0f}s: windows widened"[:50]
+    if kind == "source_ended":
+        return "AF ZONE SOURCE ENDED: zones kept, none new"
     if kind == "source_fresh":
         return "AF zone source back"
     return None

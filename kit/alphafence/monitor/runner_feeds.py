@@ -95,14 +95,18 @@ class FeedTasks:
 
     def _ended_tasks(self):
         """A telemetry stream that ended (MAVSDK raised, or the stream closed) is an event,
-        once: its value would otherwise go stale without a word."""
+        once: its value would otherwise go stale without a word. So is a live source's polling
+        that ended (``source_ended``, alerted: it outlives whatever a server sends, so only a
+        fault of the kit's own could end it)."""
         events = []
         for task in self.tasks:
-            if not task.get_name().startswith("telemetry:"):
+            name = task.get_name()
+            if not (name.startswith("telemetry:") or name == "source"):
                 continue
             if task.done() and task not in self._ended and not task.cancelled():
                 self._ended.add(task)
                 exc = task.exception()
                 error = "" if exc is None else f"{type(exc).__name__}: {exc}"
-                events.append(new_event("telemetry_task_ended", task=task.get_name(), error=error))
+                kind = "source_ended" if name == "source" else "telemetry_task_ended"
+                events.append(new_event(kind, task=name, error=" ".join(error.split())[:300]))
         return events
