@@ -45,8 +45,8 @@ class FenceGrid:
     """
 
     def __init__(self, local, keep_out, keep_out_tree):
-        x0, y0, x1, y1 = shapely.total_bounds(local)
         n = len(local)
+        x0, y0, x1, y1 = shapely.total_bounds(local) if n else (0.0, 0.0, 0.0, 0.0)
         width, height = max(x1 - x0, 1.0), max(y1 - y0, 1.0)
         cells = min(max(CELLS_PER_FENCE * n, MIN_CELLS), MAX_CELLS)
         self.size = size = math.sqrt(width * height / cells)

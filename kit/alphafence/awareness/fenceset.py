@@ -72,13 +72,13 @@ class FenceSet:
     Raises
     ------
     ValueError
-        When there are no fences.
+        When there are no fences and no ``frame`` (a set of no fence needs one).
     """
 
     def __init__(self, records, frame: LocalFrame | None = None, keep_in_union: bool = True):
         self.records, self.keep_in_union = list(records), keep_in_union
-        if not self.records:
-            raise ValueError("no fences")
+        if not self.records and frame is None:
+            raise ValueError("no fences, and no frame to place them in")
         geoms = np.array([r.geometry for r in self.records], dtype=object)
         self.frame = frame or LocalFrame.around(geoms)
         self.kind = np.array([KIND_CODES[r.kind] for r in self.records])
@@ -104,15 +104,18 @@ class FenceSet:
         self._build(geoms)
 
     @classmethod
-    def from_geojson(cls, path):
+    def from_geojson(cls, path, empty_ok: bool = False):
         """The fences of a fence GeoJSON file (``alphafence build``'s output); InputError
-        when it holds none (a monitor with nothing to watch is a mistake, said at once)."""
+        when it holds none (a monitor with nothing to watch is a mistake, said at once),
+        unless ``empty_ok`` (a live source's empty offline copy: the set has no fence yet)."""
         from alphafence.errors import InputError
         from alphafence.fencefiles.fence_read import read_fence_file as read_fences
 
         records = read_fences(path)
         if not records:
-            raise InputError(path, "holds no fences: nothing to monitor")
+            if not empty_ok:
+                raise InputError(path, "holds no fences: nothing to monitor")
+            return cls([], frame=LocalFrame(0.0, 0.0))
         return cls(records)
 
     def _build(self, geoms):
@@ -120,7 +123,7 @@ class FenceSet:
         shapely.prepare(self.local)
         self.boundary = shapely.boundary(self.local)
         self.tree = shapely.STRtree(self.local)
-        self._bounds = shapely.total_bounds(self.local)
+        self._bounds = shapely.total_bounds(self.local) if len(self.local) else np.zeros(4)
         self._by_kind = {}
         timed = np.zeros(len(self.records), dtype=bool)
         timed[self.timed] = True

@@ -48,10 +48,11 @@ def register(sub):
     add_connect_option(p)
     p.add_argument(
         "--fences",
-        required=True,
         metavar="FENCES.geojson",
         help="the full-resolution fences to watch: any fence file ('alphafence build' "
-        "output, KML, OpenAir, a .plan...), signed (--trusted-key) or --allow-unsigned",
+        "output, KML, OpenAir, a .plan...), signed (--trusted-key) or --allow-unsigned; "
+        "with --source, optional (an offline copy, even an empty one: without it nothing is "
+        "in force until the source's first complete answer)",
     )
     p.add_argument("--enforce", action="store_true", help="command the vehicle, not only alert")
     p.add_argument(
@@ -242,7 +243,6 @@ def _not_reroute(flag):
 
 def run(args) -> int:
     """Monitor the flight until Ctrl-C or SIGTERM; exit 0, or 3 when the link fails."""
-    from alphafence.awareness.fenceset import FenceSet
 
     options = MonitorOptions(
         horizon_s=args.horizon,
@@ -269,8 +269,7 @@ def run(args) -> int:
         raise InputError("--basemap", "is drawn on the live map: add --map-server HOST:PORT")
     if args.basemap:
         need(("osmium.filter", f"--basemap {args.basemap}"))
-    check_trust(args, args.fences)
-    fences = FenceSet.from_geojson(args.fences)
+    fences = _fences(args)
     args.key = signing_key(args)
     if args.log:
         from alphafence.monitor.eventlog import check_log_path
@@ -284,6 +283,21 @@ def run(args) -> int:
             raise InputError("--tlog", "records the pymavlink link's frames: use --link pymavlink")
         check_tlog_path(args.tlog)
     return asyncio.run(_run(args, fences, options, live_options(args)))
+
+
+def _fences(args):
+    """The fences to start from: the file's; with ``--source`` an empty one, or none (a set
+    of no fence, placed where the source's first fences will be)."""
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.geo.frame import LocalFrame
+
+    if args.fences is None:
+        if not args.source:
+            raise InputError("--fences", "give the fences to watch, or --source URL (zones from "
+                             "a live source alone)")  # fmt: skip
+        return FenceSet([], frame=LocalFrame(0.0, 0.0))
+    check_trust(args, args.fences)
+    return FenceSet.from_geojson(args.fences, empty_ok=bool(args.source))
 
 
 def monitor_wants(options):
@@ -332,6 +346,9 @@ async def _run(args, fences, options, live=None) -> int:
         f"monitoring {len(fences.records)} fences ({mode}); event times in UTC from this "
         "computer's clock, then monotonic seconds; Ctrl-C to stop"
     )
+    if live is not None and not live.from_file:
+        out_console.print("nothing is in force until the source's first complete answer: "
+                          "no position is reported clear before it")  # fmt: skip
     try:
         monitor = await run_monitor(
             args.connect,

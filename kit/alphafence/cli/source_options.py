@@ -174,6 +174,7 @@ def live_options(args):
         stale_after_s=args.stale_after,
         radius_m=args.source_radius,
         trusted_keys=trusted_keys(args),
+        from_file=getattr(args, "fences", None) is not None,
     )
 
 

@@ -20,6 +20,7 @@ MIN_HEADING_SPEED_MPS = 0.3  # slower than this, the velocity says nothing of a 
 MAX_NEAR_FENCES = 5000  # at most this many fences near the vehicle are sent (nearest kept)
 LOOKAHEAD_MIN_M = 50.0  # the engine looks at least this far ahead (monitor.engine)
 PROPERTIES = ("site_id", "name", "category", "kind", "margin_m", "alt_min_m", "alt_max_m")
+UNKNOWN = "UNKNOWN"  # the level before a live source alone has answered: never CLEAR
 
 
 def _ahead(lon, lat, azimuth, metres):
@@ -66,7 +67,7 @@ def vehicle_message(step, options, checks: int) -> dict:
         "heading_deg": None if heading is None else round(heading, 1),
         "mode": s.mode,
         "armed": s.armed,
-        "level": step.level.name,
+        "level": step.level.name if getattr(step, "known", True) else UNKNOWN,
         "checked": step.checked,
         "checks": checks,
         "lookahead_m": round(lookahead, 1),

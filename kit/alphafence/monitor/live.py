@@ -60,6 +60,10 @@ class LiveOptions:
         PEM public keys: a source that is one document (a signed fence bundle on a web
         server, not a collection) must come with ``URL.sig.json`` signed by one of them
         (:mod:`alphafence.fencing.bundle`), checked at every answer.
+    from_file : bool
+        The monitor started from a fence file (an offline copy, even an empty one). False: from
+        the source alone, nothing is known to be in force until its first complete answer
+        (:attr:`LiveSource.known`), and no position is reported CLEAR before it.
     """
 
     source: object
@@ -70,6 +74,7 @@ class LiveOptions:
     radius_m: float = 5000.0
     announce_s: float = 600.0
     trusted_keys: tuple = ()  # a document source (a fence bundle): its signature must verify
+    from_file: bool = True  # started from a fence file (an offline copy): what is in force is known
 
     @property
     def stale_s(self) -> float:
@@ -101,12 +106,14 @@ class LiveSource:
         self.stale = False
         self.skew_s = 0.0
         self._skew_refused = False
+        self._awaiting_position = False
         self.windows = {}  # zone hash -> the window state last said
         self._timed = None  # (the zone set's revision, its zones with a window)
         self.answers = 0
         self.pool = None
         self._wake = asyncio.Event()
         self.refreshes = 0  # refreshes ended, whatever came of them
+        self.known = options.from_file  # what is in force is known (a file, or a complete answer)
         self._refreshed = asyncio.Condition()
         self._http = None
 
@@ -156,7 +163,7 @@ class LiveSource:
 
     def area(self):
         """The lon/lat box asked: around the vehicle and the mission's waypoints (before the
-        first position: around every fence)."""
+        first position: around every fence; None without either)."""
         from alphafence.geo.frame import LocalFrame
 
         points = []
@@ -168,10 +175,13 @@ class LiveSource:
             lat, lon = getattr(item, "x", 0) / 1e7, getattr(item, "y", 0) / 1e7
             if lat or lon:
                 points.append((lon, lat))
+        records = self.monitor.engine.fences.records
+        if not points and not records:
+            return None  # no position yet, no fence: asked once the vehicle's position comes
         if not points:  # around every fence (their lon/lat bounds)
             import shapely
 
-            b = shapely.total_bounds([r.geometry for r in self.monitor.engine.fences.records])
+            b = shapely.total_bounds([r.geometry for r in records])
             points = [(b[0], b[1]), (b[2], b[3])]
         r, boxes = self.options.radius_m, []
         for lon, lat in points:
@@ -206,6 +216,9 @@ class LiveSource:
 
         put = self.monitor.handle  # logged, and alerted when it says something to the GCS
         bbox = self.area()
+        if bbox is None:
+            self._awaiting_position = True  # tick() asks as soon as a position comes
+            return
         try:
             answer = await fetch(self._http, self.options.source, bbox, self.etag,
                                  self.last_modified, keep="raw")  # fmt: skip
@@ -254,6 +267,11 @@ class LiveSource:
         if answer.complete:
             self.etag, self.last_modified = answer.etag, answer.last_modified
             self._good()
+            if not self.known:
+                self.known = True
+                put(new_event("source_known", zones=len(zones),
+                              reason="the source's first complete answer: its zones are in "
+                              "force"))  # fmt: skip
         else:
             put(
                 new_event(
@@ -307,6 +325,9 @@ class LiveSource:
         the zones with a window are looked at (the others are always in force)."""
         from alphafence.awareness.applicability import timed
 
+        if self._awaiting_position and self.monitor.engine.last is not None:
+            self._awaiting_position = False
+            self.hint()
         if self._timed is None or self._timed[0] != self.zones.revision:
             windowed = [z for z in self.zones.zones if timed(z.applicability)]
             self._timed = (self.zones.revision, windowed)
@@ -345,7 +366,9 @@ class LiveSource:
         from alphafence.awareness.fenceset import FenceSet
 
         t0 = time.monotonic()
-        frame = self.monitor.engine.fences.frame
+        current = self.monitor.engine.fences
+        # a set of no fence has a frame of no place: the first fences get one of their own
+        frame = current.frame if current.records else None
         records = None
 
         def build():  # the new zones' records read and the set indexed: a worker thread

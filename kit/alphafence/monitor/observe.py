@@ -35,6 +35,9 @@ class Step:
         The alert level after the step.
     events : tuple of dict
         The events the step returned, which the observers see next.
+    known : bool
+        What is in force is known (False: a monitor started from a live source alone, before
+        its first complete answer; its level is then not reported CLEAR).
     """
 
     sample: Sample
@@ -42,6 +45,7 @@ class Step:
     checked: bool
     level: Level
     events: tuple
+    known: bool = True
 
 
 class Observer:

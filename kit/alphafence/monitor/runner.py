@@ -268,9 +268,9 @@ class Monitor(FeedTasks):
         started, checks = time.monotonic(), self.engine.checks
         events = self.engine.step(sample)
         if self.observers:
-            step = Step(
-                sample, started, self.engine.checks > checks, self.engine.sm.level, tuple(events)
-            )
+            known = self.live is None or self.live.known
+            step = Step(sample, started, self.engine.checks > checks, self.engine.sm.level,
+                        tuple(events), known)  # fmt: skip
             for observer in self.observers:
                 observer.on_step(step)
         return events

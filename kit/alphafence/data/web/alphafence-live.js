@@ -19,7 +19,8 @@
     });
   }
   var KIND = {keep_out: "#c62828", warning: "#ef8f00", keep_in: "#2e7d32"};
-  var LEVEL = {CLEAR: "#2e7d32", WARNING: "#ef8f00", IMMINENT: "#d84315", BREACH: "#b71c1c"};
+  var LEVEL = {CLEAR: "#2e7d32", WARNING: "#ef8f00", IMMINENT: "#d84315", BREACH: "#b71c1c",
+               UNKNOWN: "#616161"};
   var ONBOARD = "#1565c0";
   var TRACK_MAX = 5000, EVENTS_SHOWN = 8;
 
