@@ -39,6 +39,7 @@ from bench import (
     route_national_bench,
     scale_bench,
     soak_bench,
+    source_budget_bench,
     upload_bench,
 )
 
@@ -64,6 +65,7 @@ def main(argv=None) -> int:
             "monitor",
             "map",
             "live",
+            "source-budget",
             "rolling",
             "route",
             "scale",
@@ -124,6 +126,8 @@ def main(argv=None) -> int:
         take("map", livemap_bench.run(args.osm, build_bench.Row))
     if args.only in (None, "live"):
         take("live", live_bench.run(args.osm, build_bench.Row))
+    if args.only in (None, "source-budget"):
+        take("source-budget", source_budget_bench.run(build_bench.Row))
     if args.only in (None, "rolling"):
         take("rolling", rolling_bench.overshoot(args.osm, build_bench.Row))
         take("rolling", rolling_bench.in_flight(args.osm, build_bench.Row))

@@ -56,9 +56,9 @@ def add_source_options(p, monitor: bool = False) -> None:
     g.add_argument(
         "--source-max-bytes",
         type=positive("--source-max-bytes", "MiB"),
-        default=64.0,
+        default=32.0,
         metavar="MIB",
-        help="one answer's budget over all its pages, inflated (default 64 MiB; past it the "
+        help="one answer's budget over all its pages, inflated (default 32 MiB; past it the "
         "answer is incomplete: it writes nothing, removes nothing)",
     )
     g.add_argument(

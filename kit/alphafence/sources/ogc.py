@@ -28,7 +28,7 @@ ACCEPT = "application/geo+json, application/json;q=0.9"
 PAGE_LIMIT = 500  # features asked per page
 MAX_PAGES = 200  # pages followed in one answer (100,000 zones at the page size)
 MAX_PAGE_BYTES = 32 * 2**20  # one page's body, inflated
-MAX_ANSWER_BYTES = 64 * 2**20  # every page of one answer, inflated
+MAX_ANSWER_BYTES = 32 * 2**20  # every page of one answer, inflated
 MAX_FEATURES = 20_000  # features in one answer
 TIMEOUT_S = 10.0  # one request, connection to last byte
 RETRIES = 2  # more tries after the first, for what may pass
