@@ -35,6 +35,7 @@ answers = st.lists(
         st.frozensets(st.tuples(st.integers(0, 9), st.integers(0, 2)), max_size=6),
         st.sampled_from(["complete", "partial", "failed"]),
         st.sampled_from(AREAS),
+        st.frozensets(st.integers(0, 9), max_size=3),  # ids served malformed
     ),
     max_size=12,
 )
@@ -44,13 +45,14 @@ def run_and_check(states, sequence):
     """Feed ``sequence`` to ``states`` and check the property after every answer."""
     last_complete = None
     previous_empty = False
-    for served, outcome, area in sequence:
+    for served, outcome, area, *malformed in sequence:
         if outcome == "failed":
             continue  # a failed answer never reaches the zone set
         served = {i: v for i, v in sorted(served)}  # one version per id in an answer
+        held = {f"Z{i}" for i in (malformed[0] if malformed else ()) if i not in served}
         zones = [zone(i, v) for i, v in served.items()]
         before = set(states.versions)
-        states.answer(zones, outcome == "complete", area)
+        states.answer(zones, outcome == "complete", area, held)
         after = set(states.versions)
         keys = {(z.id, z.hash) for z in zones}
         assert keys <= after, "a served zone is not in force"
@@ -59,6 +61,7 @@ def run_and_check(states, sequence):
             assert outcome == "complete", f"{key} removed by a {outcome} answer"
             assert zone_meets(gone, area), f"{key} removed by an answer for another area"
             assert key not in keys
+            assert key[0] not in held, f"{key} removed by an answer that served it malformed"
             assert zones or previous_empty, f"{key} removed by a first empty answer"
         if outcome == "complete":
             last_complete = keys
@@ -75,8 +78,29 @@ def test_zones_in_force_never_fewer_than_the_last_complete_answer(sequence):
 class TrustsPartialAnswers(LiveZones):
     """Broken on purpose: takes every answer as complete."""
 
-    def answer(self, zones, complete, bbox=None):
-        return super().answer(zones, True, bbox)
+    def answer(self, zones, complete, bbox=None, held=()):
+        return super().answer(zones, True, bbox, held)
+
+
+class LiftsMalformedZones(LiveZones):
+    """Broken on purpose: a zone served malformed counts as absent."""
+
+    def answer(self, zones, complete, bbox=None, held=()):
+        return super().answer(zones, complete, bbox, ())
+
+
+def test_a_rule_that_lifts_malformed_zones_is_caught():
+    sequence = [
+        (frozenset({(1, 0), (2, 0)}), "complete", WEST, frozenset()),
+        (frozenset({(1, 0)}), "complete", WEST, frozenset({2})),  # zone 2 served with a NaN
+    ]
+    run_and_check(LiveZones(), sequence)
+    try:
+        run_and_check(LiftsMalformedZones(), sequence)
+    except AssertionError as exc:
+        assert "served it malformed" in str(exc)
+    else:
+        raise AssertionError("the broken rule passed")
 
 
 def test_a_rule_that_trusts_partial_answers_is_caught():
