@@ -39,6 +39,7 @@ CASES = {
     "deep-coordinates": "the first zone's coordinates nested 500 deep",
     "nested-coordinates": "the first zone's coordinates nested 40 deep (the body within depth)",
     "not-modified-unasked": "HTTP 304 to a request without If-None-Match",
+    "hostile-windows": "time windows of every wrong shape, and in the years 1 and 9999",
     # the operator's token
     "next-other-origin": "a next link to another port of this host",
     "next-file": "a next link to file:///etc/passwd",
@@ -253,6 +254,13 @@ class HostileServer:
             zones[0] = deep_zone(zones[0])
         if case == "nested-coordinates" and zones:
             zones[0] = deep_zone(zones[0], 40)
+        if case == "hostile-windows":
+            shapes = [5, "always", [7], [{"schedule": 7}], [{"schedule": [{"day": 3}]}],
+                      [{"startDateTime": "0001-01-01T00:00:00Z",
+                        "endDateTime": "9999-12-31T23:59:59Z"}]]  # fmt: skip
+            zones = [copy.deepcopy(z) for z in zones]
+            for k, z in enumerate(zones):
+                z["properties"]["limitedApplicability"] = shapes[k % len(shapes)]
         if case == "all-malformed":
             zones = [nan_zone(z) for z in zones]
         if case == "huge-pages":

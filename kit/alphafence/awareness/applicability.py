@@ -30,6 +30,8 @@ def _in_schedule(entry, when):
     days = entry.get("day") or []
     if isinstance(days, str):
         days = [days]
+    if not isinstance(days, list):
+        return True  # a schedule we cannot read is in force
     if days and "ANY" not in days and DAYS[when.weekday()] not in days:
         return False
     start, end = _clock(entry.get("startTime")), _clock(entry.get("endTime"))
@@ -41,11 +43,20 @@ def _in_schedule(entry, when):
 
 def is_active(applicability, when: datetime) -> bool:
     """Is a zone in force at ``when`` (aware datetime)? No or unreadable applicability: always
-    (a restriction we cannot read is a restriction)."""
+    (a restriction we cannot read is a restriction), whatever its shape.
+
+    Examples
+    --------
+    >>> noon = datetime(2026, 12, 6, 12, 0, tzinfo=timezone.utc)
+    >>> [is_active(a, noon) for a in (5, [{"schedule": 7}], [{"schedule": [{"day": 3}]}])]
+    [True, True, True]
+    """
     if not applicability:
         return True
     if isinstance(applicability, dict):
         applicability = [applicability]
+    if not isinstance(applicability, list):
+        return True  # a served value of another shape: unreadable, so in force
     for entry in applicability:
         if not isinstance(entry, dict):
             return True
@@ -55,7 +66,7 @@ def is_active(applicability, when: datetime) -> bool:
         if start and when < start or end and when > end:
             continue
         schedule = entry.get("schedule")
-        if not schedule:
+        if not schedule or not isinstance(schedule, list):
             return True
         if any(_in_schedule(s, when) for s in schedule if isinstance(s, dict)):
             return True
