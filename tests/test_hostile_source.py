@@ -180,7 +180,8 @@ def test_build_says_one_line_and_writes_nothing_but_a_complete_answer(
     status = main(["build", "--source", hostile.collection, "--bbox", BOX, "-o", str(out),
                    "--source-max-bytes", "8", "--source-max-features", "12",
                    "--source-timeout", "2" if case in SLOW else "60"])  # fmt: skip
-    err = capsys.readouterr().err.strip()
+    captured = capsys.readouterr()
+    err, out_lines = captured.err.strip(), captured.out.strip().splitlines()
     code, said = BUILD[case]
     assert status == code, err
     if code:
@@ -191,6 +192,9 @@ def test_build_says_one_line_and_writes_nothing_but_a_complete_answer(
         assert doc["alphafence"]["source"]["complete"] is True
         served = {f["properties"]["source_zone"] for f in doc["features"]}
         assert served == (set() if case == "empty" else {"A", "B", "C"})
+        # the summary, longer than 120 columns, is one line in a pipe
+        (summary,) = [line for line in out_lines if "fences; wrote" in line]
+        assert len(summary) > 120 and summary.endswith(f"wrote {out}"), out_lines
     assert not other.requests and TOKEN not in err
 
 

@@ -126,11 +126,17 @@ async def test_a_build_written_to_postgis_is_served_back_as_fences(
     args = ["build", scene, "-o", fences_url, "--zones-table", zones_url, "-q"]
     assert main(args) == 0
     assert main(args) == 0  # written again: the next version, the same rows
+    assert capsys.readouterr().out == ""  # -q: nothing
+    assert main(args[:-1]) == 0  # a third time, saying what it wrote (no temporary file)
+    wrote = [line for line in capsys.readouterr().out.splitlines() if line.startswith("wrote")]
+    count = pg.sql("SELECT count(*) FROM public.fleet_fences")[0][0]
+    assert wrote == [f"wrote {count} fences to {fences_url} (version 3)",
+                     f"wrote 16 zones to {zones_url}"], wrote  # fmt: skip
     rows = pg.sql("SELECT count(*), min(version), max(version) FROM public.fleet_fences")
     local = tmp_path / "fences.geojson"
     assert main(["build", scene, "-o", str(local), "-q"]) == 0
     expected = read_fences(local)
-    assert rows == [(len(expected), 2, 2)]
+    assert rows == [(len(expected), 3, 3)]
     assert pg.sql("SELECT count(*) FROM fleet.zones")[0][0] == 16  # the scene's features
     index = pg.sql("SELECT indexdef FROM pg_indexes WHERE tablename = 'fleet_fences'")
     assert any("gist" in row[0] for row in index)
