@@ -199,7 +199,7 @@ def _swapping(records, frame, swaps=3):
         fs.index()
 
     async def work(stop, started):
-        from alphafence.monitor.live import short_switches
+        from alphafence.monitor.live_parts import short_switches
 
         started.set()
         for _ in range(swaps):

@@ -106,17 +106,15 @@ class FenceSet:
     @classmethod
     def from_geojson(cls, path, empty_ok: bool = False):
         """The fences of a fence GeoJSON file (``alphafence build``'s output); InputError
-        when it holds none (a monitor with nothing to watch is a mistake, said at once),
-        unless ``empty_ok`` (a live source's empty offline copy: the set has no fence yet)."""
+        when it holds none (nothing to watch is a mistake, said at once) unless ``empty_ok``
+        (a live source's empty offline copy: a set of no fence)."""
         from alphafence.errors import InputError
         from alphafence.fencefiles.fence_read import read_fence_file as read_fences
 
         records = read_fences(path)
-        if not records:
-            if not empty_ok:
-                raise InputError(path, "holds no fences: nothing to monitor")
-            return cls([], frame=LocalFrame(0.0, 0.0))
-        return cls(records)
+        if not records and not empty_ok:
+            raise InputError(path, "holds no fences: nothing to monitor")
+        return cls(records, frame=None if records else LocalFrame(0.0, 0.0))
 
     def _build(self, geoms):
         self.local = self.frame.read_geom(geoms)  # edges straight in lon/lat, as ArduPilot reads

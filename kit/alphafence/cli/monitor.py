@@ -13,7 +13,6 @@ from alphafence.cli.common import (
     add_link_option,
     add_signing_option,
     add_trust_options,
-    check_trust,
     err_console,
     out_console,
     signing_key,
@@ -25,7 +24,12 @@ from alphafence.cli.options import (
     sd_fence_kb,
     storage_profile,
 )
-from alphafence.cli.source_options import add_source_options, live_options, source_line
+from alphafence.cli.source_options import (
+    add_source_options,
+    live_options,
+    source_line,
+    start_fences,
+)
 from alphafence.errors import InputError, need
 from alphafence.monitor.options import (
     ACTIONS,
@@ -269,7 +273,7 @@ def run(args) -> int:
         raise InputError("--basemap", "is drawn on the live map: add --map-server HOST:PORT")
     if args.basemap:
         need(("osmium.filter", f"--basemap {args.basemap}"))
-    fences = _fences(args)
+    fences = start_fences(args)
     args.key = signing_key(args)
     if args.log:
         from alphafence.monitor.eventlog import check_log_path
@@ -283,21 +287,6 @@ def run(args) -> int:
             raise InputError("--tlog", "records the pymavlink link's frames: use --link pymavlink")
         check_tlog_path(args.tlog)
     return asyncio.run(_run(args, fences, options, live_options(args)))
-
-
-def _fences(args):
-    """The fences to start from: the file's; with ``--source`` an empty one, or none (a set
-    of no fence, placed where the source's first fences will be)."""
-    from alphafence.awareness.fenceset import FenceSet
-    from alphafence.geo.frame import LocalFrame
-
-    if args.fences is None:
-        if not args.source:
-            raise InputError("--fences", "give the fences to watch, or --source URL (zones from "
-                             "a live source alone)")  # fmt: skip
-        return FenceSet([], frame=LocalFrame(0.0, 0.0))
-    check_trust(args, args.fences)
-    return FenceSet.from_geojson(args.fences, empty_ok=bool(args.source))
 
 
 def monitor_wants(options):

@@ -307,3 +307,21 @@ def build_options(args):
         max_overshoot_m=getattr(args, "max_overshoot", None),
         join_m=args.join,
     )
+
+
+def start_fences(args):
+    """``monitor``'s fences to start from: ``--fences``' (checked as trusted); with
+    ``--source`` an empty file, or none (a set of no fence: the source's first fences get a
+    frame of their own)."""
+    from alphafence.awareness.fenceset import FenceSet
+    from alphafence.cli.common import check_trust
+    from alphafence.errors import InputError
+    from alphafence.geo.frame import LocalFrame
+
+    if args.fences is None:
+        if not args.source:
+            raise InputError("--fences", "give the fences to watch, or --source URL (zones from "
+                             "a live source alone)")  # fmt: skip
+        return FenceSet([], frame=LocalFrame(0.0, 0.0))
+    check_trust(args, args.fences)
+    return FenceSet.from_geojson(args.fences, empty_ok=bool(args.source))

@@ -24,61 +24,24 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
 from datetime import datetime, timezone
 
 from alphafence.monitor.events import new_event
+from alphafence.monitor.live_parts import (
+    LiveOptions,
+    one_line,
+    pool,
+    read_answer,
+    short_switches,
+    verify,
+)
 from alphafence.monitor.live_zones import LiveZones, copied_zones, window_state
 
-SWITCH_S = 0.0002  # the interpreter's thread switch interval while a fence set is rebuilt
+__all__ = ["LiveOptions", "LiveSource"]
+
 CLOCK_SKEW_S = 30.0  # this clock and the server's differ by more: said, and windows widened
 MAX_SKEW_S = 24 * 3600.0  # a server's clock off by more is refused, not applied
 BAD_SHOWN = 10  # features that are not zones named one event each, up to this many per answer
-
-
-@dataclass
-class LiveOptions:
-    """What the monitor asks a live source, and how often.
-
-    Attributes
-    ----------
-    source : SourceOptions
-    rules : Rules
-        What a plain GeoJSON feature restricts.
-    build : BuildOptions
-        How zones are fenced.
-    refresh_s : float
-        Seconds between answers.
-    stale_after_s : float or None
-        Without a good answer this long the source is stale (default: 3 refreshes).
-    radius_m : float
-        The area asked around the vehicle (and around each mission waypoint).
-    announce_s : float
-        A zone whose window starts within this many seconds is announced.
-    trusted_keys : tuple of str
-        PEM public keys: a source that is one document (a signed fence bundle on a web
-        server, not a collection) must come with ``URL.sig.json`` signed by one of them
-        (:mod:`alphafence.fencing.bundle`), checked at every answer.
-    from_file : bool
-        The monitor started from a fence file (an offline copy, even an empty one). False: from
-        the source alone, nothing is known to be in force until its first complete answer
-        (:attr:`LiveSource.known`), and no position is reported CLEAR before it.
-    """
-
-    source: object
-    rules: object
-    build: object
-    refresh_s: float = 30.0
-    stale_after_s: float | None = None
-    radius_m: float = 5000.0
-    announce_s: float = 600.0
-    trusted_keys: tuple = ()  # a document source (a fence bundle): its signature must verify
-    from_file: bool = True  # started from a fence file (an offline copy): what is in force is known
-
-    @property
-    def stale_s(self) -> float:
-        return self.stale_after_s if self.stale_after_s is not None else 3.0 * self.refresh_s
 
 
 class LiveSource:
@@ -133,7 +96,7 @@ class LiveSource:
                         await self.refresh()
                         await self._pause()
             except Exception as exc:  # noqa: BLE001 - the loop outlives anything it meets
-                self._failed(f"the source's worker or session failed: {_line(exc)}")
+                self._failed(f"the source's worker or session failed: {one_line(exc)}")
                 self._wake.clear()
                 await self._pause()
 
@@ -153,7 +116,7 @@ class LiveSource:
         session, for :meth:`refresh`; both closed at the end."""
         from alphafence.sources.ogc import session
 
-        self.pool = _pool()
+        self.pool = pool()
         self._http = session(self.options.source)
         try:
             yield self
@@ -198,7 +161,7 @@ class LiveSource:
         try:
             await self._refresh()
         except Exception as exc:  # noqa: BLE001 - what a server sent must not end the polling
-            self._failed(f"refresh failed: {_line(exc)}")
+            self._failed(f"refresh failed: {one_line(exc)}")
         finally:
             self.refreshes += 1
             async with self._refreshed:
@@ -223,7 +186,7 @@ class LiveSource:
             answer = await fetch(self._http, self.options.source, bbox, self.etag,
                                  self.last_modified, keep="raw")  # fmt: skip
             if answer.raw is not None and self.options.trusted_keys:
-                await self._verify(answer)
+                await verify(self._http, self.options, answer)
         except SourceError as exc:
             self._failed(str(exc))
             return
@@ -236,15 +199,15 @@ class LiveSource:
         loop = asyncio.get_running_loop()
         try:
             entries, bad, fences = await loop.run_in_executor(
-                self.pool, _read_answer, self.options, answer.pages_raw, set(self.fenced)
+                self.pool, read_answer, self.options, answer.pages_raw, set(self.fenced)
             )
         except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next
             self.pool.shutdown(wait=False, cancel_futures=True)
-            self.pool = _pool()
+            self.pool = pool()
             self._failed("reading the answer: the worker process died (a new one is started)")
             return
         except Exception as exc:  # noqa: BLE001 - a worker that failed removes nothing
-            self._failed(f"reading the answer: {_line(exc)}")
+            self._failed(f"reading the answer: {one_line(exc)}")
             return
         zones, held = self._zones(entries, fences)
         for line in bad[:BAD_SHOWN]:
@@ -296,30 +259,6 @@ class LiveSource:
             self.windows.pop(z.hash, None)
             put(new_event("source_zone_removed", zone=z.id, name=z.name))
 
-    async def _verify(self, answer) -> None:
-        """The document's detached signature (``URL.sig.json``) checked against the trusted
-        keys (in a worker thread: files and hashing): SourceError when it is not authentic."""
-        import tempfile
-        from pathlib import Path
-
-        from alphafence.errors import InputError, SourceError
-        from alphafence.fencing.bundle import SUFFIX, verify
-        from alphafence.sources.request import fetch_bytes
-
-        signature = await fetch_bytes(self._http, self.options.source, answer.url + SUFFIX)
-
-        def check():
-            with tempfile.TemporaryDirectory(prefix="alphafence-") as tmp:
-                doc = Path(tmp) / "fences.geojson"
-                doc.write_bytes(answer.raw)
-                Path(str(doc) + SUFFIX).write_bytes(signature)
-                verify(doc, self.options.trusted_keys)
-
-        try:
-            await asyncio.to_thread(check)
-        except InputError as exc:
-            raise SourceError(answer.url, f"not authentic, not applied: {exc.message}") from None
-
     def tick(self, now_utc) -> None:
         """Each second: windows that changed state are said; the source gone stale is. Only
         the zones with a window are looked at (the others are always in force)."""
@@ -335,7 +274,7 @@ class LiveSource:
             try:
                 state = window_state(z.applicability, now_utc, self.options.announce_s, self.skew_s)
             except Exception as exc:  # noqa: BLE001 - a served window this clock cannot take
-                state = f"unreadable ({_line(exc)}): in force"
+                state = f"unreadable ({one_line(exc)}): in force"
             if self.windows.get(z.hash) != state:
                 self.windows[z.hash] = state
                 self.monitor.handle(
@@ -448,39 +387,3 @@ class LiveSource:
                                           "windows are widened by the difference"))  # fmt: skip
         self.skew_s = doubt
         self.monitor.clock_slack_s = doubt
-
-
-def _pool():
-    """The fencing worker: one process, spawned (not forked: the monitor has threads)."""
-    import multiprocessing
-
-    from alphafence.fencing.zone_fences import worker_start
-
-    context = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(1, mp_context=context, initializer=worker_start)
-
-
-def _line(exc) -> str:
-    """One line for any exception: its type and its first 300 characters."""
-    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"[:300]
-
-
-@contextlib.contextmanager
-def short_switches(interval_s: float = SWITCH_S):
-    """The interpreter's thread switch interval shortened while a worker thread rebuilds the
-    fence set: a position check waits at most this long for the interpreter between its GEOS
-    calls (at the default 5 ms the checks during a rebuild are several times slower)."""
-    import sys
-
-    old = sys.getswitchinterval()
-    sys.setswitchinterval(interval_s)
-    try:
-        yield
-    finally:
-        sys.setswitchinterval(old)
-
-
-def _read_answer(options, features, known):
-    from alphafence.fencing.zone_fences import read_answer
-
-    return read_answer(options.source.url, features, options.rules, options.build, known)

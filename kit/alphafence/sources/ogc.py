@@ -18,11 +18,10 @@ import asyncio
 import ssl
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from email.utils import parsedate_to_datetime
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from alphafence.errors import SourceError
-from alphafence.sources.request import follow, get, origin
+from alphafence.sources.request import follow, get, origin, server_skew
 
 ACCEPT = "application/geo+json, application/json;q=0.9"
 PAGE_LIMIT = 500  # features asked per page
@@ -312,7 +311,7 @@ async def _read_page(http, options, answer, page_url, conditional, seen, keep):
     answer.bytes += len(raw or b"")
     if answer.pages == 1:
         answer.etag, answer.last_modified = headers.get("ETag"), headers.get("Last-Modified")
-        answer.server_skew_s = _skew(headers.get("Date"), answer.fetched_utc)
+        answer.server_skew_s = server_skew(headers.get("Date"), answer.fetched_utc)
     if status == 304:
         if answer.pages > 1:  # only the first page is asked conditionally
             _fail(answer, SourceError(page_url, "HTTP 304 to a page that was not conditional"))
@@ -359,21 +358,6 @@ def _check_matched(answer) -> None:
     if answer.matched is not None and not answer.not_modified and answer.count != answer.matched:
         raise _Incomplete(SourceError(answer.url, f"{answer.count} features read of the "
                                       f"{answer.matched} it matched"))  # fmt: skip
-
-
-def _skew(date_header, fetched_utc) -> float | None:
-    """The server's ``Date`` less ``fetched_utc`` (ISO 8601), in seconds; None when there is
-    no date, or none this computer can represent."""
-    if not date_header:
-        return None
-    try:
-        server = parsedate_to_datetime(date_header)
-        if server.tzinfo is None:
-            server = server.replace(tzinfo=timezone.utc)
-        fetched = datetime.fromisoformat(fetched_utc.replace("Z", "+00:00"))
-        return (server - fetched).total_seconds()
-    except (TypeError, ValueError, OverflowError, IndexError):
-        return None
 
 
 def _page(options, page_url, doc):

@@ -236,3 +236,29 @@ async def fetch_bytes(http, options, url: str) -> bytes:
     SourceError (one line) when it fails or is not JSON."""
     _, _, _, raw, _ = await get(http, options, url, {})
     return raw or b""
+
+
+def server_skew(date_header, fetched_utc) -> float | None:
+    """The server's ``Date`` less ``fetched_utc`` (ISO 8601), in seconds; None when there is
+    no date, or none this computer can represent.
+
+    Examples
+    --------
+    >>> server_skew("Mon, 07 Dec 2026 10:00:30 GMT", "2026-12-07T10:00:00.000Z")
+    30.0
+    >>> server_skew("Fri, 31 Dec 9999 23:59:59 GMT", "2026-12-07T10:00:00.000Z") > 2e11
+    True
+    """
+    from datetime import datetime, timezone
+    from email.utils import parsedate_to_datetime
+
+    if not date_header:
+        return None
+    try:
+        server = parsedate_to_datetime(date_header)
+        if server.tzinfo is None:
+            server = server.replace(tzinfo=timezone.utc)
+        fetched = datetime.fromisoformat(fetched_utc.replace("Z", "+00:00"))
+        return (server - fetched).total_seconds()
+    except (TypeError, ValueError, OverflowError, IndexError):
+        return None
