@@ -3,7 +3,7 @@
 - At the byte budget: an answer of about 30 MiB (``MAX_ANSWER_BYTES`` is 32) over two pages,
   each 500 ED-318 zones of 1,300 vertices; at the feature budget: 20,000 zones
   (``MAX_FEATURES``) of 5 vertices over 40 pages of 500. Served from memory by a threaded
-  ``http.server`` on loopback, asked by :func:`alphafence.sources.ogc.fetch` as ``build
+  ``http.server`` on loopback (a process of its own), asked by :func:`alphafence.sources.ogc.fetch` as ``build
   --source`` asks (the features kept) and as the monitor asks (only the pages' bytes kept: its
   worker reads them). Each run is a fresh spawned process: its peak resident memory (the
   kernel's high-water mark) less its resident memory before the answer, after the server's
@@ -85,12 +85,18 @@ def _serve(bodies):
     return server
 
 
-def _one(count, vertices, how, out):
-    """In a fresh process: (seconds, peak memory increase in MiB, features read)."""
+def _server(count, vertices, port, stop):
+    """The answer's pages served from memory until ``stop`` is set (a process of its own)."""
+    server = _serve(pages(count, vertices))
+    port.put(server.server_address[1])
+    stop.wait()
+
+
+def _one(count, vertices, how, port, out):
+    """In a fresh process: (seconds, peak memory increase in MiB, features read, MiB)."""
     import asyncio
 
-    bodies = pages(count, vertices)
-    server = None if how == "peer" else _serve(bodies)
+    bodies = pages(count, vertices) if how == "peer" else None
     if how != "peer":
         import aiohttp  # noqa: F401 - imported before the baseline, as a monitor has it
 
@@ -101,7 +107,7 @@ def _one(count, vertices, how, out):
         docs = [json.loads(b) for b in bodies]
         n = sum(len(d["features"]) for d in docs)
     else:
-        url = f"http://127.0.0.1:{server.server_address[1]}/collections/z/items"
+        url = f"http://127.0.0.1:{port}/collections/z/items"
         options = SourceOptions(url, limit=PAGE)
 
         async def ask():
@@ -112,16 +118,27 @@ def _one(count, vertices, how, out):
         assert answer.complete, answer.error
         n = answer.count
     seconds = time.perf_counter() - t0
-    out.put((seconds, max(0, _peak_kb() - base) / 1024, n, sum(map(len, bodies)) / 2**20))
+    size = sum(map(len, bodies)) if bodies else answer.bytes
+    out.put((seconds, max(0, _peak_kb() - base) / 1024, n, size / 2**20))
 
 
 def measure(count, vertices, how):
+    """One run in a fresh process (the server, when asked over HTTP, in another)."""
     context = multiprocessing.get_context("spawn")
-    out = context.Queue()
-    proc = context.Process(target=_one, args=(count, vertices, how, out))
+    out, port, stop = context.Queue(), context.Queue(), context.Event()
+    server = None
+    if how != "peer":
+        server = context.Process(target=_server, args=(count, vertices, port, stop))
+        server.start()
+    proc = context.Process(
+        target=_one, args=(count, vertices, how, port.get() if server else 0, out)
+    )
     proc.start()
     result = out.get()
     proc.join()
+    if server is not None:
+        stop.set()
+        server.join()
     return result
 
 

@@ -185,6 +185,12 @@ class Answer:
     raw: bytes | None = None  # a whole document's bytes (not a collection's pages): to verify
     pages_raw: list = field(default_factory=list)  # each page's bytes, as they came
 
+    def __repr__(self) -> str:  # short: an answer holds megabytes (Python 3.11's asyncio.run
+        # formats the result of its main task when it looks at SIGINT's handler)
+        return (f"Answer({self.url!r}, complete={self.complete}, not_modified="
+                f"{self.not_modified}, pages={self.pages}, count={self.count}, "
+                f"bytes={self.bytes}, error={self.error!r})")  # fmt: skip
+
     def metadata(self) -> dict:
         """What an offline copy records of this answer (``build --source``)."""
         meta = {"url": self.url, "fetched_utc": self.fetched_utc, "complete": self.complete}
