@@ -309,3 +309,20 @@ def test_read_zones_names_a_malformed_zone_and_holds_its_id():
     assert [z.id for z in found] == ["C"] and held == ["A", "B"]
     assert "zone A: Polygon coordinate is not a finite number (nan)" in bad[0]
     assert "zone B: Polygon coordinates nested deeper" in bad[1]
+
+
+def test_build_follows_an_origin_the_user_names_and_no_other(
+    servers, tmp_path, capsys, monkeypatch
+):
+    hostile, other = servers
+    hostile.case, other.case, other.requests[:] = "next-other-origin", None, []
+    monkeypatch.setenv("ALPHAFENCE_SOURCE_TOKEN", TOKEN)
+    out = tmp_path / "copy.geojson"
+    args = ["build", "--source", hostile.collection, "--bbox", BOX, "-o", str(out), "-q"]
+    assert main(args) == 4 and not out.exists() and not other.requests
+    assert "allow it with --source-origin" in capsys.readouterr().err
+    assert main([*args, "--source-origin", other.url]) == 0
+    assert other.authorized() and out.exists()
+    assert main([*args, "--source-origin", "file:///etc"]) == 2
+    assert "not an http:// or https:// origin" in capsys.readouterr().err
+    hostile.case = None
