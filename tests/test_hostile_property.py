@@ -9,6 +9,7 @@ breaks the property, and the test sees it."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 import pytest
 from hypothesis import HealthCheck, example, given, settings
@@ -16,6 +17,7 @@ from hypothesis import strategies as st
 
 from alphafence.fencing.pipeline import BuildOptions
 from alphafence.monitor.live import LiveOptions, LiveSource
+from alphafence.monitor.live_parts import pool
 from alphafence.monitor.live_zones import LiveZones
 from alphafence.zones.rules import load_rules
 from tests.hostile_server import HostileServer
@@ -35,6 +37,23 @@ answers = st.lists(
     min_size=1,
     max_size=7,
 )
+
+
+WORKER = []  # the module's one fencing worker, for every example (a spawn costs a CPU second)
+
+
+class SharedWorker(LiveSource):
+    """The monitor's polling as it is, its worker process the module's."""
+
+    @contextlib.asynccontextmanager
+    async def opened(self):
+        from alphafence.sources.ogc import session
+
+        self.pool, self._http = WORKER[0], session(self.options.source)
+        try:
+            yield self
+        finally:
+            await self._http.close()
 
 
 class Model:
@@ -72,7 +91,7 @@ class Model:
         self.in_force = set(served) | (held & self.in_force)
 
 
-async def flown(sequence, server, live_class=LiveSource):
+async def flown(sequence, server, live_class=SharedWorker):
     """Every answer of ``sequence`` taken by a polling loop; the model checked after each."""
     companion = Companion()
     o = LiveOptions(options(server.collection, None, limit=1), load_rules(), BuildOptions(),
@@ -98,8 +117,12 @@ async def flown(sequence, server, live_class=LiveSource):
 
 @pytest.fixture(scope="module")
 def server():
-    with HostileServer() as other, HostileServer(other=other.url) as s:
-        yield s
+    WORKER.append(pool())
+    try:
+        with HostileServer() as other, HostileServer(other=other.url) as s:
+            yield s
+    finally:
+        WORKER.pop().shutdown(wait=True, cancel_futures=True)
 
 
 @settings(
@@ -126,7 +149,7 @@ class Forgetting(LiveZones):
 
 
 def broken(rule):
-    class Broken(LiveSource):
+    class Broken(SharedWorker):
         def __init__(self, *a, **kw):
             super().__init__(*a, **kw)
             self.zones = rule()
