@@ -36,8 +36,11 @@ demo: $(STAMP)
 # 10.7 minutes with 3 workers, 14.3 with 2); the
 # SITL comes from ../shared/ardupilot-sitl when no other is found
 WORKERS ?= $(shell $(PYTHON) -c "import os; print((os.cpu_count() or 1) + 1)")
+# then the flights whose margin is a few metres at a speedup (marked alone: a monitor's few
+# hundredths of a second of lateness on a loaded machine are metres there), one at a time
 test: $(STAMP) $(PYGEOAPI_STAMP)
-	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal
+	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m "not alone"
+	$(BIN)/pytest -q -m alone
 
 # the whole suite at the oldest versions the kit supports (pyproject.toml's floors, mostly
 # Debian bookworm's): .venv-oldest from .ci/oldest-constraints.txt (needs Python 3.11, as
@@ -61,7 +64,8 @@ test-oldest: $(OLDEST_STAMP) $(PYGEOAPI_STAMP)
 
 sitl-test: $(STAMP) $(PYGEOAPI_STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
-	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m sitl
+	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m "sitl and not alone"
+	$(BIN)/pytest -q -m alone
 
 # a Navio2's OS (Debian armhf) under qemu-user, as root: the install in docs/onboard.md, the companion's
 # unit tests and a flight against x86 SITL; not part of `make test` (see tests/navio2/run.sh)

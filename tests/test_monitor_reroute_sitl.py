@@ -92,7 +92,7 @@ from tests.sitl_flight import (
     within,
 )
 
-pytestmark = pytest.mark.sitl
+pytestmark = [pytest.mark.sitl, pytest.mark.alone]  # turns within 1.5 m of its clearance
 
 EGHAM = {"home": "egham", "speedup": 5}
 

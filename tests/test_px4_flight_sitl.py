@@ -37,7 +37,7 @@ from alphafence.vehicle.link import open_vehicle
 from alphafence.vehicle.params import apply_params
 from alphafence.vehicle.px4 import PRESETS
 
-pytestmark = [pytest.mark.sitl, pytest.mark.px4]
+pytestmark = [pytest.mark.sitl, pytest.mark.px4, pytest.mark.alone]  # PX4 in real time
 HOME = (14.4775, 35.8660)  # the px4 fixture's home
 ZONE_EDGE = 190.0
 MARGIN_M = 15.0  # of the zone: the fence's near edge is 175 m east of home

@@ -54,7 +54,7 @@ from tests.test_px4_flight_sitl import (
     zone_local,
 )
 
-pytestmark = [pytest.mark.sitl, pytest.mark.px4]
+pytestmark = [pytest.mark.sitl, pytest.mark.px4, pytest.mark.alone]  # PX4 in real time
 CLEARANCE = 20.0
 TOLERANCE = 1.5
 MISSION_GOAL_EAST = 450.0
