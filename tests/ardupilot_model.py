@@ -13,10 +13,10 @@ ArduPilot's ``AC_PolyFence_loader::breached`` (current master, ``libraries/AC_Fe
 
 ``Location::get_distance`` scales the longitude difference at the **mean** latitude of the two
 points (``longitude_scale((lat + loc2.lat) / 2)``) and multiplies by LOCATION_SCALING_FACTOR,
-0.011131884502145034 m per 1e-7 degree (a 6,378,100 m sphere). The integer arithmetic lives in
-the kit (``alphafence.geo.vehicle_distance``), which this model uses, and which
-``tests/test_ardupilot_model.py`` holds to cases written from ArduPilot's source and to SITL's
-own FENCE_STATUS.
+0.011131884502145034 m per 1e-7 degree (a 6,378,100 m sphere). The model is written here from
+ArduPilot's source (``AP_Math/polygon.cpp``, ``AP_Common/Location.cpp``) and shares no code with
+the kit; ``tests/test_ardupilot_model.py`` holds it to cases written from that source and to
+SITL's own FENCE_STATUS.
 
 :func:`clearance` measures, for the zone's boundary as its file means it (straight lon/lat
 edges, sampled densely), whether ArduPilot would call every sample inside a fence, and the
@@ -33,13 +33,8 @@ import shapely
 from pyproj import Geod
 from scipy.spatial import cKDTree
 
-from alphafence.geo import vehicle_distance as vd
-from alphafence.mavlink.items import (
-    CIRCLE_EXCLUSION,
-    CIRCLE_INCLUSION,
-    POLYGON_EXCLUSION,
-    POLYGON_INCLUSION,
-)
+# MAVLink's common.xml: MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION ... _CIRCLE_EXCLUSION
+POLYGON_INCLUSION, POLYGON_EXCLUSION, CIRCLE_INCLUSION, CIRCLE_EXCLUSION = 5001, 5002, 5003, 5004
 
 GEOD = Geod(ellps="WGS84")
 LATLON_TO_M = 0.011131884502145034  # ArduPilot's LOCATION_SCALING_FACTOR: m per 1e-7 degree
@@ -54,15 +49,41 @@ def polygon_outside(lat, lon, ring_lat, ring_lon):
     """ArduPilot's ``Polygon_outside`` for many positions: True where outside.
 
     Every argument in degrees; all are taken to 1e-7 degree integers first, as the vehicle
-    holds them. The ring is not closed."""
-    return vd.polygon_outside(lon, lat, ring_lon, ring_lat)
+    holds them. The ring is not closed. ArduPilot's points are ``Vector2l(lat, lng)``: x is the
+    latitude, y the longitude; its sign shortcuts are kept as they are."""
+    px, py = e7(lat), e7(lon)
+    vx, vy = e7(ring_lat), e7(ring_lon)
+    outside = np.ones(np.shape(px), bool)
+    n = len(vx)
+    for i in range(n):
+        j = (i - 1) % n
+        crosses = (vy[i] > py) != (vy[j] > py)
+        dx1, dx2 = px - vx[i], vx[j] - vx[i]
+        dy1, dy2 = py - vy[i], vy[j] - vy[i]
+        m1 = np.where(dx1 < 0, -1, 1) * (-1 if dy2 < 0 else 1)
+        m2 = (-1 if dx2 < 0 else 1) * np.where(dy1 < 0, -1, 1)
+        if dy2 < 0:
+            flip = (m1 > m2) | ((m1 == m2) & (dx1 * dy2 > dx2 * dy1))
+        else:
+            flip = (m1 < m2) | ((m1 == m2) & (dx1 * dy2 < dx2 * dy1))
+        outside ^= crosses & flip
+    return outside
 
 
 def location_distance_m(lat, lon, clat, clon, mean=True):
     """ArduPilot's ``Location::get_distance`` from positions to a circle's centre (metres):
     the longitude scaled at the mean latitude (``mean=False``: at the centre's, as earlier
-    firmware did)."""
-    return vd.vehicle_distance_m(lon, lat, clon, clat, mean=mean)
+    firmware did). ``diff_longitude`` wraps at the antimeridian; ``(lat + loc2.lat) / 2`` is
+    int32 division (towards zero); ``longitude_scale`` is at least 0.01."""
+    lat_i, lon_i = e7(lat), e7(lon)
+    clat_i, clon_i = e7(clat), e7(clon)
+    dlat = (clat_i - lat_i).astype(float)
+    dlon = clon_i - lon_i
+    dlon = np.where(dlon > 1_800_000_000, dlon - 3_600_000_000, dlon)
+    dlon = np.where(dlon < -1_800_000_000, dlon + 3_600_000_000, dlon)
+    at = np.trunc((lat_i + clat_i) / 2) if mean else clat_i + 0 * lat_i
+    scale = np.maximum(np.cos(np.radians(at * 1e-7)), 0.01)
+    return np.hypot(dlat, dlon * scale) * LATLON_TO_M
 
 
 def fence_shapes(items):
@@ -283,8 +304,13 @@ def excursion_m(zone, rings, margin_m, spacing_m=None, reach_m=None):
 
 def circle_rim(lon, lat, radius_m, n=720):
     """Positions ArduPilot measures ``radius_m`` from a circle's centre (lon, lat arrays):
-    its mean-latitude distance inverted."""
-    return vd.vehicle_circle_rim(lon, lat, radius_m, n)
+    its mean-latitude distance inverted (north and east offsets in 1e-7 degrees, the east one
+    scaled at the latitude halfway to the rim)."""
+    ang = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    dlat = radius_m / LATLON_TO_M * np.cos(ang) * 1e-7  # degrees
+    centre = float(np.rint(lat * 1e7) * 1e-7)
+    scale = np.maximum(np.cos(np.radians(centre + dlat / 2.0)), 0.01)
+    return lon + radius_m / LATLON_TO_M * np.sin(ang) * 1e-7 / scale, lat + dlat
 
 
 def circle_inradius_m(lon, lat, radius_m):
@@ -301,24 +327,3 @@ def circle_outradius_m(lon, lat, radius_m):
     rlon, rlat = circle_rim(lon, lat, radius_m)
     n = len(rlon)
     return float(GEOD.inv(np.full(n, lon), np.full(n, lat), rlon, rlat)[2].max())
-
-
-def zone_features(zones, rules, name="zones.geojson"):
-    """Lon/lat polygons as the restricted features of a GeoJSON FeatureCollection, the ``k``th
-    with ``osm_id`` ``k`` (its source ends ``/k``), read with ``rules``."""
-    import collections
-
-    from alphafence.zones.geojson import read_geojson_doc
-
-    doc = {
-        "type": "FeatureCollection",
-        "features": [
-            {
-                "type": "Feature",
-                "properties": {"restricted": "yes", "osm_id": str(k)},
-                "geometry": shapely.geometry.mapping(z),
-            }
-            for k, z in enumerate(zones)
-        ],
-    }
-    return read_geojson_doc(name, doc, rules, [], collections.Counter())

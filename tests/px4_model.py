@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from alphafence.mavlink.items import CIRCLE_EXCLUSION, CIRCLE_INCLUSION, POLYGON_EXCLUSION
-
 from .ardupilot_model import fence_shapes
+
+# MAVLink's common.xml: MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, _CIRCLE_INCLUSION, _EXCLUSION
+POLYGON_EXCLUSION, CIRCLE_INCLUSION, CIRCLE_EXCLUSION = 5002, 5003, 5004
 
 EARTH_M = 6_371_000.0  # CONSTANTS_RADIUS_OF_EARTH
 

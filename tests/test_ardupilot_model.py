@@ -156,3 +156,26 @@ def test_circle_items_hold_under_either_distance_reading(lat, radius):
 
         before = vehicle_distance_m(plon, plat, 14.5, lat, False, LEGACY_LATLON_TO_M).min()
         assert location_distance_m(plat, plon, lat, 14.5).min() < before * (1 - 1e-6) - 0.01
+
+
+def test_the_kits_reading_agrees_with_the_model_written_from_ardupilots_source():
+    """The kit's vectorised breach check (``geo.vehicle_distance``) and this model, written
+    apart from it, agree on random positions, rings and circles (Malta and the antimeridian)."""
+    import numpy as np
+
+    from alphafence.geo import vehicle_distance as kit
+
+    from .ardupilot_model import location_distance_m, polygon_outside
+
+    rng = np.random.default_rng(7)
+    for lon0, lat0 in ((14.5, 35.9), (179.99, -16.5), (-0.5, 51.4)):
+        ring_lon = lon0 + rng.uniform(-0.01, 0.01, 9)
+        ring_lat = lat0 + rng.uniform(-0.01, 0.01, 9)
+        lon = lon0 + rng.uniform(-0.012, 0.012, 5000)
+        lat = lat0 + rng.uniform(-0.012, 0.012, 5000)
+        model = polygon_outside(lat, lon, ring_lat, ring_lon)
+        assert (kit.polygon_outside(lon, lat, ring_lon, ring_lat) == model).all()
+        for mean in (True, False):
+            d = location_distance_m(lat, lon, lat0, lon0, mean=mean)
+            assert np.allclose(kit.vehicle_distance_m(lon, lat, lon0, lat0, mean=mean), d,
+                               rtol=1e-12, atol=1e-9)  # fmt: skip

@@ -49,9 +49,9 @@ from .ardupilot_model import (
     location_distance_m,
     polygon_outside,
     spacing_for,
-    zone_features,
 )
 from .conftest import checked
+from .zone_samples import zone_features
 
 KM = 1000.0
 

@@ -21,8 +21,9 @@ from alphafence.fencing.fences import METHODS
 from alphafence.fencing.pipeline import BuildOptions, build_fences
 from alphafence.geo.frame import LocalFrame
 
-from .ardupilot_model import excursion_m, zone_features
+from .ardupilot_model import excursion_m
 from .test_as_read_properties import _rings, _rules
+from .zone_samples import zone_features
 
 FRAME = LocalFrame(14.5, 35.9)
 
