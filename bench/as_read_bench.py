@@ -62,7 +62,7 @@ def zones(seed=SEED):
 
 
 def _features(named, rules):
-    from tests.ardupilot_model import zone_features
+    from tests.zone_samples import zone_features
 
     return zone_features([z for _, z in named], rules, "national.geojson")
 
