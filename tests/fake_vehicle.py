@@ -296,6 +296,8 @@ class FakeVehicle:
         uptime: float = 60.0,
         mav_type: int = mav.MAV_TYPE_QUADROTOR,
         autopilot: int = mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        home: tuple | None = None,
+        firmware: tuple = (4, 7, 0),
     ):
         self.fence: list[StoredItem] = [StoredItem.of(it) for it in fence]
         self.params: dict[str, float] = dict(params or {})
@@ -303,6 +305,8 @@ class FakeVehicle:
         self.mav_type = mav_type  # HEARTBEAT's type: a copter unless told
         self.autopilot = autopilot  # HEARTBEAT's autopilot: ArduPilot unless told
         self.custom_mode = 0  # HEARTBEAT's custom_mode (the autopilot's mode number)
+        self.home = home  # (lon, lat): HOME_POSITION is answered only once home is set
+        self.firmware = firmware  # AUTOPILOT_VERSION's flight_sw_version (major, minor, patch)
         self.reboot_seconds = reboot_seconds
         self.reboots = 0  # boots after the first
         self._boot_t0 = time.monotonic() - uptime  # SYSTEM_TIME's clock
@@ -600,6 +604,16 @@ class FakeVehicle:
             return
         if (
             msg.command == mav.MAV_CMD_REQUEST_MESSAGE
+            and int(msg.param1) == mav.MAVLINK_MSG_ID_HOME_POSITION
+        ):  # GCS_MAVLINK::send_home_position: accepted, and nothing sent while home is unset
+            self._send(mav.MAVLink_command_ack_message(msg.command, 0, 0, 0, *src))
+            if self.home is not None:
+                lon, lat = (round(v * 1e7) for v in self.home)
+                self._send(mav.MAVLink_home_position_message(
+                    lat, lon, 0, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0))  # fmt: skip
+            return
+        if (
+            msg.command == mav.MAV_CMD_REQUEST_MESSAGE
             and int(msg.param1) == mav.MAVLINK_MSG_ID_SYSTEM_TIME
         ):
             self._send(mav.MAVLink_command_ack_message(msg.command, 0, 0, 0, *src))
@@ -612,7 +626,10 @@ class FakeVehicle:
             self._send(
                 mav.MAVLink_autopilot_version_message(
                     CAPABILITIES,
-                    (4 << 24) | (7 << 16) | (0 << 8) | 255,
+                    (self.firmware[0] << 24)
+                    | (self.firmware[1] << 16)
+                    | (self.firmware[2] << 8)
+                    | 255,
                     0,
                     0,
                     0,

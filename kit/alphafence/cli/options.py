@@ -195,6 +195,8 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
     The operating area (``--area`` or ``--bbox``) is each verb's own; :func:`compile_from_args`
     reads both.
     """
+    from alphafence.onboard import HOME_CLEARANCE_M as CLEARANCE_M
+
     add_storage_options(p)
     p.add_argument(
         "--items",
@@ -218,13 +220,31 @@ def add_compile_options(p: argparse.ArgumentParser) -> None:
         metavar="LAT,LON",
         help="the fence return point",
     )
+    p.add_argument(
+        "--home",
+        type=latlon("--home"),
+        metavar="LAT,LON",
+        help="the vehicle's home: no compiled item covers it or comes within --home-clearance "
+        "(default: a mission's home with --area; upload reads the vehicle's own)",
+    )
+    p.add_argument(
+        "--home-clearance",
+        type=non_negative("--home-clearance", "metres"),
+        default=CLEARANCE_M,
+        metavar="M",
+        help=f"metres between home (and the vehicle) and any compiled keep-out item or keep-in "
+        f"edge, where the fences themselves leave that much (default {CLEARANCE_M:g})",
+    )
 
 
-def compile_from_args(args, records):
+def compile_from_args(args, records, home=None, position=None):
     """Compile ``records`` for where the vehicle flies and the storage that
     :func:`add_compile_options` and the verb's ``--area`` / ``--bbox`` describe: the fences
     within ``--distance`` of the mission's flight path (its legs in order, the way back
     included), or of the box.
+
+    ``home`` (the vehicle's, else ``--home``, else the mission's) and ``position`` (the
+    vehicle's, ``(lon, lat)``) are left clear (:mod:`alphafence.onboard.clear`).
 
     Returns
     -------
@@ -233,12 +253,13 @@ def compile_from_args(args, records):
     Raises
     ------
     InputError
-        ``--return-point`` or ``--bbox`` typed the wrong way round (lon,lat for a position,
+        A fence that holds home (named), ``--return-point`` or ``--bbox`` typed the wrong way round (lon,lat for a position,
         lat,lon for a box: the swap is suggested), or no fence near the area (the plan would
         leave the vehicle without a fence).
     """
     import shapely
 
+    from alphafence.onboard.clear import KeepClear
     from alphafence.onboard.compile import compile_fences
     from alphafence.onboard.corridor import flight_path_from_plan
     from alphafence.onboard.rules import require_fence
@@ -250,6 +271,12 @@ def compile_from_args(args, records):
         area = shapely.box(*args.bbox)
         where = "the box " + ",".join(f"{v:g}" for v in args.bbox)
     geoms = [r.geometry for r in records if r.kind in ("keep_out", "keep_in")]
+    home = home or getattr(args, "home", None)
+    if home is None and getattr(args, "area", None):  # the mission's home: its first position
+        home = tuple(shapely.get_coordinates(area)[0])
+    elif getattr(args, "home", None) is not None:
+        check_point("--home", args.home, [area, *geoms], args.fences)
+    keep = KeepClear.of(home, position, args.home_clearance)
     if args.return_point is not None:  # LAT,LON typed the wrong way round
         check_point("--return-point", args.return_point, [area, *geoms], args.fences)
     result = compile_fences(
@@ -260,6 +287,7 @@ def compile_from_args(args, records):
         args.keep_in,
         args.return_point,
         args.items,
+        keep,
     )
     if not getattr(args, "area", None):  # a box that selects nothing, typed lat,lon
         check_box("--bbox", args.bbox, geoms, args.fences, reach_m=args.distance)

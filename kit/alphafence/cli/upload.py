@@ -22,6 +22,7 @@ from alphafence.cli.common import (
     add_signing_option,
     add_trust_options,
     check_trust,
+    err_console,
     out_console,
     signing_key,
     unsigned_hint,
@@ -129,39 +130,62 @@ class _Presets(argparse.Action):
         parser.exit(0)
 
 
-def load_items(args):
-    """The fence items to upload and, for a fence GeoJSON, the compilation that made them.
-
-    An onboard ``.plan`` gives its geoFence's items with its breach return point first; a
-    ``.waypoints`` file (or a QGC WPL file of another suffix, ``.txt``) its items as they are;
-    ArduPilot's legacy fence file (``lat lon`` lines, told by its content) its return point
-    and its inclusion polygon. Any other file is compiled for ``--area`` or ``--bbox``.
-
-    Returns
-    -------
-    tuple
-        ``(items, CompileResult or None)``.
-    """
-    from alphafence.fencefiles.ardupilot_fence import onboard_kind, read_legacy_items
-    from alphafence.fencefiles.fence_read import read_fence_file as read_fences
-    from alphafence.fencefiles.qgc_plan import read_plan_geofence
-    from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+def onboard_file(args) -> str | None:
+    """What kind of onboard file ``args.fences`` is (``"plan"``, ``"waypoints"``,
+    ``"legacy"``), or None for fences to compile."""
+    from alphafence.fencefiles.ardupilot_fence import onboard_kind
 
     name = args.fences.lower()
     if name.endswith(".plan"):
-        return read_plan_geofence(args.fences).upload_items, None
+        return "plan"
     kind = "waypoints" if name.endswith(".waypoints") else onboard_kind(args.fences)
-    if kind == "waypoints":
-        return read_waypoints_fence(args.fences), None
-    if kind == "legacy":
-        return read_legacy_items(args.fences), None
+    return kind if kind in ("waypoints", "legacy") else None
+
+
+def read_records(args):
+    """The fences of ``args.fences`` to compile (with ``--source``'s), read and checked
+    before the vehicle is asked anything; None for an onboard file."""
+    from alphafence.fencefiles.fence_read import read_fence_file as read_fences
+
+    if onboard_file(args) is not None:
+        return None
     if not (args.area or args.bbox):
         raise InputError(
             args.fences,
             "fences to compile (fence GeoJSON, KML, OpenAir...) need an operating area: "
             "--area MISSION.plan or --bbox",
         )
-    result = compile_from_args(args, with_source(args, read_fences(args.fences)))
+    return with_source(args, read_fences(args.fences))
+
+
+def load_items(args, home=None, position=None, records=None):
+    """The fence items to upload and, for a fence GeoJSON, the compilation that made them.
+
+    An onboard ``.plan`` gives its geoFence's items with its breach return point first; a
+    ``.waypoints`` file (or a QGC WPL file of another suffix, ``.txt``) its items as they are;
+    ArduPilot's legacy fence file (``lat lon`` lines, told by its content) its return point
+    and its inclusion polygon. Any other file (its ``records``, when read already) is compiled
+    for ``--area`` or ``--bbox``, leaving ``home`` and ``position`` (the vehicle's,
+    ``(lon, lat)``) clear.
+
+    Returns
+    -------
+    tuple
+        ``(items, CompileResult or None)``.
+    """
+    from alphafence.fencefiles.ardupilot_fence import read_legacy_items
+    from alphafence.fencefiles.qgc_plan import read_plan_geofence
+    from alphafence.fencefiles.qgc_wpl import read_waypoints_fence
+
+    kind = onboard_file(args)
+    if kind == "plan":
+        return read_plan_geofence(args.fences).upload_items, None
+    if kind == "waypoints":
+        return read_waypoints_fence(args.fences), None
+    if kind == "legacy":
+        return read_legacy_items(args.fences), None
+    records = read_records(args) if records is None else records
+    result = compile_from_args(args, records, home, position)
     return result.items, result
 
 
@@ -173,9 +197,10 @@ def plan_sites(path):
     return read_plan_geofence(path).sites if path.lower().endswith(".plan") else None
 
 
-def prepare(args):
-    """Compile the fences for ``args.autopilot`` (or check an onboard file's items against
-    its storage and rules), with the reports, figure and map asked for.
+def prepare(args, home=None, position=None, records=None):
+    """Compile the fences for ``args.autopilot`` (leaving the vehicle's ``home`` and
+    ``position`` clear; or check an onboard file's items against its storage and rules), with
+    the reports, figure and map asked for.
 
     Returns
     -------
@@ -192,7 +217,7 @@ def prepare(args):
             f"sets BRD_SD_FENCE for --profile navio2 or sd-fence; the {profile.name} profile's "
             "storage needs no reboot",
         )
-    items, compiled = load_items(args)
+    items, compiled = load_items(args, home, position, records)
     if compiled is not None:
         compile_report(compiled)
         fences = decode_fence(items, source=args.fences) if args.figure or args.map else None
@@ -228,8 +253,7 @@ def run(args) -> int:
     """Check the fences' signature, compile if needed (or check a plan's or waypoint file's
     items against the storage), upload, read back, set parameters.
 
-    Without ``--autopilot`` (or a ``--profile`` of one), the fence is compiled once the
-    vehicle has said which autopilot it runs.
+    Fences to compile are compiled once the vehicle has said its autopilot, home and position.
 
     Exit status 0, or 3 when the vehicle or the link fails (a
     :class:`~alphafence.errors.VehicleError`, mapped by :func:`alphafence.cli.main`).
@@ -247,7 +271,9 @@ def run(args) -> int:
                 f"{args.params} is for {preset_for}; the fence is compiled for "
                 f"{NAMES[autopilot]} (--autopilot, --profile)",
             )
-    prepared = prepare(args) if known else None
+    early = args.dry_run or (known and onboard_file(args) is not None)
+    prepared = prepare(args) if early else None
+    args.records = None if early else read_records(args)  # bad input: before any connection
     if args.dry_run:
         items = prepared[0]
         union = inclusion_count(items) > 1
@@ -268,13 +294,23 @@ async def _upload(args, prepared) -> int:
     from alphafence.vehicle.link import open_vehicle
     from alphafence.vehicle.params import apply_params, check_preset, check_union_supported
     from alphafence.vehicle.px4 import check_home, confirm_kept, monotonic
+    from alphafence.vehicle.whereabouts import whereabouts
 
     with unsigned_hint(args.key):
         async with open_vehicle(args.connect, args.timeout, args.key, args.link) as vehicle:
-            if prepared is None:  # compiled for the autopilot the vehicle says it runs
-                args.autopilot = vehicle.autopilot
-                out_console.print(f"the vehicle runs {NAMES[vehicle.autopilot]}")
-                prepared = await asyncio.to_thread(prepare, args)
+            if prepared is None:  # compiled for the vehicle: its autopilot, home and position
+                if not (args.autopilot or args.profile):
+                    args.autopilot = vehicle.autopilot
+                    out_console.print(f"the vehicle runs {NAMES[vehicle.autopilot]}")
+                home, position = (None, None)
+                if args.records is not None:  # fences to compile, round where it stands
+                    home, position, said, warn = await whereabouts(
+                        vehicle, args.home, args.home_clearance
+                    )
+                    (err_console if warn else out_console).print(
+                        ("[yellow]warning:[/] " if warn else "") + said, soft_wrap=True
+                    )
+                prepared = await asyncio.to_thread(prepare, args, home, position, args.records)
             items, profile = prepared
             if profile.autopilot != vehicle.autopilot:
                 raise VehicleError(
@@ -320,7 +356,6 @@ async def _upload(args, prepared) -> int:
 def _mission_outside(plan, items) -> None:
     """Warn when home or a position of the mission breaches the fence as the vehicle will
     read it (:func:`alphafence.onboard.decode.path_breaches`)."""
-    from alphafence.cli.common import err_console
     from alphafence.onboard.corridor import flight_path_from_plan
     from alphafence.onboard.decode import path_breaches
 

@@ -27,6 +27,7 @@ from alphafence.geo.frame import LocalFrame
 from alphafence.geo.lonlat import as_read
 from alphafence.mavlink.items import RETURN_POINT, FenceItem
 from alphafence.mavlink.storage import END_BYTES, HEADER_BYTES, RETURN_BYTES, Profile, storage_bytes
+from alphafence.onboard.clear import check_held
 from alphafence.onboard.corridor import Corridor, LossModel, Overshoot, overshoot
 from alphafence.onboard.emit import emit_items, held_lonlat
 from alphafence.onboard.merge import fit_by_merging, merge_to_upgrade, upgrade
@@ -115,6 +116,10 @@ class CompileResult:
         return sum(p.chosen.loss for p in self.pieces)
 
 
+def _label(rec) -> str:
+    return f"{rec.site_id} ({rec.name})" if rec.name else rec.site_id
+
+
 def _own(rec, part, frame, max_vertices):
     """The option of storing ``rec`` as its own vertices (:func:`own_option`), when ``part``,
     its reading, has vertices along bowed edges, and only if that option, held as read and
@@ -173,6 +178,7 @@ def compile_fences(
     keep_in_m=None,
     return_point=None,
     max_items=None,
+    keep_clear=None,
 ) -> CompileResult:
     """Fit the fences near a flight path (or an operating area) into a vehicle's fence storage.
 
@@ -201,6 +207,10 @@ def compile_fences(
         ``(lon, lat)`` of the fence's return point.
     max_items : int, optional
         At most this many items (within the profile).
+    keep_clear : KeepClear, optional
+        Home (and the vehicle's position): no item chosen covers them or comes within the
+        clearance of them (:mod:`alphafence.onboard.clear`); a fence that itself holds one is
+        refused by name.
 
     Returns
     -------
@@ -209,7 +219,8 @@ def compile_fences(
     Raises
     ------
     InputError
-        When the fences near the area cannot fit even merged.
+        When the fences near the area cannot fit even merged, or a fence holds a point of
+        ``keep_clear``.
 
     Examples
     --------
@@ -232,7 +243,8 @@ def compile_fences(
     corridor = Corridor.around(area_local, distance_m)
     if max_items is not None:
         profile = dataclasses.replace(profile, items=min(profile.items, max_items))
-    pieces, dropped, full = [], [], ([], [])
+    clear = keep_clear.local(frame) if keep_clear is not None else None
+    pieces, dropped, full, kept_in = [], [], ([], []), []
     for rec in records:
         if rec.kind not in ("keep_out", "keep_in"):
             continue
@@ -245,6 +257,10 @@ def compile_fences(
             dropped.append(rec.site_id)
             continue
         full[rec.kind == "keep_in"].append(local)
+        if clear is not None:  # a fence over home is the fence's, not the compiler's
+            clear.check_zone("compile", _label(rec), local, rec.kind == "keep_in")
+            if rec.kind == "keep_in":
+                kept_in.append((_label(rec), local))
         circle = None
         if rec.circle is not None:
             x, y = frame.to_local(rec.circle[0], rec.circle[1])
@@ -256,9 +272,15 @@ def compile_fences(
                 opts = with_own(opts, _own(rec, part, frame, profile.max_polygon_vertices))
             if opts:
                 pieces.append(Piece([rec.site_id], rec.kind == "keep_in", part, opts))
-    model = LossModel(corridor, full[0])
+    model = LossModel(corridor, full[0], clear)
     for p in pieces:
-        model.rescore(p)
+        if not model.rescore(p):
+            raise InputError(
+                "compile",
+                f"{', '.join(p.sources)}: no shape the vehicle can hold leaves "
+                f"{clear.keep.points[0].label} {clear.keep.clearance_m:g} m clear; compile with "
+                "a smaller --home-clearance",
+            )
     fixed_items, fixed_bytes = 0, HEADER_BYTES + END_BYTES
     if return_point is not None:
         fixed_items += 1
@@ -280,6 +302,9 @@ def compile_fences(
         )
         keep.options[0].loss = 0.0
         pieces.insert(0, keep)
+        kept_in.insert(0, ("the --keep-in area", allowed))
+    if clear is not None:
+        clear.check_keep_in("compile", kept_in)
     budget_items = profile.items - fixed_items
     budget_bytes = profile.bytes - fixed_bytes
     merges = []
@@ -326,6 +351,7 @@ def compile_fences(
         {r.site_id: r.name for r in records if r.name and r.kind in ("keep_out", "keep_in")},
     )
     check_for_autopilot(items, profile.autopilot)  # PX4: one inclusion at most
+    check_held(items, clear)  # home clear as the vehicle reads the items
     used = storage_bytes(items)
     if len(items) > profile.items or used > profile.bytes:  # a fence split at 180° grew
         raise InputError(

@@ -108,30 +108,37 @@ class LossModel:
     corridor : Corridor
     keep_out : list of shapely geometries
         The full-resolution keep-out fences compiled (metric).
+    clear : LocalClear, optional
+        Points no option may cover or come near (:mod:`alphafence.onboard.clear`): an option
+        that does is no option.
     """
 
-    def __init__(self, corridor: Corridor, keep_out):
+    def __init__(self, corridor: Corridor, keep_out, clear=None):
         self.corridor = corridor
         self.keep_out = np.asarray(keep_out, dtype=object)
         self.tree = shapely.STRtree(self.keep_out)
+        self.clear = clear
 
     def _forbidden_near(self, geom):
         near = self.tree.query(geom)
         return shapely.union_all(self.keep_out[near]) if len(near) else shapely.Polygon()
 
-    def rescore(self, piece) -> None:
+    def rescore(self, piece) -> bool:
         """Re-count the loss of each of ``piece``'s options, keep the options that lose less
-        than every cheaper one, and choose the cheapest (in place).
+        than every cheaper one (and leave :attr:`clear`'s points clear), and choose the
+        cheapest (in place). Whether any option is left.
 
         A keep-out option loses what it forbids beyond the full-resolution keep-out fences
         (a merged piece: the gap its merge closed, too);
         an inward keep-in option what it takes from the piece. An outward keep-in piece (the
         operator's operating area) is left alone.
         """
+        if self.clear is not None and not self.clear.fit(piece):
+            return False
         shapes = np.array([o.local for o in piece.options], dtype=object)
         if piece.inclusion:
             if piece.grows:
-                return
+                return True
             lost = shapely.difference(piece.local, shapes)
         else:
             lost = shapely.difference(
@@ -141,6 +148,7 @@ class LossModel:
             o.loss = float(loss)
         piece.options = frontier(piece.options)
         piece.choice = 0
+        return True
 
 
 def frontier(options):

@@ -79,6 +79,13 @@ def _best_merge(pieces, neighbours=4, model=None):
         common = area(shapely.buffer(shapely.points(cx, cy), R, quad_segs=8))
         circle_cost = common - own[a] - own[b]
     cost = np.maximum(hull_cost, circle_cost)
+    clear = None if model is None else model.clear
+    if clear is not None:  # no merge may fill the space round home (or the position)
+        real = [pieces[i].local if pieces[i].required is None else pieces[i].required for i in outs]
+        needs = np.array([clear.needs(g, False) for g in real])
+        cost = np.where(clear.spans(both, np.minimum(needs[a], needs[b])), np.inf, cost)
+        if not np.isfinite(cost).any():
+            return None
     j = int(np.argmin(cost))
     return float(cost[j]), outs[a[j]], outs[b[j]]
 
@@ -91,26 +98,30 @@ def _merge(pieces, a, b, profile, merges, model=None):
         joined, _ = alpha_shape(shapely.union(pieces[a].local, pieces[b].local))
     except shapely.errors.GEOSException:
         joined = None
+    hull = shapely.convex_hull(pair)
     if joined is None or joined.geom_type != "Polygon":  # not joined into one piece: the hull
-        joined = shapely.convex_hull(pair)
+        joined = hull
     required = shapely.union(*(p.local if p.required is None else p.required for p in pair_of))
+    for shape in (joined, hull):
+        merged = _merged(pieces[a].sources + pieces[b].sources, shape, required, profile)
+        if model is None or model.rescore(merged):  # else it reached over home: the hull
+            break
+    else:
+        raise InputError("compile", f"merging {', '.join(merged.sources)} would reach over "
+                         f"{model.clear.keep.points[0]}: narrow the area")  # fmt: skip
+    merges.append(tuple(merged.sources))
+    pieces[a] = merged
+    del pieces[b]
+
+
+def _merged(sources, joined, required, profile):
+    """The piece of fences ``sources`` merged into ``joined`` (metric), ``required`` their
+    union."""
     options = piece_options(joined, False, profile.max_polygon_vertices)
     gap = max(joined.area - required.area, 0.0)  # what the merge fills between the fences
     for o in options:
         o.loss += gap
-    merged = Piece(
-        pieces[a].sources + pieces[b].sources,
-        False,
-        joined,
-        options,
-        merged=True,
-        required=required,
-    )
-    if model is not None:
-        model.rescore(merged)
-    merges.append(tuple(merged.sources))
-    pieces[a] = merged
-    del pieces[b]
+    return Piece(sources, False, joined, options, merged=True, required=required)
 
 
 def fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model=None):
@@ -141,10 +152,13 @@ def fit_by_merging(pieces, budget_items, budget_bytes, profile, merges, model=No
             return
         best = _best_merge(pieces, model=model)
         if best is None:
+            clear = "" if model is None or model.clear is None else (
+                f"; no merge may come within {model.clear.keep.clearance_m:g} m of "
+                + " or ".join(p.label for p in model.clear.keep.points))  # fmt: skip
             raise InputError(
                 "compile",
                 f"the fences near the area do not fit a {profile.name} "
-                f"({items} items / {nbytes} bytes for {budget_items} / {budget_bytes})",
+                f"({items} items / {nbytes} bytes for {budget_items} / {budget_bytes}){clear}",
             )
         _merge(pieces, best[1], best[2], profile, merges, model)
 
@@ -172,7 +186,9 @@ def merge_to_upgrade(
                 return
             _merge(trial, best[1], best[2], profile, trial_merges, model)
             upgrade(trial, budget_items, budget_bytes)
-            if sum(p.chosen.loss for p in trial) < before:
+            items, nbytes = totals(trial)  # a merge kept clear of home may cost more
+            fits = items <= budget_items and nbytes <= budget_bytes
+            if fits and sum(p.chosen.loss for p in trial) < before:
                 break
         else:
             return
