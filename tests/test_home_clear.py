@@ -55,6 +55,28 @@ def exclusion_distance_m(items, home):
     return min(d, default=math.inf)
 
 
+def far_from(records, box, distance_m=2000.0, slack_m=10.0):
+    """The site ids of ``records`` farther than about ``distance_m`` from ``box`` (a compile
+    for the box leaves them out)."""
+    frame = LocalFrame.around(box)
+    near = frame.read_geom(box)
+    return [r.site_id for r in records
+            if shapely.distance(frame.read_geom(r.geometry), near) > distance_m - slack_m]  # fmt: skip
+
+
+def assert_clear_and_holding(records, items, dropped, autopilot, home, clearance=25.0):
+    """``items`` leave ``home`` clear as the autopilot reads them, and hold every keep-out
+    fence of ``records`` but those ``dropped`` (too far to compile)."""
+    assert not holds_home(items, home, autopilot)
+    assert exclusion_distance_m(items, home) >= clearance - 0.5
+    verify = VerifyFrame(*home)
+    polys, discs = onboard_geometry(items, verify, inradius(autopilot))
+    for rec in records:
+        if rec.kind == "keep_out" and rec.site_id not in set(dropped):
+            for part in shapely.get_parts(shapely.make_valid(verify.local(rec.geometry))):
+                assert contained(part, polys, discs), rec.site_id
+
+
 @pytest.fixture(scope="module")
 def malta_fences(malta, tmp_path_factory):
     out = tmp_path_factory.mktemp("malta-home") / "fences.geojson"
@@ -68,15 +90,7 @@ def test_the_malta_box_compiles_clear_of_home_and_still_holds_every_fence(malta_
     autopilot = PROFILES[profile].autopilot
     result = compile_fences(malta_fences, area, PROFILES[profile], 2000.0,
                             keep_clear=KeepClear.of(HOME))  # fmt: skip
-    assert not holds_home(result.items, HOME, autopilot)
-    assert exclusion_distance_m(result.items, HOME) >= 25.0 - 0.5
-    verify = VerifyFrame(*HOME)
-    polys, discs = onboard_geometry(result.items, verify, inradius(autopilot))
-    picked = set(result.dropped)
-    for rec in malta_fences:
-        if rec.kind == "keep_out" and rec.site_id not in picked:
-            for part in shapely.get_parts(shapely.make_valid(verify.local(rec.geometry))):
-                assert contained(part, polys, discs), rec.site_id
+    assert_clear_and_holding(malta_fences, result.items, result.dropped, autopilot, HOME)
 
 
 def test_broken_without_home_the_px4_compile_covers_it(malta_fences):
@@ -183,7 +197,7 @@ def test_home_outside_every_keep_in_fence_is_refused(tmp_path, capsys):
     # the vehicle's position in flight is no refusal: it constrains what it can
     result = compile_fences([FenceRecord("park/1", "keep_in", keep_in)], shapely.box(*BOX),
                             PROFILES["copter"], keep_clear=KeepClear.of(
-                                None, HOME, strict=False))  # fmt: skip
+                                None, HOME))  # fmt: skip
     assert len(result.items) >= 4
 
 

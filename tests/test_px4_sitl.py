@@ -89,6 +89,32 @@ async def test_a_malta_fence_compiled_for_px4_uploads_and_reads_back_identical(
     assert len(held) == n and not px4.logged("Geofence invalid")
 
 
+async def test_the_malta_box_of_the_first_report_uploads_with_home_clear(
+    px4, link, malta_fences, capsys
+):
+    """Home at Luqa, 215 m from every keep-out fence: compiled blind to it, PX4's 64 items
+    merged a 7.9 km² exclusion over it and the upload was refused. Compiled round the
+    vehicle's home, every keep-out fence of the box is held and home is in none."""
+    import shapely
+
+    from alphafence.fencefiles.fence_read import read_fence_file
+
+    from .test_home_clear import BOX, assert_clear_and_holding, far_from
+
+    argv = ["upload", str(malta_fences), "--bbox", ",".join(map(str, BOX)),
+            "--connect", px4.connection_url, "--allow-unsigned", "--timeout", "30"]  # fmt: skip
+    assert await asyncio.to_thread(main, argv) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "home 35.86" in out and "the fence leaves them 25 m clear" in out
+    assert "PX4 keeps every area" in out
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        held = await download_fence(vehicle)
+    assert 10 <= len(held) <= PX4_ITEMS and not px4.logged("Geofence invalid")
+    records = read_fence_file(malta_fences)
+    dropped = far_from(records, shapely.box(*BOX))
+    assert_clear_and_holding(records, held, dropped, "px4", HOME)
+
+
 async def test_a_fence_px4_would_drop_part_of_is_refused_and_nothing_is_sent(
     px4, link, tmp_path, capsys
 ):

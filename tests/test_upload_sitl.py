@@ -51,6 +51,31 @@ async def test_compiled_malta_fence_round_trip(sitl, malta_db, rules):
 
 
 @pytest.mark.parametrize("sitl", [MALTA_AIRPORT], indirect=True)
+async def test_the_malta_box_uploads_with_the_vehicles_home_clear(sitl, malta, tmp_path, capsys):
+    """The box of the first report, on ArduPilot with the copter profile: compiled round the
+    home the vehicle reports (Luqa), every keep-out fence held, home in none."""
+    import asyncio
+
+    from alphafence.cli import main
+    from alphafence.fencefiles.fence_read import read_fence_file
+
+    from .test_home_clear import BOX, HOME, assert_clear_and_holding, far_from
+
+    fences = tmp_path / "fences.geojson"
+    assert main(["build", str(malta), "-o", str(fences), "-q"]) == 0
+    argv = ["upload", str(fences), "--bbox", ",".join(map(str, BOX)), "--profile", "copter",
+            "--connect", sitl.connection_url, "--allow-unsigned"]  # fmt: skip
+    assert await asyncio.to_thread(main, argv) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "home 35.86" in out and "the fence leaves them 25 m clear" in out
+    async with open_vehicle(sitl.connection_url) as vehicle:
+        held = await download_fence(vehicle)
+    records = read_fence_file(fences)
+    assert_clear_and_holding(records, held, far_from(records, shapely.box(*BOX)), "ardupilot",
+                             HOME)  # fmt: skip
+
+
+@pytest.mark.parametrize("sitl", [MALTA_AIRPORT], indirect=True)
 async def test_capacity_edge_and_old_fence_kept(sitl):
     full = polygon_items(69)  # 4 + 2 + 8*69 + 1 = 559 of 560 bytes
     assert storage_bytes(full) == 559

@@ -288,6 +288,7 @@ def compile_from_args(args, records, home=None, position=None):
         args.return_point,
         args.items,
         keep,
+        getattr(args, "inclusions", None),
     )
     if not getattr(args, "area", None):  # a box that selects nothing, typed lat,lon
         check_box("--bbox", args.bbox, geoms, args.fences, reach_m=args.distance)

@@ -3,6 +3,8 @@ onboard fence (``compile``, ``upload``)."""
 
 from __future__ import annotations
 
+import argparse
+
 from rich.table import Table
 
 from alphafence.cli.common import err_console, out_console
@@ -150,3 +152,27 @@ def items_report(items, fences, profile, sites=None) -> None:
 def _site(site) -> str:
     """A site as tables name it: ``hospital/way/1 (St Mary's)``, or its id alone."""
     return f"{site['id']} ({site['name']})" if site.get("name") else site["id"]
+
+
+class Presets(argparse.Action):
+    """``--params``: a preset's name, or ``list`` (print every preset's parameters, exit 0)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values != "list":
+            setattr(namespace, self.dest, values)
+            return
+        from alphafence.mavlink.inclusions import UNION_WORDS
+        from alphafence.vehicle.params import VEHICLE, describe
+
+        t = Table(title="--params presets (ArduPilot's AC_Fence, PX4's geofence parameters)")
+        for col in ("preset", "vehicle", "parameters set"):
+            t.add_column(col)
+        for name, vehicle in VEHICLE.items():
+            t.add_row(name, vehicle, describe(name))
+        t.caption = (
+            f"A fence of two or more inclusion areas also gets {UNION_WORDS}, whatever the "
+            "preset, on ArduPilot 4.5 and later; older firmware gets them as one inclusion and "
+            "an exclusion per gap"
+        )
+        out_console.print(t)
+        parser.exit(0)

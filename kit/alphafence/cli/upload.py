@@ -12,10 +12,7 @@ with ``--reboot`` (disarmed only) it is set and the vehicle rebooted before the 
 
 from __future__ import annotations
 
-import argparse
 import asyncio
-
-from rich.table import Table
 
 from alphafence.cli.common import (
     add_link_option,
@@ -37,7 +34,7 @@ from alphafence.cli.options import (
     storage_profile,
 )
 from alphafence.cli.source_options import add_source_options, with_source
-from alphafence.cli.tables import compile_report, items_report
+from alphafence.cli.tables import Presets, compile_report, items_report
 from alphafence.errors import InputError, VehicleError, need
 from alphafence.mavlink.autopilots import NAMES
 from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
@@ -78,7 +75,7 @@ def register(sub):
     add_compile_options(p)
     p.add_argument(
         "--params",
-        action=_Presets,
+        action=Presets,
         choices=[*PARAM_PROFILES, "list"],
         metavar="PRESET",
         help="also set and verify the fence parameters of this preset, for the vehicle's type "
@@ -106,28 +103,6 @@ def register(sub):
         "--timeout", type=float, default=10.0, metavar="S", help="seconds to find the vehicle"
     )
     p.set_defaults(func=run)
-
-
-class _Presets(argparse.Action):
-    """``--params``: a preset's name, or ``list`` (print every preset's parameters, exit 0)."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        if values != "list":
-            setattr(namespace, self.dest, values)
-            return
-        from alphafence.vehicle.params import VEHICLE, describe
-
-        t = Table(title="--params presets (ArduPilot's AC_Fence, PX4's geofence parameters)")
-        for col in ("preset", "vehicle", "parameters set"):
-            t.add_column(col)
-        for name, vehicle in VEHICLE.items():
-            t.add_row(name, vehicle, describe(name))
-        t.caption = (
-            f"A fence of two or more inclusion areas also gets {UNION_WORDS}, whatever the "
-            "preset: ArduPilot otherwise reads them as their intersection"
-        )
-        out_console.print(t)
-        parser.exit(0)
 
 
 def onboard_file(args) -> str | None:
@@ -292,7 +267,7 @@ def run(args) -> int:
 async def _upload(args, prepared) -> int:
     from alphafence.vehicle.fence_transfer import FenceTransferError, upload_fence
     from alphafence.vehicle.link import open_vehicle
-    from alphafence.vehicle.params import apply_params, check_preset, check_union_supported
+    from alphafence.vehicle.params import apply_params, check_preset, inclusion_rule
     from alphafence.vehicle.px4 import check_home, confirm_kept, monotonic
     from alphafence.vehicle.whereabouts import whereabouts
 
@@ -310,6 +285,9 @@ async def _upload(args, prepared) -> int:
                     (err_console if warn else out_console).print(
                         ("[yellow]warning:[/] " if warn else "") + said, soft_wrap=True
                     )
+                if args.records is not None:  # several keep-in areas: as the firmware reads them
+                    args.rule = await inclusion_rule(vehicle)
+                    args.inclusions = args.rule[0]
                 prepared = await asyncio.to_thread(prepare, args, home, position, args.records)
             items, profile = prepared
             if profile.autopilot != vehicle.autopilot:
@@ -324,7 +302,13 @@ async def _upload(args, prepared) -> int:
             inclusions = inclusion_count(items)
             options = None
             if inclusions > 1 and not px4:
-                options = await check_union_supported(vehicle, inclusions)
+                rule, options, why = getattr(args, "rule", None) or await inclusion_rule(vehicle)
+                if rule != "union":
+                    raise VehicleError(
+                        f"the fence has {inclusions} inclusion areas and {why}: compile it from "
+                        "its fences (several keep-in areas are then one inclusion and an "
+                        "exclusion per gap), or keep one keep-in area; nothing was sent"
+                    )
             if px4:
                 await check_home(vehicle, items, args.timeout)
             if profile.file_backed:

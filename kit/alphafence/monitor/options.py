@@ -14,6 +14,7 @@ from alphafence.awareness.reach import DEFAULT_ACCEL_MPS2
 from alphafence.awareness.traffic import TrafficOptions
 from alphafence.errors import InputError
 from alphafence.mavlink.storage import Profile
+from alphafence.onboard import HOME_CLEARANCE_M
 
 # the vehicle's own fence: watched as a layer, kept equal to the fences within reach and
 # watched ("rolling": alphafence.monitor.rolling), or not
@@ -57,6 +58,7 @@ class RollingOptions:
     hysteresis: float = 0.25  # re-centre after moving this fraction of the reach
     upload_budget_s: float = 5.0  # vehicle seconds a compile + upload + read-back may take
     retry_s: float = 2.0  # after a failed re-upload, wait this long before the next try
+    home_clearance_m: float = HOME_CLEARANCE_M  # no compiled item this near home or the vehicle
 
     def __post_init__(self):
         for name, low in (("speed_mps", 0), ("lookahead_s", 0), ("retry_s", 0)):

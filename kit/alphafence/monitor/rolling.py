@@ -9,8 +9,10 @@ under way), uploads them, reads them back, and does it again once the vehicle is
 hysteresis away from that centre. So the fence in force always holds every fence within reach
 of the vehicle, the previous one until the new one is written (ArduPilot keeps its fence until
 the last item of an upload arrives, and keeps it when an upload fails; PX4 writes an upload
-into its other fence slot and switches at its end). On PX4 a fence is compiled for PX4 and
-checked against its home before it is sent (PX4 would drop an area its home breaches).
+into its other fence slot and switches at its end). Each compile leaves the vehicle's home and position
+clear (:mod:`alphafence.onboard.clear`) and writes several keep-in areas as its firmware reads
+them (:func:`~alphafence.vehicle.params.inclusion_rule`); on PX4 the fence is checked against
+its home before it is sent.
 
 :class:`RollingPlan` is the pure part (which fences, when to re-upload); :class:`RollingFence`
 does it on the event loop: the compile in a worker thread, the upload and read-back as a task
@@ -33,9 +35,11 @@ import shapely
 
 from alphafence.awareness.fenceset import KEEP_IN, KEEP_OUT
 from alphafence.mavlink.autopilots import NAMES
-from alphafence.mavlink.inclusions import inclusion_count, needs_union
+from alphafence.mavlink.inclusions import needs_union
 from alphafence.monitor.events import new_event, rounded
+from alphafence.vehicle.params import inclusion_rule
 from alphafence.vehicle.px4 import check_home, confirm_kept
+from alphafence.vehicle.whereabouts import HomeWatch
 
 RADIUS_SLACK_M = 1.0  # the compile selects this much farther than the plan (frames differ)
 
@@ -159,13 +163,12 @@ class RollingFence:
     Parameters
     ----------
     vehicle : Vehicle
-        The MAVSDK connection (``mission_raw``).
     fences : FenceSet
         The full-resolution fences.
     options : RollingOptions
         The profile, the speed limit and lookahead, the hysteresis.
     braking : Braking
-        How the vehicle stops (part of its reach).
+        How the vehicle stops.
     handle : callable
         ``handle(event)``: the monitor's (logs, alerts).
     reload : coroutine function
@@ -177,15 +180,14 @@ class RollingFence:
     plan : RollingPlan
     coverage : Coverage or None
         What the verified fence in force was compiled for.
-    task : asyncio.Task or None
-        The compile and upload under way (or the last one).
+    task, after : asyncio.Task or None
+        The compile and upload under way (or the last one); a fence transfer (the monitor's
+        first download) the first upload waits for.
     uploads : int
         Verified uploads so far.
     held : list of FenceItem or None
-        The fence of the last verified upload (a compile that makes the same items sends
-        nothing: ``onboard_kept``); None after a failed upload.
-    after : asyncio.Task or None
-        A fence transfer (the monitor's first download) the first upload waits for.
+        The fence of the last verified upload (the same items again send nothing:
+        ``onboard_kept``); None after a failed upload.
     """
 
     def __init__(self, vehicle, fences, options, braking, handle, reload):
@@ -207,6 +209,8 @@ class RollingFence:
         self._uncovered = False
         self.after: asyncio.Task | None = None  # a transfer to wait for before uploading
         self.held: list | None = None  # the items of the last verified upload
+        self.homes = HomeWatch(vehicle)  # no compile covers home (nor the vehicle)
+        self.rule: tuple | None = None  # (rule, FENCE_OPTIONS, why): params.inclusion_rule
 
     def set_fences(self, fences) -> None:
         """Compile from ``fences`` from now on: the next position starts a re-upload (one under
@@ -259,25 +263,23 @@ class RollingFence:
         """Compile (worker thread), upload and read back one fence; the event, then the
         onboard layer reloaded. Returns whether the vehicle now holds it."""
         from alphafence.errors import AlphaFenceError
+        from alphafence.onboard.clear import KeepClear
         from alphafence.onboard.compile import compile_fences
         from alphafence.vehicle.fence_transfer import same_items
 
         t0, plan = time.monotonic(), self.plan
-        fields = {
-            "reason": why,
-            "centre": [rounded(target.lat, 7), rounded(target.lon, 7)],
-            "reach_m": rounded(self.plan.reach_m),
-            "radius_m": rounded(target.radius_m),
-            "fences": len(target.sites),
-        }
+        fields = {"reason": why, "centre": [rounded(target.lat, 7), rounded(target.lon, 7)],
+                  "reach_m": rounded(self.plan.reach_m), "radius_m": rounded(target.radius_m),
+                  "fences": len(target.sites)}  # fmt: skip
+        home = await self.homes.current()
+        if self.rule is None:  # how it reads several keep-in areas: by its firmware
+            self.rule = await inclusion_rule(self.vehicle)
+        keep = KeepClear.of(home, (sample.lon, sample.lat), self.options.home_clearance_m, False)
         try:
             compiled = await asyncio.to_thread(
-                compile_fences,
-                plan.records(target),
-                shapely.Point(target.lon, target.lat),
-                self.profile,
-                target.radius_m + RADIUS_SLACK_M,
-            )
+                compile_fences, plan.records(target), shapely.Point(target.lon, target.lat),
+                self.profile, target.radius_m + RADIUS_SLACK_M, keep_clear=keep,
+                inclusions=self.rule[0])  # fmt: skip
         except asyncio.CancelledError:
             raise
         except AlphaFenceError as exc:  # the fences within reach do not fit even merged
@@ -340,10 +342,12 @@ class RollingFence:
     async def _union(self, items) -> str:
         """Set FENCE_OPTIONS' union bit for a fence of several inclusions: ``"union"``, or
         what failed (the vehicle then intersects them: the reload's event warns)."""
-        from alphafence.vehicle.params import check_union_supported, set_union
+        from alphafence.vehicle.params import set_union
 
         try:
-            options = await check_union_supported(self.vehicle, inclusion_count(items))
+            rule, options, why = self.rule
+            if rule != "union":
+                return f"intersection: {why}"
             await set_union(self.vehicle, options)
         except asyncio.CancelledError:
             raise
@@ -381,6 +385,7 @@ class RollingFence:
         seconds): MAVSDK cannot be interrupted mid-transfer (its call runs on in a worker
         thread that the event loop's shutdown would wait for), and then the vehicle holds a
         verified fence or the failure is logged."""
+        self.homes.close()
         task = self.task
         if task is None or task.done():
             return

@@ -75,9 +75,10 @@ class KeepClear:
     @classmethod
     def of(cls, home=None, position=None, clearance_m: float = CLEARANCE_M, strict=True):
         """From ``(lon, lat)`` tuples (either may be None); None when both are. ``strict``:
-        a fence that holds the position is refused (home's always is)."""
+        a fence that holds home is refused (in flight it is not: a zone may come over home
+        while the vehicle is away). A fence that holds the position never is."""
         points = [ClearPoint(label, *p, strict=k) for label, p, k in
-                  (("home", home, True), ("the vehicle's position", position, strict))
+                  (("home", home, strict), ("the vehicle's position", position, False))
                   if p is not None]  # fmt: skip
         return cls(tuple(points), float(clearance_m)) if points else None
 
@@ -190,9 +191,10 @@ class LocalClear:
         return (d < needs + EXACT_MITRE_LIMIT * PAD_M).any(axis=1)
 
 
-def check_held(items, clear: LocalClear | None, source: str = "compile") -> None:
+def check_held(items, clear: LocalClear | None, union=False, source: str = "compile") -> None:
     """Refuse compiled ``items`` that, as the autopilot reads them, breach a point no fence
-    holds (:attr:`LocalClear.free`).
+    holds (:attr:`LocalClear.free`): an exclusion over it, an inclusion without it (under
+    the ``union`` rule: no inclusion with it).
 
     Raises
     ------
@@ -201,12 +203,15 @@ def check_held(items, clear: LocalClear | None, source: str = "compile") -> None
     """
     if clear is None:
         return
+    from alphafence.mavlink.inclusions import inclusion_count
     from alphafence.onboard.rules import areas_breached_at
 
     for p, free in zip(clear.keep.points, clear.free):
         if not free:
             continue
         hit = areas_breached_at(items, p.lon, p.lat)
+        if union and sum(a.inclusion for a in hit) < inclusion_count(items):
+            hit = [a for a in hit if not a.inclusion]  # it is inside one of them
         if hit:
             raise InputError(
                 source,

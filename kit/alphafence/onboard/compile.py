@@ -18,20 +18,20 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-import numpy as np
 import shapely
 
 from alphafence.errors import InputError
 from alphafence.geo.alpha import outer_polygons
 from alphafence.geo.frame import LocalFrame
-from alphafence.geo.lonlat import as_read
+from alphafence.mavlink.autopilots import inclusion_union_possible
 from alphafence.mavlink.items import RETURN_POINT, FenceItem
 from alphafence.mavlink.storage import END_BYTES, HEADER_BYTES, RETURN_BYTES, Profile, storage_bytes
 from alphafence.onboard.clear import check_held
 from alphafence.onboard.corridor import Corridor, LossModel, Overshoot, overshoot
-from alphafence.onboard.emit import emit_items, held_lonlat
+from alphafence.onboard.emit import emit_items, own_held
+from alphafence.onboard.gaps import gap_pieces
 from alphafence.onboard.merge import fit_by_merging, merge_to_upgrade, upgrade
-from alphafence.onboard.options import PAD_M, Piece, own_option, piece_options, with_own
+from alphafence.onboard.options import Piece, piece_options, with_own
 from alphafence.onboard.rules import check_for_autopilot
 
 
@@ -120,33 +120,6 @@ def _label(rec) -> str:
     return f"{rec.site_id} ({rec.name})" if rec.name else rec.site_id
 
 
-def _own(rec, part, frame, max_vertices):
-    """The option of storing ``rec`` as its own vertices (:func:`own_option`), when ``part``,
-    its reading, has vertices along bowed edges, and only if that option, held as read and
-    rounded, holds the fence (None otherwise)."""
-    geom = rec.geometry
-    if geom.geom_type != "Polygon" or shapely.get_num_coordinates(geom) > 4 * max_vertices:
-        return None
-    lon = shapely.get_coordinates(geom.exterior)[:, 0]
-    if lon.max() - lon.min() > 180.0:  # across the antimeridian: as read, in parts
-        return None
-    own = shapely.Polygon(frame.geom_to_local(shapely.Polygon(geom.exterior)).exterior)
-    inclusion = rec.kind == "keep_in"
-    opt = own_option(own, part, inclusion, max_vertices)
-    if opt is None:
-        return None
-    lon, lat, ok = held_lonlat(opt.local, frame, not inclusion, part)
-    if not ok:
-        return None
-    # held against its own chords, not the fence: it must stand half its pad clear of it
-    read = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
-    if inclusion:
-        ok = part.covers(shapely.buffer(read, PAD_M / 2, join_style="mitre"))
-    else:
-        ok = read.covers(shapely.buffer(part, PAD_M / 2, join_style="mitre"))
-    return opt if ok else None
-
-
 def operating_area_from_plan(path):
     """The convex hull of a mission's positions and its first position (what the compiler
     selected fences around before it followed the flight path,
@@ -179,6 +152,7 @@ def compile_fences(
     return_point=None,
     max_items=None,
     keep_clear=None,
+    inclusions=None,
 ) -> CompileResult:
     """Fit the fences near a flight path (or an operating area) into a vehicle's fence storage.
 
@@ -211,6 +185,12 @@ def compile_fences(
         Home (and the vehicle's position): no item chosen covers them or comes within the
         clearance of them (:mod:`alphafence.onboard.clear`); a fence that itself holds one is
         refused by name.
+    inclusions : str, optional
+        How the vehicle reads several inclusions: ``"union"`` (ArduPilot with FENCE_OPTIONS
+        bit 1) or ``"intersection"`` (PX4, older ArduPilot); by default the autopilot's
+        (:func:`~alphafence.mavlink.autopilots.inclusion_union_possible`). Under the
+        intersection, two or more keep-in areas are stored as one inclusion round them and
+        an exclusion for each gap (:mod:`alphafence.onboard.gaps`).
 
     Returns
     -------
@@ -269,9 +249,17 @@ def compile_fences(
         for part in parts:
             opts = piece_options(part, rec.kind == "keep_in", profile.max_polygon_vertices, circle)
             if len(parts) == 1:
-                opts = with_own(opts, _own(rec, part, frame, profile.max_polygon_vertices))
+                opts = with_own(opts, own_held(rec, part, frame, profile.max_polygon_vertices))
             if opts:
                 pieces.append(Piece([rec.site_id], rec.kind == "keep_in", part, opts))
+    if inclusions is None:
+        inclusions = "union" if inclusion_union_possible(profile.autopilot) else "intersection"
+    if inclusions == "intersection" and sum(p.inclusion for p in pieces) > 1:
+        hull, gaps, _ = gap_pieces(
+            [p for p in pieces if p.inclusion], profile.max_polygon_vertices, frame
+        )
+        pieces = [hull, *(p for p in pieces if not p.inclusion), *gaps]
+        full[0].extend(g.local for g in gaps)  # forbidden: no keep-in area allows them
     model = LossModel(corridor, full[0], clear)
     for p in pieces:
         if not model.rescore(p):
@@ -351,7 +339,7 @@ def compile_fences(
         {r.site_id: r.name for r in records if r.name and r.kind in ("keep_out", "keep_in")},
     )
     check_for_autopilot(items, profile.autopilot)  # PX4: one inclusion at most
-    check_held(items, clear)  # home clear as the vehicle reads the items
+    check_held(items, clear, inclusions == "union")  # home clear as the vehicle reads the items
     used = storage_bytes(items)
     if len(items) > profile.items or used > profile.bytes:  # a fence split at 180° grew
         raise InputError(

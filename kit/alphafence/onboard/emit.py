@@ -21,6 +21,7 @@ from alphafence.mavlink.items import (
     RETURN_POINT,
     FenceItem,
 )
+from alphafence.onboard.options import PAD_M, own_option
 
 
 def _round_lonlat(frame, xy):
@@ -130,3 +131,30 @@ def emit_items(pieces, frame, return_point=None, autopilot="ardupilot"):
         for part in _sides(lon, lat):  # ArduPilot never wraps: a part on each side of 180°
             items.extend(FenceItem(cmd, float(len(part)), float(a), float(b)) for a, b in part)
     return items
+
+
+def own_held(rec, part, frame, max_vertices):
+    """The option of storing ``rec`` as its own vertices (:func:`own_option`), when ``part``,
+    its reading, has vertices along bowed edges, and only if that option, held as read and
+    rounded, holds the fence (None otherwise)."""
+    geom = rec.geometry
+    if geom.geom_type != "Polygon" or shapely.get_num_coordinates(geom) > 4 * max_vertices:
+        return None
+    lon = shapely.get_coordinates(geom.exterior)[:, 0]
+    if lon.max() - lon.min() > 180.0:  # across the antimeridian: as read, in parts
+        return None
+    own = shapely.Polygon(frame.geom_to_local(shapely.Polygon(geom.exterior)).exterior)
+    inclusion = rec.kind == "keep_in"
+    opt = own_option(own, part, inclusion, max_vertices)
+    if opt is None:
+        return None
+    lon, lat, ok = held_lonlat(opt.local, frame, not inclusion, part)
+    if not ok:
+        return None
+    # held against its own chords, not the fence: it must stand half its pad clear of it
+    read = as_read(shapely.Polygon(np.column_stack([lon, lat])), frame)
+    if inclusion:
+        ok = part.covers(shapely.buffer(read, PAD_M / 2, join_style="mitre"))
+    else:
+        ok = read.covers(shapely.buffer(part, PAD_M / 2, join_style="mitre"))
+    return opt if ok else None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from dataclasses import dataclass
 
 from alphafence.errors import VehicleError
@@ -289,35 +290,87 @@ def _call(vehicle, verb, kind, name, value=None):
     return fn(name, int(value) if kind == "int" else float(value))
 
 
+UNION_SINCE = (4, 5, 0)  # FENCE_OPTIONS bit 1 (ArduPilot PR 24379) is read from 4.5.0 on
+
+
+async def firmware_version(vehicle, timeout: float = 3.0):
+    """The autopilot's firmware ``(major, minor, patch)`` from AUTOPILOT_VERSION's
+    ``flight_sw_version`` (asked for with MAV_CMD_REQUEST_MESSAGE), or None when none comes."""
+    from alphafence.mavlink import ids
+
+    sysid = await vehicle.system_id()
+
+    async def first():
+        async for m in vehicle.messages("AUTOPILOT_VERSION"):
+            if m.system_id == sysid and isinstance(m.fields.get("flight_sw_version"), int):
+                v = m.fields["flight_sw_version"]
+                return (v >> 24) & 0xFF, (v >> 16) & 0xFF, (v >> 8) & 0xFF
+
+    async def ask():
+        while True:
+            vehicle.send_command_long(
+                ids.MAV_CMD_REQUEST_MESSAGE, ids.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            )
+            await asyncio.sleep(0.5)
+
+    asker = asyncio.ensure_future(ask())
+    try:
+        return await asyncio.wait_for(first(), timeout)
+    except asyncio.TimeoutError:
+        return None
+    finally:
+        asker.cancel()
+
+
+async def inclusion_rule(vehicle):
+    """How the vehicle reads several inclusions, by its firmware.
+
+    Returns
+    -------
+    tuple
+        ``(rule, options, why)``: ``"union"`` (ArduPilot 4.5.0 or later with FENCE_OPTIONS,
+        whose bit 1 the upload sets) or ``"intersection"`` (PX4; ArduPilot without the
+        parameter, older than 4.5.0, or whose version does not come), its FENCE_OPTIONS
+        (None without), and the reason in words.
+    """
+    from alphafence.mavlink.autopilots import NAMES, inclusion_union_possible
+    from alphafence.mavlink.inclusions import FENCE_OPTIONS
+
+    autopilot = getattr(vehicle, "autopilot", "ardupilot")
+    if not inclusion_union_possible(autopilot):
+        return "intersection", None, f"{NAMES[autopilot]} reads them as their intersection"
+    version = await firmware_version(vehicle)
+    try:
+        options = float(await _get(vehicle, FENCE_OPTIONS))
+    except Exception:
+        options = None
+    said = "ArduPilot " + (".".join(map(str, version)) if version else "of unknown version")
+    if options is None:
+        return (
+            "intersection",
+            None,
+            f"{said} has no FENCE_OPTIONS: it reads them as their intersection",
+        )
+    if version is None or version < UNION_SINCE:
+        return (
+            "intersection",
+            options,
+            (
+                f"{said} has FENCE_OPTIONS but "
+                + ("may not read" if version is None else "does not read")
+                + " its union bit (ArduPilot 4.5.0 and later): it reads them as their intersection"
+            ),
+        )
+    return "union", options, f"{said} reads them as their union with FENCE_OPTIONS bit 1"
+
+
 async def vehicle_union(vehicle) -> bool:
-    """Whether the vehicle reads its inclusions as their union (``FENCE_OPTIONS`` bit 1);
-    False when it has no such parameter (firmware that always intersects them, as PX4)."""
-    from alphafence.mavlink.autopilots import inclusion_union_possible
-    from alphafence.mavlink.inclusions import FENCE_OPTIONS, union_of
+    """Whether the vehicle reads its inclusions as their union: FENCE_OPTIONS bit 1 set, on
+    firmware that reads it (:func:`inclusion_rule`)."""
+    from alphafence.mavlink.inclusions import union_of
 
-    if not inclusion_union_possible(getattr(vehicle, "autopilot", "ardupilot")):
-        return False
-    try:
-        return union_of(await _get(vehicle, FENCE_OPTIONS))
-    except Exception:
-        return False
-
-
-async def check_union_supported(vehicle, inclusions: int) -> float:
-    """Before a fence of ``inclusions`` inclusion areas is sent: the vehicle's
-    ``FENCE_OPTIONS``, or ParamError when it has none (it would read the areas as their
-    intersection, and nothing is sent)."""
-    from alphafence.mavlink.inclusions import FENCE_OPTIONS, UNION_WORDS
-
-    try:
-        return float(await _get(vehicle, FENCE_OPTIONS))
-    except Exception:
-        raise ParamError(
-            f"the fence has {inclusions} inclusion areas and ArduPilot reads them as one "
-            f"(their intersection) unless {UNION_WORDS} is set, but this vehicle has no "
-            "FENCE_OPTIONS (its firmware predates it): upload one keep-in area, or update the "
-            "firmware; nothing was sent"
-        ) from None
+    rule, options, _ = await inclusion_rule(vehicle)
+    return rule == "union" and union_of(options)
 
 
 async def set_union(vehicle, options) -> ParamReport:

@@ -16,6 +16,8 @@ import contextlib
 from alphafence.mavlink import ids
 
 ASK_EVERY_S = 0.5  # HOME_POSITION is asked for this often until it comes
+HOME_WAIT_S = 4.0  # a watch's first answer is waited for this long
+HOME_EVERY_S = 10.0  # then home is asked for again this often (it moves where the vehicle arms)
 
 
 async def _first(vehicle, name, sysid, read):
@@ -99,3 +101,45 @@ async def whereabouts(vehicle, fallback_home=None, clearance_m: float = 0.0):
         f"for --home, and leaves it {clearance_m:g} m clear" if fallback_home is not None
         else "without it and may cover where it arms (give --home)")  # fmt: skip
     return fallback_home, position, line, True
+
+
+class HomeWatch:
+    """The vehicle's home, kept current in flight (the rolling fence compiles round it).
+
+    The first :meth:`current` starts a task that asks for home every :data:`HOME_EVERY_S`
+    and waits up to :data:`HOME_WAIT_S` for its first answer; later calls return at once.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    """
+
+    def __init__(self, vehicle):
+        self.vehicle = vehicle
+        self.home = None  # (lon, lat), the last one read
+        self._task = None
+        self._read = asyncio.Event()
+
+    async def current(self):
+        """Home ``(lon, lat)``, or None while the vehicle has none."""
+        if self._task is None:
+            self._task = asyncio.create_task(self._watch(), name="vehicle:home")
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(asyncio.shield(self._read.wait()), HOME_WAIT_S)
+        return self.home
+
+    async def _watch(self):
+        while True:
+            try:
+                self.home = await read_home(self.vehicle) or self.home
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # noqa: BLE001 - a link that cannot say: the last home read
+                pass
+            self._read.set()
+            await asyncio.sleep(HOME_EVERY_S)
+
+    def close(self) -> None:
+        """Stop asking."""
+        if self._task is not None:
+            self._task.cancel()
