@@ -112,7 +112,7 @@ def test_upload_refuses_firmware_without_fence_options_and_sends_nothing(tmp_pat
     assert code == 3
     assert not fake.received("MISSION_COUNT") and not fake.received("PARAM_SET")
     err = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("warning:")]
-    assert len(err) == 1 and "upload one keep-in area, or update the firmware" in err[0]
+    assert len(err) == 1 and "has no FENCE_OPTIONS" in err[0] and "nothing was sent" in err[0]
 
 
 def test_one_inclusion_needs_no_option(tmp_path, capsys):

@@ -233,3 +233,48 @@ async def _modes(vehicle, out):
         if m.component_id == 1 and m.fields["autopilot"] == 12:
             if not out or out[-1] != m.fields["custom_mode"]:
                 out.append(m.fields["custom_mode"])
+
+
+@pytest.mark.parametrize("home_in", ["west", "east"])
+async def test_two_keep_in_areas_are_one_inclusion_and_its_gap_and_px4_arms_in_either(
+    px4, link, tmp_path, capsys, home_in
+):
+    """PX4 intersects its inclusions; two keep-in areas compiled as one inclusion round them
+    and an exclusion for the gap: PX4 keeps every area and arms with home in either, and by
+    its model nothing between them is allowed."""
+    import json
+
+    import shapely
+    import shapely.geometry
+
+    from alphafence.fencefiles.fence_geojson import FenceRecord
+
+    from .test_keep_in_gaps import violations
+
+    frame = LocalFrame(*HOME)
+    shift = 0.0 if home_in == "west" else -2000.0
+    boxes = [shapely.box(-300 + shift, -300, 300 + shift, 300),
+             shapely.box(1700 + shift, -300, 2300 + shift, 300)]  # fmt: skip
+    records = [FenceRecord(f"area/{k}", "keep_in", frame.geom_to_wgs84(b))
+               for k, b in enumerate(boxes)]  # fmt: skip
+    features = [{"type": "Feature", "properties": {"site_id": r.site_id, "kind": "keep_in"},
+                 "geometry": shapely.geometry.mapping(r.geometry)} for r in records]  # fmt: skip
+    path = tmp_path / "areas.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    lon0, lat0, lon1, lat1 = shapely.total_bounds([r.geometry for r in records])
+    argv = ["upload", str(path), "--bbox", f"{lon0},{lat0},{lon1},{lat1}", "--connect",
+            px4.connection_url, "--allow-unsigned", "--timeout", "30", "--params", "px4-hold"]  # fmt: skip
+    assert await asyncio.to_thread(main, argv) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "PX4 keeps every area" in out
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        held = await download_fence(vehicle)
+        assert sum(1 for k, i in enumerate(held)
+                   if i.command == POLYGON_INCLUSION and (k == 0 or held[k - 1].command != i.command)) == 1  # fmt: skip
+        assert any(i.command == POLYGON_EXCLUSION for i in held)
+        assert violations(records, held, "px4", HOME) == 0
+        await vehicle.action.arm()  # home inside one area: PX4's geofence check passes
+        from alphafence.mavlink import ids
+
+        assert await vehicle.command_long(ids.MAV_CMD_COMPONENT_ARM_DISARM, 0.0) == 0
+    assert not px4.logged("Geofence invalid")

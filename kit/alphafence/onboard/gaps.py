@@ -19,6 +19,7 @@ from alphafence.mavlink.storage import polygon_bytes
 from alphafence.onboard.options import PAD_M, Option, Piece, piece_options
 
 HULL_VERTICES = 16  # the hull inclusion is simplified outward to at most this many vertices
+OPEN_M = 1e-3  # the areas are opened by this much before their gaps are taken
 GAP_ID = "keep-in-gap"  # the sources of a gap exclusion: what it stands for, in tables
 
 
@@ -91,7 +92,11 @@ def gap_pieces(keep_in, max_vertices: int, frame):
 
     ring = [(i.lon, i.lat) for i in emit_items([hull_piece], frame)]
     read = frame.read_geom(shapely.Polygon(ring))
-    gap = shapely.difference(shapely.union(read, stored), union)
+    # a spike of no width along an area's edge is no area: the vehicle reads a point on it as
+    # outside, so the areas are opened by a millimetre first and the spike falls in a gap
+    opened = shapely.buffer(shapely.buffer(union, -OPEN_M, join_style="mitre"), OPEN_M,
+                            join_style="mitre")  # fmt: skip
+    gap = shapely.difference(shapely.union(read, stored), opened)
     gaps = []
     for k, part in enumerate(without_holes(gap)):
         if part.area < 1e-6:
