@@ -217,6 +217,9 @@ def test_firmware_older_than_the_union_bit_gets_the_gaps_never_a_silent_intersec
     )
     assert inclusions == 1 and POLYGON_EXCLUSION in commands
     assert not fake.received("PARAM_SET")  # no union bit: this firmware does not read it
+    said = out.out.replace("\n", " ")
+    assert "keep-in areas compiled as one inclusion round them and" in said
+    assert "ArduPilot 4.4.0 has FENCE_OPTIONS but does not read its union bit" in said
     assert violations(records, fake.fence, "ardupilot", HOME) == 0
     # the same fence on 4.5: the areas as they are, and the union bit set
     code, fake = _upload_to_fake(tmp_path, _fences_file(tmp_path, records), (4, 5, 0), BOX_ARGS)

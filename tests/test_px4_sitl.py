@@ -267,6 +267,7 @@ async def test_two_keep_in_areas_are_one_inclusion_and_its_gap_and_px4_arms_in_e
     assert await asyncio.to_thread(main, argv) == 0, capsys.readouterr().err
     out = capsys.readouterr().out
     assert "PX4 keeps every area" in out
+    assert "keep-in areas compiled as one inclusion round them" in out.replace("\n", " ")
     async with open_vehicle(px4.connection_url, 30) as vehicle:
         held = await download_fence(vehicle)
         assert sum(1 for k, i in enumerate(held)

@@ -176,3 +176,17 @@ class Presets(argparse.Action):
         )
         out_console.print(t)
         parser.exit(0)
+
+
+def gaps_report(compiled, rule) -> None:
+    """Say when several keep-in areas were compiled as one inclusion and its gaps, and why."""
+    from alphafence.onboard.gaps import GAP_ID
+
+    gaps = sum(p.sources[0].startswith(GAP_ID) for p in compiled.pieces if p.sources)
+    if gaps:
+        from alphafence.mavlink.autopilots import NAMES
+
+        name = NAMES[compiled.profile.autopilot]
+        why = rule[2] if rule else f"{name} reads several inclusions as their intersection"
+        out_console.print(f"keep-in areas compiled as one inclusion round them and {gaps} gap "
+                          f"exclusion{'s' * (gaps > 1)}: {why}", soft_wrap=True)  # fmt: skip

@@ -34,7 +34,7 @@ from alphafence.cli.options import (
     storage_profile,
 )
 from alphafence.cli.source_options import add_source_options, with_source
-from alphafence.cli.tables import Presets, compile_report, items_report
+from alphafence.cli.tables import Presets, compile_report, gaps_report, items_report
 from alphafence.errors import InputError, VehicleError, need
 from alphafence.mavlink.autopilots import NAMES
 from alphafence.mavlink.inclusions import UNION_WORDS, inclusion_count
@@ -195,6 +195,7 @@ def prepare(args, home=None, position=None, records=None):
     items, compiled = load_items(args, home, position, records)
     if compiled is not None:
         compile_report(compiled)
+        gaps_report(compiled, getattr(args, "rule", None))
         fences = decode_fence(items, source=args.fences) if args.figure or args.map else None
     else:
         fences = check_items(args.fences, items, profile, args.items)
@@ -254,7 +255,12 @@ def run(args) -> int:
         union = inclusion_count(items) > 1
         out_console.print(
             f"dry run: {len(items)} fence items ready"
-            + (f" (the upload also sets {UNION_WORDS})" if union else "")
+            + (
+                f" (the upload also sets {UNION_WORDS}, on ArduPilot 4.5 and later; for older "
+                "firmware it compiles them as one inclusion and its gaps)"
+                if union
+                else ""
+            )
             + "; nothing sent"
         )
         return 0
