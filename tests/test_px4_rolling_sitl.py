@@ -212,3 +212,35 @@ async def test_px4_keeps_its_whole_fence_when_an_upload_stops_halfway(px4, compl
         assert result == ids.MAV_MISSION_ACCEPTED and held == new
     else:
         assert result is None and held == old, (len(held), held[:2])
+
+
+@pytest.mark.parametrize("link", ["pymavlink"], indirect=True)
+async def test_px4s_rolling_fence_holds_two_keep_in_areas_as_one_inclusion_and_its_gap(px4, link):
+    """PX4 intersects its inclusions: the rolling fence of two keep-in areas within reach (home
+    in the west one) is one inclusion round them and an exclusion for the gap, which PX4 keeps
+    whole and which, by the tests' model of PX4, allows the areas and nothing between them."""
+    from tests.test_keep_in_gaps import violations
+
+    frame = LocalFrame(*HOME)
+    areas = [FenceRecord(f"test/keep_in-{k}", "keep_in", frame.geom_to_wgs84(shapely.box(*b)))
+             for k, b in enumerate([(-150, -150, 150, 150), (250, -150, 450, 150)])]  # fmt: skip
+    log = EventLog()
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        options = MonitorOptions(onboard="rolling", rolling=ROLLING)
+        monitor = Monitor(vehicle, FenceSet(areas, frame=frame, keep_in_union=True), options, log)
+        stop = asyncio.Event()
+        task = asyncio.create_task(monitor.run(stop))
+        try:
+            (done,) = (await _events(log, "onboard_upload_failed", "onboard_upload"))[:1]
+            held = await download_fence(vehicle)
+        finally:
+            stop.set()
+            await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 15)
+    assert done["event"] == "onboard_upload" and done["verified"], done
+    assert "inclusions" not in done  # one inclusion: no union bit to set, none asked
+    from tests.ardupilot_model import fence_shapes
+
+    shapes = fence_shapes(held)
+    assert sum(c == 5001 for c, _, _ in shapes) == 1 and sum(c == 5002 for c, _, _ in shapes) >= 1
+    assert violations(areas, held, "px4", HOME) == 0
+    assert not px4.logged("Geofence invalid")
