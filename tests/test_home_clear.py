@@ -203,20 +203,20 @@ def test_home_outside_every_keep_in_fence_is_refused(tmp_path, capsys):
 
 def test_a_keep_in_fence_is_stored_holding_home_the_clearance_inside():
     frame = LocalFrame(*HOME)
-    # a 12-vertex keep-in with home 30 m inside a notch: simplified inward to few vertices
-    ang = np.linspace(0, 2 * math.pi, 40, endpoint=False)
-    rad = np.where(np.arange(40) % 2 == 0, 400.0, 330.0)
-    ring = np.column_stack([rad * np.cos(ang), rad * np.sin(ang) - 300.0])
-    keep_in = frame.geom_to_wgs84(shapely.Polygon(ring))
+    # a keep-in area with home 40 m inside a finger (80 m wide) off a large square: simplified
+    # inward to four vertices, the square alone is what is stored, and home is left out
+    shape = shapely.union(shapely.box(-500, -1200, 500, -200), shapely.box(-40, -200, 40, 100))
+    fence = [FenceRecord("park/1", "keep_in", frame.geom_to_wgs84(shape))]
     home_xy = shapely.Point(0, 0)
-    assert shapely.Polygon(ring).boundary.distance(home_xy) > 25.5
-    fence = [FenceRecord("park/1", "keep_in", keep_in)]
-    # blind to home, 12 items simplify the star inward past it: the vehicle could not arm
-    blind = compile_fences(fence, shapely.box(*BOX), PROFILES["copter"], max_items=12)
+    # blind to home (the broken case), four items store the square: the vehicle could not arm
+    blind = compile_fences(fence, shapely.box(*BOX), PROFILES["copter"], max_items=4)
     assert holds_home(blind.items, HOME, "ardupilot")
-    with pytest.raises(InputError, match="do not fit"):  # no 12-vertex shape leaves it clear
-        compile_fences(fence, shapely.box(*BOX), PROFILES["copter"], max_items=12,
-                       keep_clear=KeepClear.of(HOME))  # fmt: skip
+    try:  # round home, four items either leave it inside or do not fit
+        four = compile_fences(fence, shapely.box(*BOX), PROFILES["copter"], max_items=4,
+                              keep_clear=KeepClear.of(HOME))  # fmt: skip
+        assert not holds_home(four.items, HOME, "ardupilot")
+    except InputError as err:
+        assert "do not fit" in str(err)
     result = compile_fences(fence, shapely.box(*BOX), PROFILES["copter"],
                             keep_clear=KeepClear.of(HOME))  # fmt: skip
     assert not holds_home(result.items, HOME, "ardupilot")
