@@ -26,6 +26,7 @@ from alphafence.onboard.compile import compile_fences
 from . import ardupilot_model, px4_model
 from .helpers import VerifyFrame
 from .test_compile import contained, onboard_geometry
+from .zone_samples import star_polygon
 
 HOME = (14.4775, 35.866)  # Luqa: the SITL fixtures' malta_airport home (lon, lat)
 BOX = (14.46, 35.855, 14.50, 35.88)  # the operating box of the first report
@@ -118,11 +119,7 @@ def scenes(draw):
     frame = LocalFrame(lon0, lat0)
     records = []
     for k in range(draw(st.integers(2, 16))):
-        cx, cy = draw(st.floats(-1500, 1500)), draw(st.floats(-1500, 1500))
-        m = draw(st.integers(3, 24))
-        ang = np.sort(draw(st.lists(st.floats(0, 6.28), min_size=m, max_size=m, unique=True)))
-        rad = np.asarray(draw(st.lists(st.floats(10, 300), min_size=m, max_size=m)))
-        poly = shapely.Polygon(np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang)]))
+        poly = star_polygon(draw, st, 1500, (3, 24), (10, 300))
         if poly.is_valid and poly.area > 10:
             records.append(FenceRecord(f"test/{k}", "keep_out", frame.geom_to_wgs84(poly)))
     hx, hy = draw(st.floats(-800, 800)), draw(st.floats(-800, 800))

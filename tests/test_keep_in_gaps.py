@@ -21,6 +21,7 @@ from alphafence.onboard.clear import KeepClear
 from alphafence.onboard.compile import compile_fences
 
 from . import ardupilot_model, px4_model
+from .zone_samples import star_polygon
 
 ORIGIN = (-0.55, 51.43)
 
@@ -133,11 +134,7 @@ def area_sets(draw):
     frame = LocalFrame(lon0, lat0)
     polys = []
     for _ in range(draw(st.integers(2, 4))):
-        cx, cy = draw(st.floats(-3000, 3000)), draw(st.floats(-3000, 3000))
-        m = draw(st.integers(3, 10))
-        ang = np.sort(draw(st.lists(st.floats(0, 6.28), min_size=m, max_size=m, unique=True)))
-        rad = np.asarray(draw(st.lists(st.floats(150, 700), min_size=m, max_size=m)))
-        poly = shapely.Polygon(np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang)]))
+        poly = star_polygon(draw, st, 3000, (3, 10), (150, 700))
         # valid in lon/lat too, as a build writes its fences (a ring that doubles back on
         # itself is read one way by GEOS and another by an autopilot's crossing test)
         if poly.is_valid and poly.area > 1e4 and frame.geom_to_wgs84(poly).is_valid:

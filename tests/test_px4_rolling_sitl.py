@@ -118,6 +118,25 @@ async def test_px4s_rolling_fence_holds_every_fence_within_reach_along_a_leg(px4
     assert checked > 100 and len(reached) >= 5, (checked, reached)
 
 
+async def _first_rolling_upload(px4, fences):
+    """Run a rolling monitor on PX4 until its first upload ends (verified or failed): the
+    fence PX4 held before, that upload's event, and the fence PX4 holds after it."""
+    log = EventLog()
+    async with open_vehicle(px4.connection_url, 30) as vehicle:
+        before = await download_fence(vehicle)
+        options = MonitorOptions(onboard="rolling", rolling=ROLLING)
+        monitor = Monitor(vehicle, fences, options, log)
+        stop = asyncio.Event()
+        task = asyncio.create_task(monitor.run(stop))
+        try:
+            (first,) = (await _events(log, "onboard_upload_failed", "onboard_upload"))[:1]
+            after = await download_fence(vehicle)
+        finally:
+            stop.set()
+            await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 15)
+    return before, first, after
+
+
 @pytest.mark.parametrize("link", ["pymavlink"], indirect=True)
 @pytest.mark.parametrize("checked", [True, False], ids=["home-checked", "broken-unchecked"])
 async def test_px4s_rolling_fence_never_sends_an_area_home_breaches(
@@ -131,19 +150,7 @@ async def test_px4s_rolling_fence_never_sends_an_area_home_breaches(
         monkeypatch.setattr(rolling_module, "check_home", no_check)
     frame = LocalFrame(*HOME)
     keep_in = _squares(frame, [(200.0, 0.0)], "keep_in", size=100.0)  # home is outside it
-    log = EventLog()
-    async with open_vehicle(px4.connection_url, 30) as vehicle:
-        before = await download_fence(vehicle)
-        options = MonitorOptions(onboard="rolling", rolling=ROLLING)
-        monitor = Monitor(vehicle, FenceSet(keep_in, frame=frame), options, log)
-        stop = asyncio.Event()
-        task = asyncio.create_task(monitor.run(stop))
-        try:
-            (failed,) = (await _events(log, "onboard_upload_failed", "onboard_upload"))[:1]
-            after = await download_fence(vehicle)
-        finally:
-            stop.set()
-            await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 15)
+    before, failed, after = await _first_rolling_upload(px4, FenceSet(keep_in, frame=frame))
     assert failed["event"] == "onboard_upload_failed", failed
     if checked:
         assert failed["stage"] == "home" and "nothing was sent" in failed["error"], failed
@@ -224,18 +231,8 @@ async def test_px4s_rolling_fence_holds_two_keep_in_areas_as_one_inclusion_and_i
     frame = LocalFrame(*HOME)
     areas = [FenceRecord(f"test/keep_in-{k}", "keep_in", frame.geom_to_wgs84(shapely.box(*b)))
              for k, b in enumerate([(-150, -150, 150, 150), (250, -150, 450, 150)])]  # fmt: skip
-    log = EventLog()
-    async with open_vehicle(px4.connection_url, 30) as vehicle:
-        options = MonitorOptions(onboard="rolling", rolling=ROLLING)
-        monitor = Monitor(vehicle, FenceSet(areas, frame=frame, keep_in_union=True), options, log)
-        stop = asyncio.Event()
-        task = asyncio.create_task(monitor.run(stop))
-        try:
-            (done,) = (await _events(log, "onboard_upload_failed", "onboard_upload"))[:1]
-            held = await download_fence(vehicle)
-        finally:
-            stop.set()
-            await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 15)
+    fences = FenceSet(areas, frame=frame, keep_in_union=True)
+    _, done, held = await _first_rolling_upload(px4, fences)
     assert done["event"] == "onboard_upload" and done["verified"], done
     assert "inclusions" not in done  # one inclusion: no union bit to set, none asked
     from tests.ardupilot_model import fence_shapes
