@@ -163,3 +163,55 @@ def test_the_link_delivers_what_pymavlink_alone_delivers(kinds, signed):
         or "bad" in kinds
         or "noise" in kinds
     )
+
+
+def _first_of_stream(behind, key=KEY):
+    """A new stream's first frame stamped ``behind`` (10 us units) before the reader's clock,
+    read by both decoders: (fast's verdict, pymavlink's)."""
+    now = signing_timestamp()
+    mav = sender(key)
+    mav.signing.timestamp = now - behind
+    frame = GPI(*[4] * 9).pack(mav)
+    assert int.from_bytes(frame[-12:-6], "little") == now - behind
+    ours, theirs = reader(key), reader(key)
+    ours.signing.timestamp = theirs.signing.timestamp = now
+    return fast(ours, frame) is not None, by_pymavlink(theirs, frame) is not None
+
+
+def test_a_new_stream_more_than_a_minute_behind_is_refused_as_pymavlink_refuses_it():
+    # MAVLink 2 signing (pymavlink's check_signature): a stream's first timestamp may be at
+    # most 60 s, 6,000,000 units of 10 us, behind the link's own; one unit more is a replay
+    minute = 60 * 100_000
+    assert _first_of_stream(0) == (True, True)
+    assert _first_of_stream(minute) == (True, True)
+    assert _first_of_stream(minute + 1) == (False, False)
+    assert _first_of_stream(10 * minute) == (False, False)
+
+
+def test_a_decoder_without_the_new_stream_window_takes_an_old_recording(monkeypatch):
+    # broken on purpose: with no window, a recording hours old opens a stream
+    monkeypatch.setattr(fast_frames, "NEW_STREAM_WINDOW", 10**15)
+    assert _first_of_stream(360 * 60 * 100_000) == (True, False)
+
+
+def test_one_forged_frame_stamped_ahead_does_not_lock_out_the_vehicles_stream():
+    # a frame signed with another key, on the vehicle's stream (link 0, system 1, component
+    # 1), stamped an hour ahead: the link's reader checks the signature before it moves the
+    # stream, so the vehicle's next genuine frame is still taken. pymavlink alone (the
+    # broken case) records the forged stamp first and drops the vehicle from then on.
+    from alphafence.vehicle.bridge import VehicleLink
+
+    forger = sender(bytes(32))
+    forger.signing.timestamp = signing_timestamp() + 360_000_000
+    forged = mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(forger)
+    genuine = mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(sender(KEY))
+
+    got = []
+    link = VehicleLink("udpout://127.0.0.1:9", KEY, got.append, verify=True)
+    link._received(forged, ("127.0.0.1", 1))
+    link._received(genuine, ("127.0.0.1", 1))
+    assert len(got) == 1 and link.stats.bad_signature == 1
+
+    alone = reader(KEY)
+    assert not [m for m in alone.parse_buffer(forged) or [] if m.get_type() == "HEARTBEAT"]
+    assert not [m for m in alone.parse_buffer(genuine) or [] if m.get_type() == "HEARTBEAT"]

@@ -138,10 +138,10 @@ def test_from_raw_keeps_every_valid_polygon(n_circles, where, n):
 # -- the signed link's parser ---------------------------------------------------------------
 
 
-def _frames(key, count):
+def _frames(key, count, timestamp=10**12):
     sender = mav.MAVLink(None, srcSystem=1, srcComponent=1)
     sender.signing.secret_key, sender.signing.sign_outgoing = key, True
-    sender.signing.timestamp = 10**12
+    sender.signing.timestamp = timestamp
     return [sender.heartbeat_encode(2, 3, 0, 0, 4).pack(sender) for _ in range(count)]
 
 
@@ -172,8 +172,40 @@ def test_signed_link_parser_never_raises_and_passes_only_signed(chunks, verify):
         for msg in got:
             buf = bytes(msg.get_msgbuf())
             assert signature_matches(buf, KEY) or msg.get_msgId() in (109, 166)
+    assert link.stats.received == len(got)
+
+
+@FUZZ
+@given(
+    st.lists(st.sampled_from(["ours", "theirs", "unsigned"]), max_size=20),
+    st.lists(st.integers(1, 200), max_size=6),
+)
+def test_signed_link_counts_every_whole_frame_where_it_belongs(kinds, cuts):
+    """Whole frames, ours in order (each stamp newer), another key's and unsigned ones,
+    in any order and cut into chunks anywhere: each is counted once, as what it is."""
+    from alphafence.vehicle.keys import signing_timestamp
+
+    ours = iter(_frames(KEY, 20, signing_timestamp() + 1000))
+    theirs = iter(_frames(bytes(32 * [1]), 20, signing_timestamp() + 1000))
+    sender = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    frames = [
+        next(ours) if k == "ours" else next(theirs) if k == "theirs"
+        else sender.heartbeat_encode(2, 3, 0, 0, 4).pack(sender)
+        for k in kinds
+    ]  # fmt: skip
+    data = b"".join(frames)
+    got = []
+    link = VehicleLink("udpout://127.0.0.1:9", KEY, got.append, verify=True)
+    at = 0
+    for cut in cuts + [len(data)]:
+        link._received(data[at : at + cut], ("127.0.0.1", 1))
+        at += cut
+    link._received(data[at:], ("127.0.0.1", 1))
     s = link.stats
-    assert s.received == len(got) and min(s.unsigned, s.bad_signature, s.garbage) >= 0
+    assert (s.received, s.bad_signature, s.unsigned, s.garbage) == (
+        kinds.count("ours"), kinds.count("theirs"), kinds.count("unsigned"), 0,
+    )  # fmt: skip
+    assert len(got) == s.received
 
 
 # -- the monitor's traffic parsers and engine ------------------------------------------------

@@ -20,6 +20,7 @@ ports, ``udpin``, ``udpout``, ``udpbcast``, ``tcpout``, ``tcpin``), signed or no
 from __future__ import annotations
 
 import contextlib
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -27,6 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from alphafence.errors import VehicleError
 from alphafence.mavlink.udp import MavlinkDatagrams
+from alphafence.vehicle import fast_frames
 from alphafence.vehicle.endpoints import Endpoint, parse_endpoint
 from alphafence.vehicle.keys import signing_timestamp
 from alphafence.vehicle.transports import TransportError, stream_transport
@@ -126,6 +128,10 @@ class VehicleLink:
                 self.reader.signing.timestamp = self.mav.signing.timestamp
                 self.reader.signing.allow_unsigned_callback = lambda _mav, msg_id: (
                     msg_id in UNSIGNED_OK
+                )
+                # the signature before the stream's timestamp moves (pymavlink moves it first)
+                self.reader.check_signature = functools.partial(
+                    fast_frames.check_signature, self.reader.signing
                 )
         self.remote: tuple | None = None  # where the vehicle is (UDP)
         self._closed: str | None = None  # why the link ended

@@ -97,6 +97,15 @@ def _crc(frame, end, extra) -> int:
     return x25crc(frame[1:end] + extra).crc
 
 
+def check_signature(signing, msgbuf, src_system=None, src_component=None) -> bool:
+    """pymavlink's ``MAVLink.check_signature`` with the signature checked first: pymavlink
+    records a frame's timestamp for its stream before it checks the signature, so one forged
+    frame stamped far ahead makes every genuine frame of that stream "old" (a link lost to a
+    single unsigned-key packet). Bind it to a reader with ``functools.partial(check_signature,
+    reader.signing)`` as ``reader.check_signature``."""
+    return _signed_by(bytes(msgbuf), signing)
+
+
 def _signed_by(frame: bytes, signing) -> bool:
     """Whether ``frame`` is signed with the key and its timestamp moves its stream forward;
     if so the timestamp is recorded (as pymavlink's ``check_signature`` records it)."""
