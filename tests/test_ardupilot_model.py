@@ -34,10 +34,25 @@ def test_distance_scales_longitude_at_the_mean_latitude():
 
 
 def test_distance_mean_latitude_is_an_integer_division():
-    # (lat + loc2.lat) / 2 on int32 truncates toward zero: -1 and -2 (1e-7 deg) average to -1
-    a = float(location_distance_m(-1e-7, 1.0, -2e-7, 0.0)[()])
-    scale = math.cos(math.radians(-1e-7))
-    assert a == pytest.approx(math.hypot(1.0, 1e7 * scale) * LATLON_TO_M, rel=1e-12)
+    # (lat + loc2.lat) / 2 on int32 truncates toward zero. Far from the equator half a unit of
+    # latitude moves the longitude scale by tan(lat) * 0.5e-7 deg, which over a long east-west
+    # distance is tens of micrometres: the case is worked at 60 degrees, 1 degree of longitude
+    # apart, on both sides of the equator (where truncation and flooring part)
+    for sign in (1, -1):
+        a_lat, c_lat = sign * 600_000_001, sign * 600_000_002  # 1e-7 degrees
+        mean = int((a_lat + c_lat) / 2)  # C's division: toward zero
+        assert mean == sign * 600_000_001
+
+        def at(m):
+            dlon = 10_000_000 * math.cos(math.radians(m * 1e-7))
+            return math.hypot(1, dlon) * LATLON_TO_M  # 1e-7 degrees of latitude apart
+
+        got = float(location_distance_m(a_lat * 1e-7, 1.0, c_lat * 1e-7, 0.0)[()])
+        assert got == pytest.approx(at(mean), rel=1e-13)
+        # the cases tell the rule apart: an exact mean, or flooring, misses by far more
+        for wrong in ((a_lat + c_lat) / 2, (a_lat + c_lat) // 2, c_lat):
+            if wrong != mean:
+                assert abs(at(wrong) - got) > 1e-12 * got * 100
 
 
 def test_distance_constant_is_a_6378100_m_sphere():
@@ -179,3 +194,45 @@ def test_the_kits_reading_agrees_with_the_model_written_from_ardupilots_source()
             d = location_distance_m(lat, lon, lat0, lon0, mean=mean)
             assert np.allclose(kit.vehicle_distance_m(lon, lat, lon0, lat0, mean=mean), d,
                                rtol=1e-12, atol=1e-9)  # fmt: skip
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(-80.0, 80.0),
+    st.floats(-180.0, 180.0),
+    st.floats(0.0, 360.0),
+    st.floats(1.0, 100_000.0),
+)
+def test_the_kits_distance_is_arduPilots_to_the_micrometre(clat, clon, bearing, dist):
+    """``alphafence.geo.vehicle_distance.vehicle_distance_m`` against the model, written apart
+    from it, for positions up to 100 km from a centre anywhere: equal to a part in 1e12. A
+    kit that scales longitude at the centre's latitude misses by up to 1e-4 of the distance."""
+    from alphafence.geo.vehicle_distance import vehicle_distance_m
+
+    from .ardupilot_model import GEOD
+
+    lon, lat, _ = GEOD.fwd(clon, clat, bearing, dist)
+    model = float(location_distance_m(lat, lon, clat, clon)[()])
+    kit = float(vehicle_distance_m(lon, lat, clon, clat))
+    assert kit == pytest.approx(model, rel=1e-12, abs=1e-9)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(20.0, 80.0), st.booleans(), st.floats(5_000.0, 100_000.0), st.booleans())
+def test_the_kit_breaches_a_circle_where_arduPilot_does(lat, south, radius, inclusion):
+    """At diagonal bearings just inside and just outside the model's rim of a circle item (a
+    part in 1e6 and 3 cm either way), the kit's breach check gives ArduPilot's verdict; there a
+    centre-latitude reading is off by decimetres to tens of metres."""
+    from .ardupilot_model import circle_rim
+
+    clat = -lat if south else lat
+    item = FenceItem(5003 if inclusion else 5004, radius, 14.5, clat)
+    fences = decode_fence([item])
+    for scale, slack in ((1.0 - 1e-6, -0.03), (1.0 + 1e-6, 0.03)):
+        rlon, rlat = circle_rim(14.5, clat, radius * scale + slack, n=8)
+        diagonal = slice(1, None, 2)  # 45, 135, 225, 315 degrees
+        rlon, rlat = rlon[diagonal], rlat[diagonal]
+        want = breached([item], rlon, rlat)
+        got = [kit_breached(fences, a, b, False) for a, b in zip(rlon, rlat)]
+        assert got == want.tolist()
+        assert want.tolist() == [inclusion == (scale > 1.0)] * 4  # the model's rim is its own
