@@ -306,10 +306,39 @@ def _keep_in_outputs(result, zone, margin):
         _inside_less_margin(shapely.Polygon(rim), where, margin, ".plan inclusion circle")
     union = "alphafence" in plan["geoFence"]  # the upload sets FENCE_OPTIONS' union then
     assert (len(inclusions) + len(circles) > 1) == union
-    # inside the fence is no breach by the vehicle's own rule
+    # inside every part of the fence is no breach by the vehicle's own rule, and outside the
+    # zone is one: the keep-in keeps the vehicle in
     for rec in records:
-        p = shapely.get_parts(rec.geometry)[0].representative_point()
-        assert not breached(items, [p.x], [p.y], union)[0], "inside the keep-in, yet a breach"
+        for part in shapely.get_parts(rec.geometry):
+            p = part.representative_point()
+            assert not breached(items, [p.x], [p.y], union)[0], "inside the keep-in: a breach"
+    lon, lat = _around(zone)
+    assert lon.size and breached(items, lon, lat, union).all(), "outside the zone: no breach"
+
+
+def _around(zone, n=24):
+    """Positions on a grid round the zone's bounds, outside the zone (a tenth of its size
+    beyond its bounds on every side, and the grid's points inside the bounds the zone does
+    not cover)."""
+    x0, y0, x1, y1 = zone.bounds
+    dx, dy = (x1 - x0) * 0.1 + 1e-3, (y1 - y0) * 0.1 + 1e-3
+    lon, lat = np.meshgrid(np.linspace(x0 - dx, x1 + dx, n), np.linspace(y0 - dy, y1 + dy, n))
+    lon, lat = lon.ravel(), np.clip(lat.ravel(), -89.0, 89.0)
+    keep = (np.abs(lon) < 180.0) & ~shapely.intersects_xy(zone, lon, lat)
+    return lon[keep], lat[keep]
+
+
+def _vanishes(zone, margin):
+    """Whether the zone has no point more than its margin (and a tenth, and a metre) from its
+    boundary: measured in an azimuthal equidistant frame of pyproj's at the zone's centre."""
+    from pyproj import Transformer
+
+    c = zone.centroid
+    to_m = Transformer.from_crs(
+        "EPSG:4326", f"+proj=aeqd +lat_0={c.y} +lon_0={c.x} +ellps=WGS84", always_xy=True
+    )
+    local = shapely.transform(zone, lambda xy: np.column_stack(to_m.transform(*xy.T)))
+    return bool(shapely.buffer(local, -(margin * 1.1 + 1.0)).is_empty)
 
 
 @settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -323,6 +352,7 @@ def test_keep_in_fences_lie_inside_their_zone_less_margin_as_read(method, size_k
         result = build_fences(_features(zones[:1], rules), rules,
                               BuildOptions(method=method, max_vertices=32))  # fmt: skip
     except ValueError:  # a zone narrower than twice its margin has no keep-in fence
+        assert _vanishes(zones[0], margin), f"{method}: refused a zone wider than its margin"
         event("vanishes inside its margin")
         return
     event(f"checked: {method} {size_km} km {shape} margin {margin:g}")
@@ -398,3 +428,17 @@ def test_the_check_sees_what_a_metric_frame_hides():
     assert 90.0 < out < 110.0, out  # 50 m of margin, and about 50 m into the zone
     dense = np.asarray(frame.geom_to_wgs84(shapely.segmentize(square, 300.0)).exterior.coords)
     assert excursion_m(zone, [dense[:-1]], 50.0, spacing_m=20.0) < 0.01
+
+
+def test_the_keep_in_checks_fail_on_a_refusal_or_a_fence_that_keeps_nothing_in():
+    # broken on purpose: a build that refuses a 1 km wide zone with a 100 m margin is caught
+    # (only a zone narrower than twice its margin may be refused), and so is a fence read
+    # with no inclusion (nothing outside the zone is a breach)
+    wide = _strip(14.5, 35.9, 90.0, 10 * KM, 1 * KM)
+    narrow = _strip(14.5, 35.9, 90.0, 10 * KM, 0.15 * KM)
+    assert not _vanishes(wide, 100.0) and _vanishes(narrow, 100.0)
+    rules = _rules("keep_in", 100.0)
+    result = build_fences(_features([wide], rules), rules, BuildOptions(method="alpha"))
+    _keep_in_outputs(result, wide, 100.0)
+    lon, lat = _around(wide)
+    assert lon.size > 100 and not breached([], lon, lat, False).any()
