@@ -236,3 +236,27 @@ def test_the_kit_breaches_a_circle_where_arduPilot_does(lat, south, radius, incl
         got = [kit_breached(fences, a, b, False) for a, b in zip(rlon, rlat)]
         assert got == want.tolist()
         assert want.tolist() == [inclusion == (scale > 1.0)] * 4  # the model's rim is its own
+
+
+@pytest.mark.parametrize("model", ["ardupilot_model.py", "px4_model.py"])
+def test_the_models_import_nothing_from_the_kit(model):
+    """The autopilots' models share no code with the kit: a distance or rule bug in the kit
+    cannot move the model with it. Read from the module's syntax tree (imports anywhere in it,
+    functions included), and from a fresh interpreter that imports the model alone."""
+    import ast
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).parent
+    tree = ast.parse((here / model).read_text())
+    named = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    named |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert not [m for m in named if m.split(".")[0] == "alphafence"], named
+    probe = (
+        f"import sys; import tests.{model[:-3]}; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'alphafence'))"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], cwd=here.parent, capture_output=True,
+                         text=True, check=True)  # fmt: skip
+    assert out.stdout.strip() == "[]", out.stdout

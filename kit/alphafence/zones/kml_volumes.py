@@ -10,10 +10,13 @@ A placemark's geometries (as :mod:`alphafence.zones.kml` reads them) make volume
   whose altitudes vary) adds only its altitudes; walls without a floor or ceiling stand on the
   outline their horizontal lines close.
 
-Some airspace exports draw each volume as separate placemarks, all named after the zone, in one
-Folder: a floor polygon, a ceiling polygon and one placemark per wall. A placemark holding only
-walls has no area of its own: the placemarks of its Folder with its name that hold only
-(not extruded) polygons are read as one zone, in the place of the first of them.
+Some airspace exports draw each volume as separate placemarks in one Folder: a floor polygon,
+a ceiling polygon and one placemark per wall, all named after the zone, or named after it with
+what each is (``NAME lower``, ``NAME upper``, ``NAME side 3``, as national eAIP exports do). A
+placemark holding only walls has no area of its own: the placemarks of its Folder with its name
+(less such a word) that hold only (not extruded) polygons are read as one zone, named ``NAME``,
+in the place of the first of them. Its floor and ceiling give its footprint and band; its walls
+give the outline only where it has neither, so a wall of zero width in a whole volume is nothing.
 
 Each function that makes areas takes an optional *reading*: the 2-D polygon a placemark's
 polygon is read as (e.g. with its edges along geodesics,
@@ -23,6 +26,7 @@ polygon is (a floor, a wall) is judged on it as written.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +38,26 @@ from alphafence.zones.airspace import circle_polygon
 
 _REFERENCES = {"absolute": "AMSL", "relativeToGround": "AGL"}
 _WALL = 1e-6  # a polygon whose area is below this times its perimeter squared is a wall
+# a volume's part named after it: "NAME upper", "NAME lower", "NAME side 12", "NAME wall 3"
+_PART = re.compile(
+    r"^(?P<stem>.*?\S)[\s_-]+(?:upper|lower|top|bottom|floor|ceiling|side|wall)(?:[\s_-]*\d+)?$",
+    re.IGNORECASE,
+)
+
+
+def zone_name(name):
+    """The zone a placemark's name says it is part of: the name less a closing word that says
+    which part (``upper``, ``lower``, ``side N``, ...).
+
+    Examples
+    --------
+    >>> [zone_name(n) for n in ("EY D 99 upper", "EY D 99 side 12", "EY D 99", None)]
+    ['EY D 99', 'EY D 99', 'EY D 99', None]
+    """
+    if not name:
+        return name
+    found = _PART.match(str(name).strip())
+    return found.group("stem") if found else name
 
 
 @dataclass(eq=False)
@@ -215,6 +239,8 @@ def _zone_volume(path, members, reading):
     tags = {}
     for pm in reversed(members):  # the first placemark's values win
         tags.update(pm.tags)
+    if members[0].name:
+        tags["name"] = zone_name(members[0].name)
     props = {"lower_reference": ref, "upper_reference": ref} if ref else {}
     return geom, tags, members[0].ident, lower, upper, props
 
@@ -246,7 +272,7 @@ def volumes(path, marks, reading=None, faults=None):
     """
 
     def key(pm):
-        return pm.folder, pm.name
+        return pm.folder, zone_name(pm.name)
 
     def areas(pm):
         return bool(pm.prims) and all(p[0] == "area" and not p[4] for p in pm.prims)
