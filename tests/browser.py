@@ -10,14 +10,17 @@ packages.
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 from pathlib import Path
 
 import pytest
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMEDRIVER = "/usr/bin/chromedriver"
+# Debian's paths ($ALPHAFENCE_CHROMIUM and $ALPHAFENCE_CHROMEDRIVER move them, for the test
+# that hides them)
+CHROMIUM = os.environ.get("ALPHAFENCE_CHROMIUM", "/usr/bin/chromium")
+CHROMEDRIVER = os.environ.get("ALPHAFENCE_CHROMEDRIVER", "/usr/bin/chromedriver")
 MISSING = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
 
 FLAGS = (

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from .ci_env import under_ci
+
 ROOT = Path(__file__).resolve().parents[1]
 NO_POSTGIS = "PostgreSQL with PostGIS not found"
 NO_PYGEOAPI = "pygeoapi not found"
@@ -109,7 +111,11 @@ class PostGIS:
 
 
 def pygeoapi_bin() -> str | None:
-    """pygeoapi's command: ``$ALPHAFENCE_PYGEOAPI``, ``.venv-pygeoapi``, or PATH's."""
+    """pygeoapi's command: ``$ALPHAFENCE_PYGEOAPI`` (only it, when set), ``.venv-pygeoapi``,
+    or PATH's."""
+    given = os.environ.get("ALPHAFENCE_PYGEOAPI")
+    if given is not None:
+        return given if os.access(given, os.X_OK) else None
     for candidate in (os.environ.get("ALPHAFENCE_PYGEOAPI"),
                       str(ROOT / ".venv-pygeoapi" / "bin" / "pygeoapi"), shutil.which("pygeoapi")):  # fmt: skip
         if candidate and os.access(candidate, os.X_OK):
@@ -376,7 +382,7 @@ def serving(folder: Path):
     if pygeoapi_missing():
         pytest.skip(pygeoapi_missing())
     no_pg = postgis_missing()
-    if no_pg and os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+    if no_pg and under_ci():
         pytest.skip(no_pg)
     if no_pg:
         import warnings

@@ -53,10 +53,11 @@ from pathlib import Path
 
 import pytest
 
+from .conftest import MALTA  # ../shared's, or $ALPHAFENCE_SHARED's
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BIN = Path(sys.executable).parent
-MALTA = ROOT.parent / "shared" / "data" / "osm" / "malta-2018-08-27.osm.pbf"
 PYGEOAPI = ROOT / ".venv-pygeoapi" / "bin"
 
 RUN = {"console", "bash", "sh", "shell", "python"}
