@@ -10,7 +10,7 @@ MALTA  := ../shared/data/osm/malta-2018-08-27.osm.pbf
 PYGEOAPI       := .venv-pygeoapi
 PYGEOAPI_STAMP := $(PYGEOAPI)/.installed
 
-.PHONY: install demo test test-oldest sitl-test navio2-test bench soak fuzz fuzz-atheris lint docs clean
+.PHONY: install demo test test-oldest sitl-test navio2-test bench soak fuzz fuzz-atheris lint docs clean mutation mutation-ci
 
 install: $(STAMP)
 
@@ -66,6 +66,19 @@ sitl-test: $(STAMP) $(PYGEOAPI_STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary
 	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m "sitl and not alone"
 	$(BIN)/pytest -q -m alone
+
+# the safety-critical code broken on purpose, one small change at a time (mutmut 3; the
+# targets and their tests in tests/mutation/targets.toml): fails on a break no test notices
+# that tests/mutation/survivors.toml does not list as harmless; RECORD=1 writes the scores
+mutation: $(STAMP)
+	$(BIN)/pip install --quiet -e '.[mutation]'
+	$(BIN)/python -m tests.mutation $(if $(RECORD),--record)
+
+# CI's share: the targets whose module changed since tests/mutation/scores.json was recorded,
+# or the fast decoder's alone when none did, each within 10 minutes
+mutation-ci: $(STAMP)
+	$(BIN)/pip install --quiet -e '.[mutation]'
+	$(BIN)/python -m tests.mutation --changed --canary "fast decoder and signing" --budget 600
 
 # a Navio2's OS (Debian armhf) under qemu-user, as root: the install in docs/onboard.md, the companion's
 # unit tests and a flight against x86 SITL; not part of `make test` (see tests/navio2/run.sh)

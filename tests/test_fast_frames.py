@@ -215,3 +215,80 @@ def test_one_forged_frame_stamped_ahead_does_not_lock_out_the_vehicles_stream():
     alone = reader(KEY)
     assert not [m for m in alone.parse_buffer(forged) or [] if m.get_type() == "HEARTBEAT"]
     assert not [m for m in alone.parse_buffer(genuine) or [] if m.get_type() == "HEARTBEAT"]
+
+
+def _recrc(frame, extra):
+    """``frame`` with its CRC made again over its header and payload (and ``extra``): a frame
+    whose every other check must stand on its own."""
+    from pymavlink.generator.mavcrc import x25crc
+
+    frame = bytearray(frame)
+    end = 10 + frame[1]
+    crc = x25crc(bytes(frame[1:end]) + bytes([extra])).crc
+    frame[end], frame[end + 1] = crc & 0xFF, crc >> 8
+    return bytes(frame)
+
+
+def test_a_frame_is_decoded_only_as_its_own_message_id():
+    # a GLOBAL_POSITION_INT frame carried under another id (each byte of the 24-bit id in
+    # turn), its CRC made good with GLOBAL_POSITION_INT's extra: the id alone refuses it
+    frame = GPI(1, 359000000, 144000000, 5, 6, 7, 8, 9, 10).pack(sender())
+    extra = GPI.crc_extra
+    assert fast(reader(), _recrc(frame, extra)) is not None
+    for at, value in ((7, 34), (8, 1), (9, 1)):
+        other = bytearray(frame)
+        other[at] = value
+        assert fast(reader(), _recrc(bytes(other), extra)) is None, at
+    # and a decoder for an id above 255 (two id bytes) takes its own frames
+    cls = mavlink.MAVLink_button_change_message
+    mine = cls(1, 2, 3).pack(sender())
+    assert FrameDecoder(cls).decode(mine) == (1, 2, 3)
+
+
+def test_a_frame_with_unknown_incompatibility_flags_or_marker_is_refused():
+    # MAVLink 2: an incompat_flags bit other than signing's means "do not parse"; a frame
+    # that does not start with 0xFD is no MAVLink 2 frame, whatever its CRC says
+    frame = GPI(1, 2, 3, 4, 5, 6, 7, 8, 9).pack(sender())
+    for at, value in ((2, 2), (2, 4), (2, 0x80), (0, 0xFE)):
+        other = bytearray(frame)
+        other[at] = value
+        other = _recrc(bytes(other), GPI.crc_extra)
+        assert fast(reader(), other) is None, (at, value)
+        assert by_pymavlink(reader(), other) is None, (at, value)
+    # compat_flags are ignored by a reader that does not know them
+    other = bytearray(frame)
+    other[3] = 0x10
+    assert fast(reader(), _recrc(bytes(other), GPI.crc_extra)) is not None
+
+
+def test_each_link_system_and_component_is_a_stream_of_its_own():
+    # signing: a timestamp must move forward on its own stream (link id, system, component);
+    # a newer stream elsewhere does not make an older stamp here a replay
+    codec = reader(KEY)
+    first = sender(KEY, system=1)
+    first.signing.timestamp += 1000
+    assert fast(codec, GPI(*[1] * 9).pack(first)) is not None
+    for system, component, link in ((2, 1, 0), (1, 2, 0), (1, 1, 3)):
+        other = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
+        other.signing.secret_key, other.signing.sign_outgoing = KEY, True
+        other.signing.link_id = link
+        other.signing.timestamp = first.signing.timestamp - 500
+        frame = GPI(*[2] * 9).pack(other)
+        assert fast(codec, frame) is not None, (system, component, link)
+        assert fast(codec, frame) is None  # and replayed there, refused
+    # on the first stream, another frame stamped before its last is refused too
+    older = sender(KEY, system=1)
+    older.signing.timestamp = first.signing.timestamp - 10
+    frame = GPI(*[3] * 9).pack(older)
+    assert fast(codec, frame) is None
+    assert fast(reader(KEY), frame) is not None  # (new to a fresh reader: the stamp is why)
+
+
+def test_the_decoder_names_its_fields_and_refuses_arrays():
+    decoder = FrameDecoder(GPI)
+    assert decoder.index == {name: k for k, name in enumerate(GPI.ordered_fieldnames)}
+    assert decoder.index["lat"] == 1
+    import pytest
+
+    with pytest.raises(ValueError, match="MAVLink_param_value_message: array fields"):
+        FrameDecoder(mavlink.MAVLink_param_value_message)
