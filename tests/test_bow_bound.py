@@ -14,8 +14,10 @@ import math
 
 import numpy as np
 import pyproj
+import pytest
 import shapely
-from hypothesis import given, settings
+import shapely.affinity
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from alphafence.geo import lonlat
@@ -103,3 +105,69 @@ def test_a_bound_without_tan_lat_calls_bowing_edges_free(monkeypatch):
     monkeypatch.setattr(lonlat, "math", NoTan(math))
     assert bow_free_one(geom, frame, 1.0) and bool(bow_free([geom], frame, 1.0)[0])
     assert longest_edge_bow(frame, geom) > 2.0
+
+
+def spec_bound_m(lat0, reach_m, tolerance):
+    """The bound as the module states it: ``sqrt(8 R t / (tan|lat| + 1))`` at the latitude
+    the geometry may reach (the frame's plus its reach in degrees of 111,319.49 m), at most
+    89 degrees; R = 6,371,008.8 m."""
+    lat = min(abs(lat0) + reach_m / 111_319.49, 89.0)
+    return math.sqrt(8 * 6_371_008.8 * tolerance / (math.tan(math.radians(lat)) + 1.0))
+
+
+def spec_free(geom, lat0, tolerance):
+    """Free when the bounds' diagonal is within the bound, or else every edge of every ring
+    (the step from one ring to the next counted too) is."""
+    x0, y0, x1, y1 = geom.bounds
+    bound = spec_bound_m(lat0, max(abs(x0), abs(y0), abs(x1), abs(y1)), tolerance)
+    if math.hypot(x1 - x0, y1 - y0) <= bound:
+        return True
+    coords = shapely.get_coordinates(geom)
+    return bool(np.hypot(*np.diff(coords, axis=0).T).max() <= bound)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    lat=st.floats(-85.0, 85.0),
+    dx=st.floats(-1_000_000.0, 1_000_000.0),
+    dy=st.floats(-1_000_000.0, 1_000_000.0),
+    stretch=st.floats(0.3, 3.0),
+    pieces=st.integers(1, 4),
+    tolerance=st.sampled_from([READ_TOLERANCE_M, 0.05, 1.0]),
+    turn=st.sampled_from([0.0, 90.0, 30.0]),
+)
+@example(lat=60.0, dx=0.0, dy=0.0, stretch=1.5, pieces=1, tolerance=1.0, turn=90.0)
+@example(lat=-60.0, dx=0.0, dy=-2.0, stretch=1.2, pieces=2, tolerance=1.0, turn=90.0)
+def test_free_is_the_stated_bound_anywhere_in_the_frame(
+    lat, dx, dy, stretch, pieces, tolerance, turn
+):
+    """Strips far from the frame's origin (up to 1,000 km each way, either hemisphere), and
+    several at once: ``bow_free`` and ``bow_free_one`` say what the stated bound says."""
+    frame = LocalFrame(14.5, lat)
+    length = spec_bound_m(lat, 0.0, tolerance) * stretch
+    geoms = [
+        shapely.affinity.translate(strip(length, 1.0 + k), dx + 3 * k * length, dy - 50.0 * k)
+        for k in range(pieces)
+    ]
+    dotted = shapely.Polygon(
+        [(x, 0.0) for x in np.linspace(-length, length, 9)]
+        + [(x, 2.0) for x in np.linspace(length, -length, 9)]
+    )
+    geoms += [shapely.affinity.translate(dotted, dx, dy), shapely.MultiPolygon(geoms[:2])]
+    # turned about the origin: upright strips (their diagonal is their height)
+    geoms = [shapely.affinity.rotate(g, turn, origin=(0.0, 0.0)) for g in geoms]
+    want = [spec_free(g, lat, tolerance) for g in geoms]
+    assert bow_free(geoms, frame, tolerance).tolist() == want
+    assert [bow_free_one(g, frame, tolerance) for g in geoms] == want
+
+
+def test_the_frame_scale_is_d_over_r_over_its_sine():
+    from alphafence.geo.lonlat import frame_scale
+
+    r = 6_371_008.8
+    for reach in (1.0, 20_000.0, 700_000.0, 5_000_000.0):
+        assert frame_scale(reach) == pytest.approx((reach / r) / math.sin(reach / r), rel=1e-12)
+    assert frame_scale(0.0) == 1.0 and frame_scale(1e-6) == 1.0
+    # beyond a quarter of the world the scale is held at its value there (pi / 2)
+    assert frame_scale(3e7) == pytest.approx(math.pi / 2, rel=1e-12)
+    assert frame_scale(r * math.pi / 2) == pytest.approx(math.pi / 2, rel=1e-12)

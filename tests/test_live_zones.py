@@ -129,3 +129,22 @@ def test_an_empty_answer_needs_a_second_to_remove_and_other_areas_keep_theirs():
     assert [z.hash for z in change.changed] == ["h7.1"] and len(states.zones) == 2
     change = states.answer([zone(7, 1)], True, EAST)
     assert not change.removed and [z.hash for z in states.zones] == ["h7.1"]
+
+
+def test_each_answer_says_what_it_changed_and_counts_in_the_revision():
+    live = LiveZones()
+    assert live.revision == 0 and not live.empty_pending
+    first = live.answer([zone(1, 0), zone(6, 0)], True)
+    assert ([z.id for z in first.added], first.changed, first.removed) == (["Z1", "Z6"], [], [])
+    assert first and live.revision == 1
+    again = live.answer([zone(1, 0), zone(6, 0)], True)
+    assert not again and live.revision == 1  # nothing changed: no revision
+    moved = live.answer([zone(1, 1), zone(6, 0)], True)  # a new version of Z1 only
+    assert [z.hash for z in moved.changed] == ["h1.1"] and not moved.added and moved
+    assert live.revision == 2
+    held = live.answer([zone(6, 0)], True, held=["Z1"])  # Z1 served malformed: kept
+    assert sorted(z.hash for z in held.held) == ["h1.1"] and not held.removed and not held
+    assert live.revision == 2
+    gone = live.answer([zone(1, 1)], True)  # Z6 no longer served
+    assert [z.id for z in gone.removed] == ["Z6"] and gone and live.revision == 3
+    assert sorted(z.hash for z in live.zones) == ["h1.1"]

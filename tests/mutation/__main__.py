@@ -117,7 +117,10 @@ def run_target(target: dict, base: Path, budget_s: float | None) -> dict:
     work = workspace(target, base)
     started = time.monotonic()
     names = [f"{dotted(target['module'])}.{f}*" for f in target["functions"]]
-    done = _mutmut(work, "run", *names, timeout=budget_s)
+    try:
+        done = _mutmut(work, "run", *names, timeout=budget_s)
+    except subprocess.TimeoutExpired:
+        raise SystemExit(f"{target['name']}: not done within {budget_s:g} s") from None
     if done.returncode != 0:
         raise SystemExit(f"mutmut failed on {target['name']}:\n{done.stdout[-3000:]}{done.stderr}")
     results = _mutmut(work, "results", "--all", "true").stdout
@@ -175,6 +178,7 @@ def main(argv=None) -> int:
     ap.add_argument("--canary", help="with --changed: the target run when none changed")
     ap.add_argument("--budget", type=float, help="seconds each target may take")
     ap.add_argument("--record", action="store_true", help="write tests/mutation/scores.json")
+    ap.add_argument("--stanzas", help="append survivors.toml stanzas of unlisted survivors here")
     args = ap.parse_args(argv)
     if not MUTMUT.exists():
         print(f"mutmut is not installed beside {sys.executable} (pip install 'mutmut>=3.3')")
@@ -200,6 +204,9 @@ def main(argv=None) -> int:
             for name, function, removed, added in unlisted:
                 failed = True
                 print(f"  UNLISTED SURVIVOR {name}\n    in {function}: {removed!r} -> {added!r}")
+                if args.stanzas:
+                    with open(args.stanzas, "a", encoding="utf-8") as fh:
+                        fh.write(stanza(result["module"], function, removed, added))
             for s in stale:
                 print(f"  listed, but killed now: {s['function']}: {s['added']!r} (take it off)")
     finally:
@@ -210,6 +217,13 @@ def main(argv=None) -> int:
     if args.record and not failed:
         record(rows)
     return 1 if failed else 0
+
+
+def stanza(module, function, removed, added) -> str:
+    """A survivors.toml entry for a survivor, its reason left to write."""
+    q = json.dumps  # a TOML basic string is a JSON string
+    return (f"\n[[survivor]]\nmodule = {q(module)}\nfunction = {q(function)}\n"
+            f"removed = {q(removed)}\nadded = {q(added)}\nwhy = \"\"\n")  # fmt: skip
 
 
 def record(rows: list[dict]) -> None:
