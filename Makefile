@@ -39,8 +39,8 @@ WORKERS ?= $(shell $(PYTHON) -c "import os; print((os.cpu_count() or 1) + 1)")
 # then the flights whose margin is a few metres at a speedup (marked alone: a monitor's few
 # hundredths of a second of lateness on a loaded machine are metres there), one at a time
 test: $(STAMP) $(PYGEOAPI_STAMP)
-	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m "not alone"
-	$(BIN)/pytest -q -m alone
+	$(BIN)/pytest -q -n $(WORKERS) --dist worksteal -m "not alone" --durations=25
+	$(BIN)/pytest -q -m alone --durations=5
 
 # the whole suite at the oldest versions the kit supports (pyproject.toml's floors, mostly
 # Debian bookworm's): .venv-oldest from .ci/oldest-constraints.txt (needs Python 3.11, as
@@ -60,7 +60,7 @@ test-oldest: $(OLDEST_STAMP) $(PYGEOAPI_STAMP)
 	$(OLDEST)/bin/python -c "import numpy, scipy, shapely; print('oldest versions: numpy', \
 		numpy.__version__, 'scipy', scipy.__version__, 'shapely', shapely.__version__)"
 	@echo "oldest versions: the suite without the tests that drive only external parts (SITL, the browser), which make test runs"
-	$(OLDEST)/bin/pytest -q -n auto --dist worksteal -m "not sitl and not browser"
+	$(OLDEST)/bin/pytest -q -n auto --dist worksteal -m "not sitl and not browser" --durations=25
 
 sitl-test: $(STAMP) $(PYGEOAPI_STAMP)
 	@$(BIN)/alphafence sitl --find >/dev/null  # on failure it prints how to get a binary

@@ -151,3 +151,20 @@ def test_readable_refuses_a_crossed_ring_and_one_over_half_the_world():
     narrow = [(-89.75, 10.0), (89.75, 10.0), (0.0, 20.0)]  # 179.5 degrees
     x, y = frame.to_local(np.array([p[0] for p in narrow]), np.array([p[1] for p in narrow]))
     assert readable(shapely.Polygon(np.column_stack([x, y])), frame)
+
+
+def test_clear_as_read_checks_every_part_and_readable_every_half_world():
+    frame = LocalFrame(14.5, 35.9)
+    a, b = shapely.box(0, 0, 200, 100), shapely.box(5000, 0, 5200, 100)
+    zone = shapely.MultiPolygon([a, b])
+    fence = shapely.MultiPolygon(
+        [a.buffer(30, join_style="mitre"), b.buffer(0.01, join_style="mitre")]
+    )
+    assert not clear_as_read(fence, frame, zone, 0.0)  # the second part is 1 cm off
+    # a ring spanning 180.5 degrees of longitude in short steps is not readable; 179.5 is
+    wide = LocalFrame(90.0, 5.0)
+    for span, ok in ((180.5, False), (179.5, True)):
+        lons = np.array([0.0, 60.0, 120.0, span, 120.0, 60.0]) - 90.0
+        lats = np.array([0.0, 0.0, 0.0, 0.0, 10.0, 10.0])
+        x, y = wide.to_local((lons + 180.0) % 360.0 - 180.0, lats)
+        assert readable(shapely.Polygon(np.column_stack([x, y])), wide) is ok, span

@@ -148,3 +148,20 @@ def test_each_answer_says_what_it_changed_and_counts_in_the_revision():
     gone = live.answer([zone(1, 1)], True)  # Z6 no longer served
     assert [z.id for z in gone.removed] == ["Z6"] and gone and live.revision == 3
     assert sorted(z.hash for z in live.zones) == ["h1.1"]
+
+
+def test_a_zone_meets_an_area_by_its_restricted_features_else_its_own_geometry():
+    west_box = {"type": "Polygon", "coordinates": [[[14.1, 35.2], [14.2, 35.2], [14.2, 35.3],
+                                                    [14.1, 35.2]]]}  # fmt: skip
+    bare = Zone("B", "h", {"id": "B", "geometry": west_box}, ())
+    assert zone_meets(bare, WEST) and not zone_meets(bare, EAST)
+    # restricted features (fenced) decide over the feature's own geometry
+    east = Restricted(shapely.box(14.8, 35.2, 14.81, 35.21))
+    both = Zone("C", "h", {"id": "C", "geometry": west_box}, (east,))
+    assert zone_meets(both, EAST) and not zone_meets(both, WEST)
+    # a geometry GEOS cannot read meets every area (it is never taken away by one)
+    broken = Zone(
+        "D", "h", {"id": "D", "geometry": {"type": "Polygon", "coordinates": [[[1]]]}}, ()
+    )
+    assert zone_meets(broken, WEST) and zone_meets(broken, EAST)
+    assert zone_meets(bare, None)
