@@ -27,6 +27,7 @@ RANK = {
     "fencing": 5,
     "flights": 5,
     "onboard": 6,
+    "updating": 6,
     "route": 6,
     "awareness": 6,
     "vehicle": 7,

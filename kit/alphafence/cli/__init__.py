@@ -19,6 +19,7 @@ from alphafence.errors import AlphaFenceError, missing_dependency
 # monitor -> check-flight), then planning, signing and trying out; --help lists them so
 VERBS = (
     "build",
+    "update",
     "compare",
     "compile",
     "upload",

@@ -96,6 +96,12 @@ def register(sub):
         "placemarks, ED-269/ED-318 zones, GeoJSON features; each is named in the summary and "
         "the output's metadata) instead of failing with the list of them",
     )
+    p.add_argument(
+        "--store",
+        metavar="FILE.sqlite",
+        help="also keep what 'alphafence update' needs to apply OpenStreetMap's changes to "
+        "these fences (the restricted features, the extract's nodes and ways) in this file",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     add_source_options(p)
     p.set_defaults(func=run)
@@ -126,13 +132,13 @@ def run(args) -> int:
 
     source = source_options(args)
     if source is not None:
-        from alphafence.cli.build_source import run_source
+        from alphafence.cli.build_routes import run_source
 
         return run_source(args, build_options(args), source)
     if not args.databases:
         raise InputError("build", "give a geofence database, or --source URL")
     if is_postgis_url(args.output) or args.zones_table:
-        from alphafence.cli.build_postgis import run_postgis
+        from alphafence.cli.build_routes import run_postgis
 
         return run_postgis(args, run)
     wants = build_wants(args.databases, args.figure)
@@ -153,10 +159,25 @@ def run(args) -> int:
         raise _hinted(exc) from None
     meta = build_meta(stream.database(), rules, opts)
     keep = bool(args.plan or args.waypoints or args.figure or args.map)
+    store = None
+    if args.store:
+        from alphafence.updating.keep import StoreWriter
+
+        target = getattr(args, "store_output", None) or args.output
+        store = StoreWriter(args.store, args.databases, rules, args.rules, opts, args.bbox,
+                            target)  # fmt: skip
     try:
-        result, extra = _build(args, stream, rules, opts, meta, keep)
+        result, extra = _build(args, stream, rules, opts, meta, keep, store)
     except InputError as exc:
+        if store is not None:
+            store.abort()
         raise _hinted(exc) from None
+    except BaseException:
+        if store is not None:
+            store.abort()
+        raise
+    if store is not None:
+        store.finish()
     write_all(extra)
     if extra:
         from alphafence.mavlink.items import fence_items
@@ -278,7 +299,7 @@ def summary(db, result, opts, written):
         out_console.print("wrote " + ", ".join(written))
 
 
-def _build(args, stream, rules, opts, meta, keep):
+def _build(args, stream, rules, opts, meta, keep, store=None):
     """The build, its fence file written as tiles complete: ``(result, the other outputs
     rendered)``."""
     from alphafence.fencefiles.fence_stream import open_writers
@@ -299,6 +320,7 @@ def _build(args, stream, rules, opts, meta, keep):
             # the spool (an unlinked file, gone with the process) sits beside the output, on
             # its disk: /tmp is often memory (tmpfs), and a country's features are gigabytes
             spool_dir=os.path.dirname(os.path.abspath(args.output)),
+            on_features=None if store is None else store.add,
         )
         extra = render(result.fences, meta, None, args.plan, args.waypoints) if keep else {}
     return result, extra

@@ -68,13 +68,42 @@ def region_labels(bounds, widths, join_m):
     bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
     if len(bounds) == 1:
         return np.zeros(1, int)
+    grown = grown_bounds(bounds, widths, join_m)
+    boxes = shapely.box(grown[:, 0], grown[:, 1], grown[:, 2], grown[:, 3])
+    tree = shapely.STRtree(boxes)
+    a, b = tree.query(boxes, predicate="intersects")
+    return _components(len(bounds), a, b)
+
+
+def grown_bounds(bounds, widths, join_m):
+    """Each extent grown as :func:`region_labels` grows it: by the join distance, twice the
+    feature's width and a metre, in degrees at the extent's farthest latitude. Two features
+    of one class share a region when their grown extents meet (edges included), directly or
+    through others; an update finds a region's members by the same test.
+
+    Parameters
+    ----------
+    bounds : ndarray, shape (n, 4)
+        ``minlon, minlat, maxlon, maxlat`` per feature.
+    widths : ndarray, shape (n,)
+    join_m : float
+
+    Returns
+    -------
+    ndarray, shape (n, 4)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = grown_bounds(np.array([[0.0, 0.0, 0.001, 0.001]]), np.zeros(1), 25.0)
+    >>> round(float(g[0, 0]) * M_PER_DEG_LON, 6), round(float(g[0, 3] - 0.001) * M_PER_DEG_LAT, 6)
+    (-26.0, 26.0)
+    """
+    bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
     lat = np.clip(np.maximum(np.abs(bounds[:, 1]), np.abs(bounds[:, 3])), 0, 89.9)
     grow_m = join_m + 2 * np.asarray(widths, dtype=float) + 1.0
     dlat = grow_m / M_PER_DEG_LAT
     dlon = grow_m / (M_PER_DEG_LON * np.cos(np.radians(lat)))
-    boxes = shapely.box(
-        bounds[:, 0] - dlon, bounds[:, 1] - dlat, bounds[:, 2] + dlon, bounds[:, 3] + dlat
+    return np.column_stack(
+        [bounds[:, 0] - dlon, bounds[:, 1] - dlat, bounds[:, 2] + dlon, bounds[:, 3] + dlat]
     )
-    tree = shapely.STRtree(boxes)
-    a, b = tree.query(boxes, predicate="intersects")
-    return _components(len(bounds), a, b)

@@ -162,7 +162,11 @@ def group_sites(features, rules, join_m=25.0):
         geoms = np.array([f.geometry for f in feats], dtype=object)
         widths = feature_widths(feats, rules)
         regions = _regions(geoms, widths, join_m)
-        order = np.argsort(regions, kind="stable")  # region by region, database order within
+        # region by region, each in its features' canonical order (by source): a site is
+        # made of its features whatever order the database gave them in, so an update that
+        # rebuilds one region gives the bits a whole build gives
+        labels = regions.tolist()
+        order = np.array(sorted(range(len(feats)), key=lambda i: (labels[i], feats[i].source)))
         ends = np.cumsum(np.bincount(regions))
         spans = list(zip([0, *ends[:-1].tolist()], ends.tolist()))
         sites.extend(
@@ -221,8 +225,26 @@ def regions_sites(features, spans, rules, join_m=25.0):
     >>> [s.sources for s in regions_sites(feats, [(0, 1), (1, 3)], rules)]
     [['way/1'], ['way/2', 'way/3']]
     """
+    order = canonical_order(features, spans)
+    features = [features[i] for i in order]
     geoms = np.array([f.geometry for f in features], dtype=object)
     return _regions_sites(features, geoms, feature_widths(features, rules), spans, join_m)
+
+
+def canonical_order(features, spans):
+    """The order each span's features are grouped in: by source, then as given (a database's
+    order does not decide a site's name, its largest feature or the bits of its fence).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as F
+    >>> canonical_order([F(source="way/2"), F(source="node/9"), F(source="way/1")], [(0, 2), (2, 3)])
+    [1, 0, 2]
+    """
+    out = []
+    for start, end in spans:
+        out.extend(sorted(range(start, end), key=lambda i: features[i].source))
+    return out
 
 
 def _regions_sites(feats, geoms, widths, spans, join_m):

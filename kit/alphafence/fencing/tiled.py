@@ -209,6 +209,7 @@ def build_tiled(
     tile_deg=TILE_DEG,
     target=None,
     spool_dir=None,
+    on_features=None,
 ) -> TiledResult:
     """Build the fences of a database of any size.
 
@@ -236,6 +237,9 @@ def build_tiled(
         Features per job to aim for (default :func:`job_size`).
     spool_dir : str, optional
         Where the spool's temporary file goes.
+    on_features : callable, optional
+        Called with each batch of restricted features read (lists; an update store keeps
+        them).
 
     Returns
     -------
@@ -271,6 +275,8 @@ def build_tiled(
                 if not isinstance(batch, list):
                     batch.add_to(spool, rules)
                 else:
+                    if on_features is not None:
+                        on_features(batch)
                     widths = feature_widths(batch, rules)
                     spool.add(batch, widths, [spool.class_of(site_class(f)) for f in batch])
                 if progress is not None:

@@ -101,7 +101,7 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
             sql = (f"INSERT INTO {qualified} (id, {names}, properties, version, geom) VALUES "
                    f"(%s, {marks}, %s, %s, ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326))")  # fmt: skip
             with conn.cursor() as cur:
-                cur.executemany(sql, [_row(k, f, version) for k, f in enumerate(features)])
+                cur.executemany(sql, _rows(features, version))
             if meta:
                 text = json.dumps(meta).replace("'", "''")
                 conn.execute(f"COMMENT ON TABLE {qualified} IS '{text}'")
@@ -111,8 +111,68 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
     return version
 
 
-def _row(k, feature, version):
-    p = feature["properties"]
-    ident = f"{p.get('site_id') or 'fence'}#{p.get('kind')}#{k}"
-    values = [p.get(c) for c, _ in COLUMNS]
-    return (ident, *values, json.dumps(p), version, json.dumps(feature["geometry"]))
+def _rows(features, version):
+    """Each Feature's row; its id ``SITE#KIND#N`` (the N-th of its site and kind), so the rows
+    of one site are named alike whichever build or update wrote them."""
+    seen = {}
+    for feature in features:
+        p = feature["properties"]
+        key = (p.get("site_id") or "fence", p.get("kind"))
+        n = seen[key] = seen.get(key, -1) + 1
+        values = [p.get(c) for c, _ in COLUMNS]
+        geometry = json.dumps(feature["geometry"])
+        yield (f"{key[0]}#{key[1]}#{n}", *values, json.dumps(p), version, geometry)
+
+
+def replace_rows(url: str, drop, features, meta_update: dict | None = None) -> tuple:
+    """Replace the rows of the sites ``drop`` (site ids) in the table ``url`` names with these
+    Features, in one transaction, at one more ``version`` than the table's.
+
+    Parameters
+    ----------
+    url : str
+    drop : set of str
+    features : list of dict
+    meta_update : dict, optional
+        Merged into the table comment's metadata.
+
+    Returns
+    -------
+    (int, int)
+        Rows removed, and the new version.
+
+    Raises
+    ------
+    InputError
+        No such table, or PostGIS refused: nothing changed.
+    """
+    need(("psycopg", f"writing {url}"))
+    import psycopg
+
+    conninfo, schema, table = split_target(url)
+    qualified = f'"{schema}"."{table}"'
+    names = ", ".join(f'"{c}"' for c, _ in COLUMNS)
+    marks = ", ".join(["%s"] * len(COLUMNS))
+    try:
+        with psycopg.connect(conninfo) as conn, conn.transaction():
+            if conn.execute("SELECT to_regclass(%s)", (qualified,)).fetchone()[0] is None:
+                raise InputError(url, "no such table (build into it first)")
+            conn.execute(f"LOCK TABLE {qualified} IN SHARE ROW EXCLUSIVE MODE")
+            row = conn.execute(f"SELECT coalesce(max(version), 0) FROM {qualified}").fetchone()
+            version = int(row[0]) + 1
+            removed = conn.execute(
+                f"DELETE FROM {qualified} WHERE site_id = ANY(%s)", (sorted(drop),)
+            ).rowcount
+            sql = (f"INSERT INTO {qualified} (id, {names}, properties, version, geom) VALUES "
+                   f"(%s, {marks}, %s, %s, ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326))")  # fmt: skip
+            with conn.cursor() as cur:
+                cur.executemany(sql, list(_rows(features, version)))
+            if meta_update:
+                old = conn.execute("SELECT obj_description(%s::regclass)", (qualified,)).fetchone()
+                meta = {**json.loads(old[0] or "{}"), **meta_update}
+                text = json.dumps(meta).replace("'", "''")
+                conn.execute(f"COMMENT ON TABLE {qualified} IS '{text}'")
+    except psycopg.Error as exc:
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        raise InputError(url, f"PostGIS refused the update, nothing changed: {message}") from None
+    return removed, version
