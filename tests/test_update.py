@@ -217,3 +217,68 @@ def test_store_needs_one_osm_extract(tmp_path, capsys):
     assert main(argv) == 2
     assert "--store keeps an OpenStreetMap extract" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def postgis(tmp_path_factory):
+    from tests.live_servers import PostGIS, postgis_missing
+
+    if postgis_missing():
+        pytest.skip(postgis_missing())
+    pg = PostGIS(tmp_path_factory.mktemp("update-pg")).start()
+    yield pg
+    pg.stop()
+
+
+def table_rows(pg, table):
+    """The table's fences: id, properties and geometry (as PostGIS holds it), sorted."""
+    return sorted(pg.sql(f"SELECT id, properties::text, ST_AsEWKB(geom) FROM {table}"))
+
+
+def test_a_postgis_table_updates_in_one_transaction_at_its_next_version(postgis, tmp_path):
+    world = World(seed=3)
+    world.write(tmp_path / "world.osm")
+    store = tmp_path / "store.sqlite"
+    table = f"{postgis.url}/public.fleet"
+    assert main(["build", str(tmp_path / "world.osm"), "-o", table, "--store", str(store),
+                 "-q"]) == 0  # fmt: skip
+    for seed in range(4):
+        before = {i: v for i, v in postgis.sql("SELECT id, version FROM fleet")}
+        version = max(before.values())
+        world.mark()
+        rng = random.Random(seed)
+        for _ in range(5):
+            world.edit(rng)
+        change, changed = tmp_path / f"c{seed}.osc", tmp_path / f"changed{seed}.osm"
+        world.write_changes(change)
+        world.write(changed)
+        assert main(["update", str(change), "--store", str(store), "-q"]) == 0
+        assert main(["build", str(changed), "-o", f"{postgis.url}/public.whole", "-q"]) == 0
+        assert table_rows(postgis, "fleet") == table_rows(postgis, "whole")
+        after = {i: v for i, v in postgis.sql("SELECT id, version FROM fleet")}
+        # rows the update wrote are at the next version; the others kept theirs
+        assert {v for i, v in after.items() if i not in before or v != before[i]} <= {version + 1}
+        assert all(before[i] == v for i, v in after.items() if v != version + 1)
+    (comment,) = postgis.sql("SELECT obj_description('public.fleet'::regclass)")[0]
+    assert json.loads(comment)["updated_with"][-1].endswith("c3.osc")
+
+
+def test_a_refused_postgis_update_changes_nothing(postgis, tmp_path, capsys):
+    world = World(seed=4)
+    world.write(tmp_path / "world.osm")
+    store = tmp_path / "store.sqlite"
+    table = f"{postgis.url}/public.refused"
+    assert main(["build", str(tmp_path / "world.osm"), "-o", table, "--store", str(store),
+                 "-q"]) == 0  # fmt: skip
+    world.mark()
+    world.node(10, 10, {"aeroway": "helipad"})
+    world.write_changes(tmp_path / "c.osc")
+    rows_before = table_rows(postgis, "refused")
+    kept = sqlite3.connect(store).execute("SELECT count(*) FROM features").fetchone()
+    # a constraint PostGIS enforces that the update's rows break: the write is refused whole
+    (version,) = postgis.sql("SELECT max(version) FROM refused")[0]
+    postgis.sql(f"ALTER TABLE refused ADD CONSTRAINT frozen CHECK (version <= {version})")
+    assert main(["update", str(tmp_path / "c.osc"), "--store", str(store), "-q"]) == 2
+    assert "PostGIS refused the update, nothing changed" in capsys.readouterr().err
+    assert table_rows(postgis, "refused") == rows_before
+    assert sqlite3.connect(store).execute("SELECT count(*) FROM features").fetchone() == kept

@@ -124,7 +124,7 @@ def run_postgis(args, build) -> int:
     need(("psycopg", f"writing {target if is_postgis_url(target) else zones}"))
     with tempfile.TemporaryDirectory(prefix="alphafence-") as tmp:
         if is_postgis_url(target):
-            args.output = args.hidden_output = str(Path(tmp) / "fences.geojson")
+            args.output = args.hidden_output = str(Path(tmp) / "fences.geojsonl")
             args.store_output = target  # what an update store names as its fences
         args.zones_table = None
         try:
@@ -134,11 +134,20 @@ def run_postgis(args, build) -> int:
         if status:
             return status
         if is_postgis_url(target):
-            doc = json.loads((Path(tmp) / "fences.geojson").read_text(encoding="utf-8"))
-            version = write_features(target, doc["features"], doc.get("alphafence"))
+            path, meta, count = Path(tmp) / "fences.geojsonl", {}, [0]
+
+            def features():  # streamed from the file, never all held
+                with open(path, encoding="utf-8") as fh:
+                    for line in fh:
+                        feature = json.loads(line)
+                        meta.update(feature.pop("alphafence", None) or {})
+                        feature.pop("generator", None)
+                        count[0] += 1
+                        yield feature
+
+            version = write_features(target, features(), meta)
             if not args.quiet:
-                out_console.print(f"wrote {len(doc['features'])} fences to {target} "
-                                  f"(version {version})")  # fmt: skip
+                out_console.print(f"wrote {count[0]} fences to {target} (version {version})")
     if zones:
         count = _write_zones(args, zones)
         if not args.quiet:

@@ -60,13 +60,14 @@ def split_target(url: str) -> tuple:
 
 def write_features(url: str, features, meta: dict | None = None) -> int:
     """Replace the rows of the table ``url`` names with these Features (fences, or zones), in one
-    transaction; the new ``version``.
+    transaction, streamed to PostGIS with ``COPY`` (any number of them, never all held); the
+    new ``version``.
 
     Parameters
     ----------
     url : str
         ``postgresql://.../DATABASE/SCHEMA.TABLE``.
-    features : list of dict
+    features : iterable of dict
         Fence GeoJSON Features (``alphafence build``'s).
     meta : dict, optional
         The build's metadata, kept in a table comment.
@@ -96,12 +97,7 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
             row = conn.execute(f"SELECT coalesce(max(version), 0) FROM {qualified}").fetchone()
             version = int(row[0]) + 1
             conn.execute(f"DELETE FROM {qualified}")
-            names = ", ".join(f'"{c}"' for c, _ in COLUMNS)
-            marks = ", ".join(["%s"] * len(COLUMNS))
-            sql = (f"INSERT INTO {qualified} (id, {names}, properties, version, geom) VALUES "
-                   f"(%s, {marks}, %s, %s, ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326))")  # fmt: skip
-            with conn.cursor() as cur:
-                cur.executemany(sql, _rows(features, version))
+            _copy(conn, qualified, features, version)
             if meta:
                 text = json.dumps(meta).replace("'", "''")
                 conn.execute(f"COMMENT ON TABLE {qualified} IS '{text}'")
@@ -109,6 +105,25 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
         message = " ".join(str(exc).split()) or type(exc).__name__
         raise InputError(url, f"PostGIS refused the write, nothing changed: {message}") from None
     return version
+
+
+def _copy(conn, qualified, features, version, batch=5000):
+    """``COPY`` the Features' rows into the table, a batch at a time (geometry as hex EWKB,
+    parsed from the GeoJSON as PostGIS's ST_GeomFromGeoJSON parses it: the same doubles)."""
+    import shapely
+
+    names = ", ".join(f'"{c}"' for c, _ in COLUMNS)
+    sql = f"COPY {qualified} (id, {names}, properties, version, geom) FROM STDIN"
+    rows = _rows(features, version)
+    with conn.cursor() as cur, cur.copy(sql) as copy:
+        while True:
+            chunk = [r for _, r in zip(range(batch), rows)]
+            if not chunk:
+                break
+            geoms = shapely.set_srid(shapely.from_geojson([r[-1] for r in chunk]), 4326)
+            ewkb = shapely.to_wkb(geoms, hex=True, include_srid=True)
+            for r, g in zip(chunk, ewkb):
+                copy.write_row((*r[:-1], g))
 
 
 def _rows(features, version):
@@ -151,8 +166,6 @@ def replace_rows(url: str, drop, features, meta_update: dict | None = None) -> t
 
     conninfo, schema, table = split_target(url)
     qualified = f'"{schema}"."{table}"'
-    names = ", ".join(f'"{c}"' for c, _ in COLUMNS)
-    marks = ", ".join(["%s"] * len(COLUMNS))
     try:
         with psycopg.connect(conninfo) as conn, conn.transaction():
             if conn.execute("SELECT to_regclass(%s)", (qualified,)).fetchone()[0] is None:
@@ -163,10 +176,7 @@ def replace_rows(url: str, drop, features, meta_update: dict | None = None) -> t
             removed = conn.execute(
                 f"DELETE FROM {qualified} WHERE site_id = ANY(%s)", (sorted(drop),)
             ).rowcount
-            sql = (f"INSERT INTO {qualified} (id, {names}, properties, version, geom) VALUES "
-                   f"(%s, {marks}, %s, %s, ST_SetSRID(ST_GeomFromGeoJSON(%s), 4326))")  # fmt: skip
-            with conn.cursor() as cur:
-                cur.executemany(sql, list(_rows(features, version)))
+            _copy(conn, qualified, features, version)
             if meta_update:
                 old = conn.execute("SELECT obj_description(%s::regclass)", (qualified,)).fetchone()
                 meta = {**json.loads(old[0] or "{}"), **meta_update}
