@@ -282,3 +282,64 @@ def test_a_refused_postgis_update_changes_nothing(postgis, tmp_path, capsys):
     assert "PostGIS refused the update, nothing changed" in capsys.readouterr().err
     assert table_rows(postgis, "refused") == rows_before
     assert sqlite3.connect(store).execute("SELECT count(*) FROM features").fetchone() == kept
+
+
+def test_replication_diffs_since_the_state_file(base, tmp_path, capsys):
+    """A replication server (a folder served on loopback, laid out as OSM's minutely diffs:
+    state.txt and 000/000/NNN.osc.gz): the diffs after the state file's sequence are fetched
+    and applied in order, and the state file moves on only once the fences are written."""
+    import gzip
+    import http.server
+    import threading
+    from functools import partial
+
+    world, builds = base
+    world = world.copy()
+    served = tmp_path / "replication"
+    (served / "000" / "000").mkdir(parents=True)
+    rng = random.Random(7)
+    for seq in (1, 2, 3):
+        world.mark()
+        for _ in range(3):
+            world.edit(rng)
+        plain = tmp_path / f"{seq}.osc"
+        world.write_changes(plain)
+        (served / "000" / "000" / f"{seq:03d}.osc.gz").write_bytes(
+            gzip.compress(plain.read_bytes())
+        )
+    (served / "state.txt").write_text("sequenceNumber=3\ntimestamp=2026-12-07T12\\:00\\:00Z\n")
+    world.write(tmp_path / "changed.osm")
+
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args):
+            pass
+
+    handler = partial(Quiet, directory=str(served))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/"
+    try:
+        out, store, state = tmp_path / "f.geojsonl", tmp_path / "s.sqlite", tmp_path / "state"
+        shutil.copy(builds[".geojsonl"][0], out)
+        shutil.copy(builds[".geojsonl"][1], store)
+        state.write_text("0\n")
+        argv = ["update", "--store", str(store), "-o", str(out), "--replication", url,
+                "--state", str(state)]  # fmt: skip
+        assert main([*argv, "--max-diffs", "2"]) == 0  # two now, the third next time
+        assert state.read_text() == "2\n"
+        assert main(argv) == 0
+        assert state.read_text() == "3\n"
+        capsys.readouterr()
+        assert main(argv) == 0
+        assert capsys.readouterr().out.strip() == "up to date at sequence 3"
+        assert main(["build", str(tmp_path / "changed.osm"), "-o", str(tmp_path / "w.geojsonl"),
+                     "-q"]) == 0  # fmt: skip
+        assert rows(out) == rows(tmp_path / "w.geojsonl")
+        state.write_text("1\n")  # a diff the server no longer has: one line, nothing changed
+        (served / "000" / "000" / "002.osc.gz").unlink()
+        fences = out.read_bytes()
+        assert main(argv) == 2
+        assert "replication file 2 not fetched" in capsys.readouterr().err
+        assert state.read_text() == "1\n" and out.read_bytes() == fences
+    finally:
+        server.shutdown()

@@ -117,7 +117,11 @@ def fetch_diffs(url, state, folder, most) -> tuple:
         for seq in range(start + 1, last + 1):
             try:
                 with server.open_url(server.make_request(server.get_diff_url(seq))) as resp:
-                    data = resp.read()
+                    # requests' Response (pyosmium 4) or urllib's (older releases)
+                    status = getattr(resp, "status_code", None) or getattr(resp, "status", 200)
+                    if status >= 400:
+                        raise OSError(f"HTTP {status}")
+                    data = resp.content if hasattr(resp, "content") else resp.read()
             except Exception as exc:  # noqa: BLE001 - urllib's and requests' errors alike
                 raise InputError(url, f"replication file {seq} not fetched ({exc})") from None
             path = Path(folder) / f"{seq:09d}.osc.gz"
