@@ -40,6 +40,7 @@ from bench import (
     scale_bench,
     soak_bench,
     source_budget_bench,
+    update_bench,
     upload_bench,
 )
 
@@ -69,6 +70,7 @@ def main(argv=None) -> int:
             "rolling",
             "route",
             "scale",
+            "update",
             "soak",
         ],
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
@@ -92,6 +94,13 @@ def main(argv=None) -> int:
         default=scale_bench.SIZES,
         metavar="N,N",
         help="areas built by the scale group (default 133000,1000000)",
+    )
+    p.add_argument(
+        "--update-sizes",
+        type=lambda s: tuple(int(v) for v in s.split(",")),
+        default=update_bench.SIZES,
+        metavar="N,N",
+        help="areas of the update group's extracts (default 133000; 1000000 for its target)",
     )
     args = p.parse_args(argv)
     _use_shared_sitl()
@@ -136,6 +145,8 @@ def main(argv=None) -> int:
         take("route", route_national_bench.run(build_bench.Row))
     if args.only in (None, "scale"):
         take("scale", scale_bench.run(args.osm, build_bench.Row, console, args.scale_sizes))
+    if args.only in (None, "update"):
+        take("update", update_bench.run(args.osm, build_bench.Row, console, args.update_sizes))
     if args.only == "soak":
         take("soak", soak_bench.run(args.osm, build_bench.Row, args.soak_minutes, console))
     elif args.only is None:  # too long for the default run

@@ -12,6 +12,7 @@ from alphafence.cli import VERBS, main, parser
 # the planning, signing and trying-out verbs
 WORKFLOW = (
     "build",
+    "update",
     "compare",
     "compile",
     "upload",

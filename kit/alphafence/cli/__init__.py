@@ -38,6 +38,7 @@ EPILOG = """\
 the workflow:
   1. get map data for your area (an OpenStreetMap extract, a geozone list)
   2. alphafence build AREA.osm.pbf -o fences.geojson
+     (kept current: build ... --store STORE, then alphafence update CHANGES.osc.gz --store STORE)
   3. alphafence upload fences.geojson --bbox MINLON,MINLAT,MAXLON,MAXLAT --dry-run
   4. alphafence upload fences.geojson --bbox ... --connect /dev/ttyACM0
   5. alphafence monitor --fences fences.geojson --connect udpin:0.0.0.0:14550
