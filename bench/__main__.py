@@ -26,6 +26,7 @@ from rich.table import Table
 
 from bench import (
     as_read_bench,
+    baseline_bench,
     build_bench,
     cli_bench,
     compile_bench,
@@ -71,6 +72,7 @@ def main(argv=None) -> int:
             "route",
             "scale",
             "update",
+            "baseline",
             "soak",
         ],
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
@@ -145,6 +147,8 @@ def main(argv=None) -> int:
         take("route", route_national_bench.run(build_bench.Row))
     if args.only in (None, "scale"):
         take("scale", scale_bench.run(args.osm, build_bench.Row, console, args.scale_sizes))
+    if args.only in (None, "baseline"):
+        take("baseline", baseline_bench.run(args.osm, build_bench.Row, console))
     if args.only in (None, "update"):
         take("update", update_bench.run(args.osm, build_bench.Row, console, args.update_sizes))
     if args.only == "soak":

@@ -130,8 +130,9 @@ def hold_fences(locals_, frames, outward=True, regions=None, zones=None):
     """
     out = list(locals_)
     changed = [False] * len(out)
+    free = bow_free_many(out, frames)
     for i, (geom, frame) in enumerate(zip(out, frames)):
-        if geom is None or bow_free_one(geom, frame):
+        if free[i] or bow_free_one(geom, frame):
             continue
         if zones is not None and clear_as_read(geom, frame, zones[0][i], zones[1][i]):
             continue
@@ -143,6 +144,30 @@ def hold_fences(locals_, frames, outward=True, regions=None, zones=None):
         if held is not out[i]:
             out[i], changed[i] = held, True
     return out, changed
+
+
+def bow_free_many(geoms, frames):
+    """Which fences cannot bow by their bounds' diagonal alone (:func:`bow_free_one`'s first
+    test, for all of them at once; None counts as free); the others are measured one by one.
+
+    Examples
+    --------
+    >>> from alphafence.geo.frame import LocalFrame
+    >>> frame = LocalFrame(14.5, 35.9)  # the bound there: 543 m
+    >>> bow_free_many([shapely.box(0, 0, 300, 300), shapely.box(0, 0, 3000, 300), None],
+    ...               [frame] * 3).tolist()
+    [True, False, True]
+    """
+    if not len(geoms):
+        return np.zeros(0, bool)
+    b = shapely.bounds(np.array(geoms, dtype=object))  # NaN for None and empty: free
+    reach = np.fmax(np.fmax(np.abs(b[:, 0]), np.abs(b[:, 1])),
+                    np.fmax(np.abs(b[:, 2]), np.abs(b[:, 3])))  # fmt: skip
+    lat = np.fmin(np.abs([f.lat0 for f in frames]) + reach / METRES_PER_DEGREE, MAX_LAT)
+    bound = np.sqrt(8.0 * EARTH_RADIUS_M * READ_TOLERANCE_M / (np.tan(np.radians(lat)) + 1.0))
+    # a hair inside the bound: numpy's and math's last digits may differ; those few are
+    # measured one by one, as ever
+    return ~(np.hypot(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]) > bound * (1 - 1e-9))
 
 
 def readable_fences(locals_, frames, regions, simplify, budget):
@@ -244,16 +269,18 @@ def split_at_antimeridian(fences):
     list of Fence
         The same fences, those across the antimeridian with their parts set.
     """
-    for f in fences:
-        frame = f.frame
-        b = shapely.bounds(f.local)
-        reach = float(np.nanmax(np.abs(b))) if np.isfinite(b).all() else 0.0
-        scale = max(math.cos(math.radians(min(abs(frame.lat0) + reach / 111_000.0, 89.9))), 1e-3)
-        if abs(frame.lon0) + reach / (111_000.0 * scale) < 179.0:
-            continue
-        split = split_lonlat(f.geometry)
+    if not fences:
+        return fences
+    b = np.abs(shapely.bounds(np.array([f.local for f in fences], dtype=object)))
+    ok = np.isfinite(b).all(axis=1)
+    reach = np.where(ok, np.fmax.reduce(np.where(ok[:, None], b, 0.0), axis=1), 0.0)
+    lat0 = np.abs([f.frame.lat0 for f in fences])
+    lon0 = np.abs([f.frame.lon0 for f in fences])
+    scale = np.fmax(np.cos(np.radians(np.fmin(lat0 + reach / 111_000.0, 89.9))), 1e-3)
+    for i in np.flatnonzero(~(lon0 + reach / (111_000.0 * scale) < 179.0)).tolist():
+        split = split_lonlat(fences[i].geometry)
         if split is not None:
-            f.wgs84 = split
+            fences[i].wgs84 = split
     return fences
 
 
