@@ -35,6 +35,7 @@ from bench import (
     livemap_bench,
     monitor_bench,
     monitor_cpu_bench,
+    planet_bench,
     rolling_bench,
     route_bench,
     route_national_bench,
@@ -73,6 +74,7 @@ def main(argv=None) -> int:
             "scale",
             "update",
             "baseline",
+            "planet",
             "soak",
         ],
         help="run one group (soak only runs when asked for: 30 minutes of SITL)",
@@ -103,6 +105,13 @@ def main(argv=None) -> int:
         default=update_bench.SIZES,
         metavar="N,N",
         help="areas of the update group's extracts (default 133000; 1000000 for its target)",
+    )
+    p.add_argument(
+        "--planet-sizes",
+        type=lambda s: tuple(int(v) for v in s.split(",")),
+        default=planet_bench.SIZES,
+        metavar="N,N",
+        help="areas of the planet group's builds (default 1000000,2000000)",
     )
     args = p.parse_args(argv)
     _use_shared_sitl()
@@ -151,6 +160,8 @@ def main(argv=None) -> int:
         take("baseline", baseline_bench.run(args.osm, build_bench.Row, console))
     if args.only in (None, "update"):
         take("update", update_bench.run(args.osm, build_bench.Row, console, args.update_sizes))
+    if args.only == "planet":  # too long for the default run
+        take("planet", planet_bench.run(args.osm, build_bench.Row, console, args.planet_sizes))
     if args.only == "soak":
         take("soak", soak_bench.run(args.osm, build_bench.Row, args.soak_minutes, console))
     elif args.only is None:  # too long for the default run

@@ -25,6 +25,8 @@ rate (45 s per 133,000 areas) and its memory up to 133,000 areas, the 1,000,000 
 
 from __future__ import annotations
 
+import contextlib
+import importlib.util
 import os
 import signal
 import socket
@@ -342,54 +344,15 @@ def dask_row(Row, console, flags, build, runs):
     """The --dask build of 13,300 areas on a local scheduler and two single-threaded worker
     processes, against --jobs 1: same fences, overhead as the ratio."""
     name = f"scale: --dask, 2 local worker processes, {DASK_AREAS:,} areas"
-    try:
-        import distributed
-    except ImportError:
+    if importlib.util.find_spec("distributed") is None:
         return Row(name, "not run: dask not installed", "same fences as --jobs 1", "-", "-", True)
     if "--dask" not in flags:
         return Row(name, "not run: no --dask yet", "same fences as --jobs 1", "-", "-", True)
-    dask = Path(sys.executable).with_name("dask")
-    addr = f"tcp://127.0.0.1:{_free_port()}"
-    common = ["--no-dashboard"]
-    procs = []
     try:
-        procs.append(
-            subprocess.Popen(
-                [str(dask), "scheduler", "--host", "127.0.0.1", "--port", addr.rsplit(":", 1)[1]]
-                + common,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-                start_new_session=True,
-            )
-        )
-        for _ in range(2):
-            procs.append(
-                subprocess.Popen(
-                    [str(dask), "worker", addr, "--nworkers", "1", "--nthreads", "1"] + common,
-                    stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
-                    preexec_fn=_pin,
-                    start_new_session=True,
-                )
-            )
-        try:
-            with distributed.Client(addr, timeout=60) as client:
-                client.wait_for_workers(2, timeout=120)
-        except (OSError, TimeoutError) as exc:
-            return Row(name, f"no cluster: {exc}"[:80], "same fences as --jobs 1", "-", "-", False)
-        d = build(DASK_AREAS, dask=addr, extra_roots=[p.pid for p in procs])
-    finally:
-        for p in procs:
-            try:
-                os.killpg(p.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-        for p in procs:
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait()
+        with local_cluster() as (addr, pids):
+            d = build(DASK_AREAS, dask=addr, extra_roots=pids)
+    except (OSError, TimeoutError) as exc:
+        return Row(name, f"no cluster: {exc}"[:80], "same fences as --jobs 1", "-", "-", False)
     s = runs.get((DASK_AREAS, 1)) or build(DASK_AREAS, 1)
     if _failed(d) or _failed(s):
         same, verdict = False, "a build failed: see above"
@@ -412,3 +375,37 @@ def dask_row(Row, console, flags, build, runs):
         "-" if _failed(d) or _failed(s) else f"{d['wall'] / s['wall']:.2f}x overhead",
         same,
     )
+
+
+@contextlib.contextmanager
+def local_cluster(workers=2):
+    """A Dask scheduler and ``workers`` single-threaded worker processes (each pinned to the
+    bench's cores), started with Dask's own command: ``(address, their pids)``."""
+    import distributed
+
+    dask = Path(sys.executable).with_name("dask")
+    addr = f"tcp://127.0.0.1:{_free_port()}"
+    common = ["--no-dashboard"]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "start_new_session": True}
+    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port",
+                               addr.rsplit(":", 1)[1], *common], **quiet)]  # fmt: skip
+    try:
+        for _ in range(workers):
+            procs.append(subprocess.Popen([str(dask), "worker", addr, "--nworkers", "1",
+                                           "--nthreads", "1", *common], preexec_fn=_pin,
+                                          **quiet))  # fmt: skip
+        with distributed.Client(addr, timeout=60) as client:
+            client.wait_for_workers(workers, timeout=120)
+        yield addr, [p.pid for p in procs]
+    finally:
+        for p in procs:
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()

@@ -106,6 +106,7 @@ def write_change(layout, path, moved=(), added=0, deleted=(), untagged=(), backg
     from osmium.osm import mutable
 
     rng = random.Random(seed)
+    Path(path).unlink(missing_ok=True)  # pyosmium will not write over a file
     rings, offsets = layout["rings"], layout["offsets"]
     step = 3.0 / 111_320.0
     nid, wid = layout["nodes"] + 1, layout["ways"] + 1

@@ -96,7 +96,9 @@ def load_middle(db, path, keys, stop=None):
     for r, members, tags in rels:
         _put_relation(db, r, members, tags)
     db.execute("CREATE INDEX IF NOT EXISTS node_ways_node ON node_ways (node)")
+    db.execute("CREATE INDEX IF NOT EXISTS node_ways_way ON node_ways (way)")
     db.execute("CREATE INDEX IF NOT EXISTS way_rels_way ON way_rels (way)")
+    db.execute("CREATE INDEX IF NOT EXISTS way_rels_rel ON way_rels (rel)")
 
 
 def _put_relation(db, r, members, tags):
@@ -155,8 +157,9 @@ def read_changes(paths, stop=None) -> Changes:
             for obj in osmium.FileProcessor(text):
                 if obj.is_node():
                     loc = obj.location
+                    tags = dict(obj.tags) if len(obj.tags) else {}  # most nodes have none
                     out.nodes[obj.id] = (
-                        None if obj.deleted or not loc.valid() else (loc.x, loc.y, dict(obj.tags))
+                        None if obj.deleted or not loc.valid() else (loc.x, loc.y, tags)
                     )
                 elif obj.is_way():
                     out.ways[obj.id] = (
@@ -197,11 +200,10 @@ def apply_changes(db, changes: Changes, keys) -> dict:
     nodes = set(changes.nodes)
     ways = set(changes.ways) | _in(db, "SELECT way FROM node_ways WHERE node IN ({})", nodes)
     rels = set(changes.relations) | _in(db, "SELECT rel FROM way_rels WHERE way IN ({})", ways)
-    for n, value in changes.nodes.items():
-        if value is None:
-            db.execute("DELETE FROM nodes WHERE id = ?", (n,))
-        else:
-            db.execute("INSERT OR REPLACE INTO nodes VALUES (?, ?, ?)", (n, value[0], value[1]))
+    items = changes.nodes.items()
+    db.executemany("DELETE FROM nodes WHERE id = ?", [(n,) for n, v in items if v is None])
+    db.executemany("INSERT OR REPLACE INTO nodes VALUES (?, ?, ?)",
+                   [(n, v[0], v[1]) for n, v in items if v is not None])  # fmt: skip
     for w, value in changes.ways.items():
         db.execute("DELETE FROM ways WHERE id = ?", (w,))
         db.execute("DELETE FROM node_ways WHERE way = ?", (w,))
