@@ -343,3 +343,32 @@ def test_replication_diffs_since_the_state_file(base, tmp_path, capsys):
         assert state.read_text() == "1\n" and out.read_bytes() == fences
     finally:
         server.shutdown()
+
+
+def test_an_update_waits_for_another_then_says_so(base, tmp_path, monkeypatch, capsys):
+    """A store held by another update (a transaction open on it): this one waits, and past
+    its wait says so in one line, changing nothing."""
+    from alphafence.updating import store as store_module
+
+    world, builds = base
+    world = world.copy()
+    world.mark()
+    world.node(50, 50, {"aeroway": "helipad"})
+    world.write_changes(tmp_path / "c.osc")
+    out, store = tmp_path / "f.geojsonl", tmp_path / "s.sqlite"
+    shutil.copy(builds[".geojsonl"][0], out)
+    shutil.copy(builds[".geojsonl"][1], store)
+    fences = out.read_bytes()
+    holder = sqlite3.connect(store, isolation_level=None)
+    holder.execute("BEGIN IMMEDIATE")
+    monkeypatch.setattr(store_module, "LOCK_WAIT_S", 0.2)
+    try:
+        argv = ["update", str(tmp_path / "c.osc"), "--store", str(store), "-o", str(out)]
+        assert main(argv) == 2
+        assert "another update has held the store" in capsys.readouterr().err
+        assert out.read_bytes() == fences
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    assert main([*argv, "-q"]) == 0  # once it is free
+    assert out.read_bytes() != fences

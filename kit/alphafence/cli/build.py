@@ -186,7 +186,7 @@ def run(args) -> int:
     # a PostGIS build's temporary file is not named: its table is, once written
     written = [
         str(w) for w in [args.output, *extra] if str(w) != getattr(args, "hidden_output", None)
-    ]
+    ] + ([f"{args.store} (for alphafence update)"] if store is not None else [])
     if args.figure:
         from alphafence.plots.fences import fence_map
 

@@ -26,6 +26,7 @@ from alphafence.fencing.sites import feature_widths, site_class
 from alphafence.zones.features import Feature
 
 FORMAT = 1  # the store's layout; a store of another layout is refused with one line
+LOCK_WAIT_S = 600.0  # how long an update waits for another that holds the store
 
 SCHEMA = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -58,7 +59,8 @@ class Store:
         if not create and not self.path.is_file():
             raise InputError(self.path, "no such update store (build with --store to make one)")
         try:
-            self.db = sqlite3.connect(self.path, isolation_level=None)
+            # a second update waits for the first (cron's next run over a long one)
+            self.db = sqlite3.connect(self.path, isolation_level=None, timeout=LOCK_WAIT_S)
             self.db.execute("PRAGMA journal_mode=WAL" if not create else "PRAGMA journal_mode=OFF")
             if create:
                 self.db.execute("PRAGMA synchronous=OFF")
@@ -67,6 +69,11 @@ class Store:
             elif self.meta("format") != FORMAT:
                 raise InputError(self.path, f"an update store of another layout ({FORMAT} read)")
             self.db.execute("BEGIN IMMEDIATE")  # the whole run is one transaction
+        except sqlite3.OperationalError as exc:
+            if "locked" in str(exc):
+                raise InputError(self.path, f"another update has held the store for over "
+                                 f"{LOCK_WAIT_S:.0f} s") from None  # fmt: skip
+            raise InputError(self.path, f"not an update store ({exc})") from None
         except sqlite3.DatabaseError as exc:
             raise InputError(self.path, f"not an update store ({exc})") from None
         self._rules = None
