@@ -6,7 +6,14 @@ import os
 
 from rich.table import Table
 
-from alphafence.cli.common import SKIP_HINT, err_console, out_console, progress, union_hint
+from alphafence.cli.common import (
+    SKIP_HINT,
+    callback,
+    err_console,
+    out_console,
+    progress,
+    union_hint,
+)
 from alphafence.cli.maps import add_map_options, check_map_args
 from alphafence.cli.options import at_least, non_negative, positive
 from alphafence.cli.source_options import (
@@ -177,7 +184,9 @@ def run(args) -> int:
             store.abort()
         raise
     if store is not None:
-        store.finish()
+        with progress(not args.quiet) as prog:
+            tick = callback(prog, f"keeping {args.databases[0]}'s nodes and ways for updates")
+            store.finish(None if tick is None else lambda n: tick(n, None))
     write_all(extra)
     if extra:
         from alphafence.mavlink.items import fence_items

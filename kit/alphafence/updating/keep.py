@@ -61,12 +61,13 @@ class StoreWriter:
         """Keep a batch of the build's restricted features."""
         self.store.add(features, self.join_m)
 
-    def finish(self, stop=None):
-        """Keep the extract's nodes and ways, then move the store into place."""
+    def finish(self, progress=None):
+        """Keep the extract's nodes and ways (``progress(nodes)`` as they are kept), then move
+        the store into place."""
         from alphafence.updating.middle import load_middle
 
         try:
-            load_middle(self.store.db, self.database, self.keys, stop)
+            load_middle(self.store.db, self.database, self.keys, progress)
             self.store.commit()
             self.store.close()
             os.replace(self.tmp, self.path)

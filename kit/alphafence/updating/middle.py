@@ -50,7 +50,7 @@ def _refs(blob):
     return np.frombuffer(blob, dtype="<i8").tolist()
 
 
-def load_middle(db, path, keys, stop=None):
+def load_middle(db, path, keys, progress=None):
     """Keep the extract ``path``'s nodes, ways and keyed relations in the store ``db``.
 
     Parameters
@@ -59,15 +59,15 @@ def load_middle(db, path, keys, stop=None):
     path : str
     keys : tuple of str
         The rules' keys.
-    stop : callable, optional
-        Called every batch (raises to stop: Ctrl-C).
+    progress : callable, optional
+        ``progress(nodes)``, every 50,000 nodes kept.
     """
     import osmium
 
     for statement in MIDDLE.split(";"):  # not executescript: it would end the transaction
         if statement.strip():
             db.execute(statement)
-    nodes, ways, rels = [], [], []
+    nodes, ways, rels, kept = [], [], [], 0
     kinds = osmium.osm.NODE | osmium.osm.WAY | osmium.osm.RELATION
     for obj in osmium.FileProcessor(str(path), kinds):
         if obj.is_node():
@@ -76,9 +76,9 @@ def load_middle(db, path, keys, stop=None):
                 nodes.append((obj.id, loc.x, loc.y))
                 if len(nodes) >= BATCH:
                     db.executemany("INSERT OR REPLACE INTO nodes VALUES (?, ?, ?)", nodes)
-                    nodes = []
-                    if stop:
-                        stop()
+                    kept, nodes = kept + len(nodes), []
+                    if progress:
+                        progress(kept)
         elif obj.is_way():
             tags = obj.tags
             tags = dict(tags) if len(tags) and keyed(tags, keys) else None
