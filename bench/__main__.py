@@ -94,21 +94,21 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--scale-sizes",
-        type=lambda s: tuple(int(v) for v in s.split(",")),
+        type=_sizes,
         default=scale_bench.SIZES,
         metavar="N,N",
         help="areas built by the scale group (default 133000,1000000)",
     )
     p.add_argument(
         "--update-sizes",
-        type=lambda s: tuple(int(v) for v in s.split(",")),
+        type=_sizes,
         default=update_bench.SIZES,
         metavar="N,N",
         help="areas of the update group's extracts (default 133000; 1000000 for its target)",
     )
     p.add_argument(
         "--planet-sizes",
-        type=lambda s: tuple(int(v) for v in s.split(",")),
+        type=_sizes,
         default=planet_bench.SIZES,
         metavar="N,N",
         help="areas of the planet group's builds (default 1000000,2000000)",
@@ -191,6 +191,11 @@ def main(argv=None) -> int:
     path = write_results(args.out, rows, argv, load_start)
     console.print(f"rows written to {path}")
     return 1 if failed else 0
+
+
+def _sizes(text):
+    """``--X-sizes``: areas, comma-separated."""
+    return tuple(int(v) for v in text.split(","))
 
 
 def _use_shared_sitl():

@@ -142,8 +142,6 @@ def _window(variant):
 async def test_a_zone_inserted_mid_flight_is_fenced_uploaded_and_flown_around(
     malta_fences, sitl_factory, live_source, variant
 ):
-    from alphafence.vehicle.params import PROFILES as PARAMS
-    from alphafence.vehicle.params import apply_params
 
     pg, api, table = live_source
     frame = LocalFrame(*START)
@@ -151,74 +149,31 @@ async def test_a_zone_inserted_mid_flight_is_fenced_uploaded_and_flown_around(
     zone_frame = LocalFrame(*frame.to_wgs84(-ZONE_AT_M, 0.0))
     square = shapely.box(-ZONE_HALF_M, -ZONE_HALF_M, ZONE_HALF_M, ZONE_HALF_M)
     ring = list(zone_frame.geom_to_wgs84(square).exterior.coords)
-    rolling = RollingOptions(profile=PROFILES["copter"], speed_mps=SPEED, upload_budget_s=15.0)
-    options = speedup_options(SPEEDUP, onboard="rolling", rolling=rolling, enforce=True,
-                              imminent_action="reroute", reroute_clearance_m=CLEARANCE)  # fmt: skip
-    live = LiveOptions(SourceOptions(api.collection), load_rules(), BuildOptions(),
-                       refresh_s=REFRESH_S)  # fmt: skip
+    options, live = monitor_options(api.collection)
 
     sitl = await sitl_factory(home=f"{START[1]},{START[0]},80,270", speedup=SPEEDUP)
     log = FlightLog(frame)
-    monitor_log = EventLog()
-    log.events = monitor_log.events
     results = {}
 
-    async def flight():
-        async with open_vehicle(sitl.connection_url) as vehicle:
-            log.texts = vehicle.texts
-            watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence", "progress")
-            monitor = Monitor(vehicle, fences, options, monitor_log, live=live)
-            stop = asyncio.Event()
-            task = asyncio.create_task(monitor.run(stop))
-            try:
-                await vehicle.telemetry.set_rate_position(10.0)
-                await until("the first rolling fence",
-                            lambda: _events(log, "onboard_upload") or _events(log, "onboard_kept"),
-                            60, log)  # fmt: skip
-                await until("the first answer", lambda: _events(log, "source_answer"), 60, log)
-                await until("the route planner", lambda: _events(log, "reroute_ready"), 60, log)
-                await apply_params(vehicle, PARAMS["copter-rtl"])
-                # GUIDED (the re-route's gotos) at the mission's speed too
-                await vehicle.param.set_param_float("WPNAV_SPEED", SPEED * 100.0)
-                await ask_fence_status(vehicle, 2.0)
-                await upload_mission(vehicle, _mission(frame, sitl.home))
-                await retry("arming", vehicle.action.arm, ARM_TIMEOUT)
-                await vehicle.mission_raw.start_mission()
-                await until("AUTO", lambda: log.mode() == "AUTO", 10, log)
-                await until(
-                    "take-off", lambda: log.positions and log.positions[-1][3] > 10, 60, log
-                )
-                await until("30 s of flight along the leg",
-                            lambda: log.positions[-1][1] < -INSERT_AT_M, 60, log)  # fmt: skip
-                window = _window(variant)
-                insert_zone(pg, table, ed318_zone("LIVE-1", ring, "police closure", window))
-                results["t_insert"] = time.monotonic()
-                await until(
-                    "the zone", lambda: _events(log, "source_zone"), 4 * REFRESH_S + 30, log
-                )
-                if variant == "ends":  # enforced until its end, then dropped
-                    await until("the window's end", lambda: _windows(log, "ended"), 60, log)
-                    await until("past the zone",
-                                lambda: log.positions[-1][1] < -ZONE_AT_M - 3 * ZONE_HALF_M,
-                                120, log)  # fmt: skip
-                    return
-                if variant == "starts":  # announced first, enforced from its start
-                    await until("the window's start", lambda: _windows(log, "active"), 60, log)
-                await until("the re-route",
-                            lambda: _events(log, "reroute") or _events(log, "reroute_failed"),
-                            120, log, poll=0.01)  # fmt: skip
-                await until("reroute_done",
-                            lambda: _events(log, "reroute_done") or _events(log, "reroute_failed"),
-                            120, log)  # fmt: skip
-                await until("past the zone",
-                            lambda: log.positions[-1][1] < -ZONE_AT_M - 3 * ZONE_HALF_M, 120, log)  # fmt: skip
-                assert not task.done(), "the monitor stopped by itself"
-            finally:
-                stop.set()
-                await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 20)
-                await unwatch(watchers)
+    async def insert():
+        window = _window(variant)
+        insert_zone(pg, table, ed318_zone("LIVE-1", ring, "police closure", window))
+        results["t_insert"] = time.monotonic()
 
-    await within(flight(), WALL_TIMEOUT, log)
+    async def then():
+        await until("the zone", lambda: _events(log, "source_zone"), 4 * REFRESH_S + 30, log)
+        if variant == "ends":  # enforced until its end, then dropped
+            await until("the window's end", lambda: _windows(log, "ended"), 60, log)
+            await until("past the zone",
+                        lambda: log.positions[-1][1] < -ZONE_AT_M - 3 * ZONE_HALF_M,
+                        120, log)  # fmt: skip
+            return False
+        if variant == "starts":  # announced first, enforced from its start
+            await until("the window's start", lambda: _windows(log, "active"), 60, log)
+        return True
+
+    await within(fly_the_leg(sitl, frame, fences, options, live, log, insert, then),
+                 WALL_TIMEOUT, log)  # fmt: skip
     events = list(log.events)
     brief = ", ".join(f"{e['event']}@{e['time']:.1f}" for e in events)
     assert not _events(log, "reroute_failed"), brief
@@ -256,6 +211,69 @@ async def test_a_zone_inserted_mid_flight_is_fenced_uploaded_and_flown_around(
     )
     print(f"nearest approach to the zone: {nearest:.1f} m (margin {MARGIN_M} m)")
     assert nearest >= MARGIN_M, (nearest, brief)
+
+
+def monitor_options(collection, clearance=CLEARANCE):
+    """The monitor's options for these flights: the rolling onboard fence (copter), enforcing,
+    re-routing, and the live source asked every :data:`REFRESH_S`: ``(options, live)``."""
+    rolling = RollingOptions(profile=PROFILES["copter"], speed_mps=SPEED, upload_budget_s=15.0)
+    options = speedup_options(SPEEDUP, onboard="rolling", rolling=rolling, enforce=True,
+                              imminent_action="reroute", reroute_clearance_m=clearance)  # fmt: skip
+    live = LiveOptions(SourceOptions(collection), load_rules(), BuildOptions(),
+                       refresh_s=REFRESH_S)  # fmt: skip
+    return options, live
+
+
+async def fly_the_leg(sitl, frame, fences, options, live, log, change, then=None):
+    """Fly the leg with the monitor following the live source: once the copter is
+    :data:`INSERT_AT_M` along, ``await change()`` (a zone inserted, a map updated), then
+    ``await then()`` (what to wait for; False: no re-route follows), then the re-route and the
+    copter past the zone."""
+    from alphafence.vehicle.params import PROFILES as PARAMS
+    from alphafence.vehicle.params import apply_params
+
+    monitor_log = EventLog()
+    log.events = monitor_log.events
+    async with open_vehicle(sitl.connection_url) as vehicle:
+        log.texts = vehicle.texts
+        watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence", "progress")
+        monitor = Monitor(vehicle, fences, options, monitor_log, live=live)
+        stop = asyncio.Event()
+        task = asyncio.create_task(monitor.run(stop))
+        try:
+            await vehicle.telemetry.set_rate_position(10.0)
+            await until("the first rolling fence",
+                        lambda: _events(log, "onboard_upload") or _events(log, "onboard_kept"),
+                        60, log)  # fmt: skip
+            await until("the first answer", lambda: _events(log, "source_answer"), 60, log)
+            await until("the route planner", lambda: _events(log, "reroute_ready"), 60, log)
+            await apply_params(vehicle, PARAMS["copter-rtl"])
+            # GUIDED (the re-route's gotos) at the mission's speed too
+            await vehicle.param.set_param_float("WPNAV_SPEED", SPEED * 100.0)
+            await ask_fence_status(vehicle, 2.0)
+            await upload_mission(vehicle, _mission(frame, sitl.home))
+            await retry("arming", vehicle.action.arm, ARM_TIMEOUT)
+            await vehicle.mission_raw.start_mission()
+            await until("AUTO", lambda: log.mode() == "AUTO", 10, log)
+            await until("take-off", lambda: log.positions and log.positions[-1][3] > 10, 60, log)
+            await until("30 s of flight along the leg",
+                        lambda: log.positions[-1][1] < -INSERT_AT_M, 60, log)  # fmt: skip
+            await change()
+            if then is not None and not await then():
+                return
+            await until("the re-route",
+                        lambda: _events(log, "reroute") or _events(log, "reroute_failed"),
+                        120, log, poll=0.01)  # fmt: skip
+            await until("reroute_done",
+                        lambda: _events(log, "reroute_done") or _events(log, "reroute_failed"),
+                        120, log)  # fmt: skip
+            await until("past the zone",
+                        lambda: log.positions[-1][1] < -ZONE_AT_M - 3 * ZONE_HALF_M, 120, log)  # fmt: skip
+            assert not task.done(), "the monitor stopped by itself"
+        finally:
+            stop.set()
+            await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 20)
+            await unwatch(watchers)
 
 
 def _windows(log, state):

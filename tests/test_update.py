@@ -51,6 +51,24 @@ def base(tmp_path_factory):
     return world, builds
 
 
+def copy_of(builds, folder):
+    """The first build's fences and store, copied into ``folder``: ``(fences, store)``."""
+    out, store = folder / "f.geojsonl", folder / "s.sqlite"
+    shutil.copy(builds[".geojsonl"][0], out)
+    shutil.copy(builds[".geojsonl"][1], store)
+    return out, store
+
+
+def helipad_added(base, folder, x, y):
+    """The world with a helipad added at x, y metres, its change file ``folder/c.osc``, and a
+    copy of the first build: ``(world, fences, store)``."""
+    world = base[0].copy()
+    world.mark()
+    world.node(x, y, {"aeroway": "helipad"})
+    world.write_changes(folder / "c.osc")
+    return (world, *copy_of(base[1], folder))
+
+
 def run_edits(base, folder, seed, count, suffix=".geojsonl"):
     """Edit the world at random, update the first build, build the changed world whole."""
     world, builds = base
@@ -91,14 +109,7 @@ def test_every_fence_format_updates_as_a_whole_build(base, tmp_path, suffix):
 
 def test_untouched_fences_stay_byte_for_byte(base, tmp_path):
     """A helipad far from everything added: one site's rows come, every other line stays."""
-    world, builds = base
-    world = world.copy()
-    world.mark()
-    world.node(2000, 2000, {"aeroway": "helipad"})
-    world.write_changes(tmp_path / "c.osc")
-    out, store = tmp_path / "f.geojsonl", tmp_path / "s.sqlite"
-    shutil.copy(builds[".geojsonl"][0], out)
-    shutil.copy(builds[".geojsonl"][1], store)
+    world, out, store = helipad_added(base, tmp_path, 2000, 2000)
     before = out.read_bytes().splitlines()
     assert (
         main(["update", str(tmp_path / "c.osc"), "--store", str(store), "-o", str(out), "-q"]) == 0
@@ -123,9 +134,7 @@ def test_deletion_removes_and_move_moves(base, tmp_path):
         world.nodes[n] = (lon + 0.055, lat, tags)
         world.changed["n"].add(n)
     world.write_changes(tmp_path / "c.osc")
-    out, store = tmp_path / "f.geojsonl", tmp_path / "s.sqlite"
-    shutil.copy(builds[".geojsonl"][0], out)
-    shutil.copy(builds[".geojsonl"][1], store)
+    out, store = copy_of(builds, tmp_path)
     old = {
         json.loads(x)["properties"]["site_id"]: json.loads(x)
         for x in out.read_text().split("\n")
@@ -167,9 +176,7 @@ def test_ctrl_c_while_writing_changes_nothing(base, tmp_path, monkeypatch):
     for _ in range(6):
         world.edit(rng)
     world.write_changes(tmp_path / "c.osc")
-    out, store = tmp_path / "f.geojsonl", tmp_path / "s.sqlite"
-    shutil.copy(builds[".geojsonl"][0], out)
-    shutil.copy(builds[".geojsonl"][1], store)
+    out, store = copy_of(builds, tmp_path)
     fences, kept = out.read_bytes(), sqlite3.connect(store).execute(
         "SELECT count(*), sum(length(record)) FROM features").fetchone()  # fmt: skip
 
@@ -235,13 +242,19 @@ def table_rows(pg, table):
     return sorted(pg.sql(f"SELECT id, properties::text, ST_AsEWKB(geom) FROM {table}"))
 
 
+def built_into(pg, table, folder, seed):
+    """A world built into the PostGIS table with a store: ``(world, store)``."""
+    world = World(seed=seed)
+    world.write(folder / "world.osm")
+    store = folder / "store.sqlite"
+    argv = ["build", str(folder / "world.osm"), "-o", f"{pg.url}/public.{table}", "--store",
+            str(store), "-q"]  # fmt: skip
+    assert main(argv) == 0
+    return world, store
+
+
 def test_a_postgis_table_updates_in_one_transaction_at_its_next_version(postgis, tmp_path):
-    world = World(seed=3)
-    world.write(tmp_path / "world.osm")
-    store = tmp_path / "store.sqlite"
-    table = f"{postgis.url}/public.fleet"
-    assert main(["build", str(tmp_path / "world.osm"), "-o", table, "--store", str(store),
-                 "-q"]) == 0  # fmt: skip
+    world, store = built_into(postgis, "fleet", tmp_path, seed=3)
     for seed in range(4):
         before = {i: v for i, v in postgis.sql("SELECT id, version FROM fleet")}
         version = max(before.values())
@@ -264,12 +277,7 @@ def test_a_postgis_table_updates_in_one_transaction_at_its_next_version(postgis,
 
 
 def test_a_refused_postgis_update_changes_nothing(postgis, tmp_path, capsys):
-    world = World(seed=4)
-    world.write(tmp_path / "world.osm")
-    store = tmp_path / "store.sqlite"
-    table = f"{postgis.url}/public.refused"
-    assert main(["build", str(tmp_path / "world.osm"), "-o", table, "--store", str(store),
-                 "-q"]) == 0  # fmt: skip
+    world, store = built_into(postgis, "refused", tmp_path, seed=4)
     world.mark()
     world.node(10, 10, {"aeroway": "helipad"})
     world.write_changes(tmp_path / "c.osc")
@@ -319,9 +327,7 @@ def test_replication_diffs_since_the_state_file(base, tmp_path, capsys):
     threading.Thread(target=server.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{server.server_address[1]}/"
     try:
-        out, store, state = tmp_path / "f.geojsonl", tmp_path / "s.sqlite", tmp_path / "state"
-        shutil.copy(builds[".geojsonl"][0], out)
-        shutil.copy(builds[".geojsonl"][1], store)
+        (out, store), state = copy_of(builds, tmp_path), tmp_path / "state"
         state.write_text("0\n")
         argv = ["update", "--store", str(store), "-o", str(out), "--replication", url,
                 "--state", str(state)]  # fmt: skip
@@ -350,14 +356,7 @@ def test_an_update_waits_for_another_then_says_so(base, tmp_path, monkeypatch, c
     its wait says so in one line, changing nothing."""
     from alphafence.updating import store as store_module
 
-    world, builds = base
-    world = world.copy()
-    world.mark()
-    world.node(50, 50, {"aeroway": "helipad"})
-    world.write_changes(tmp_path / "c.osc")
-    out, store = tmp_path / "f.geojsonl", tmp_path / "s.sqlite"
-    shutil.copy(builds[".geojsonl"][0], out)
-    shutil.copy(builds[".geojsonl"][1], store)
+    world, out, store = helipad_added(base, tmp_path, 50, 50)
     fences = out.read_bytes()
     holder = sqlite3.connect(store, isolation_level=None)
     holder.execute("BEGIN IMMEDIATE")

@@ -23,17 +23,7 @@ import shapely
 
 from alphafence.awareness.fenceset import FenceSet
 from alphafence.fencefiles.fence_geojson import read_fences
-from alphafence.fencing.pipeline import BuildOptions
 from alphafence.geo.frame import LocalFrame
-from alphafence.mavlink.storage import PROFILES
-from alphafence.monitor.eventlog import EventLog
-from alphafence.monitor.live import LiveOptions
-from alphafence.monitor.options import RollingOptions
-from alphafence.monitor.runner import Monitor
-from alphafence.review.replay import speedup_options
-from alphafence.sources.ogc import SourceOptions
-from alphafence.vehicle.link import open_vehicle
-from alphafence.zones.rules import load_rules
 from tests.live_servers import (
     PostGIS,
     Pygeoapi,
@@ -42,20 +32,12 @@ from tests.live_servers import (
     pygeoapi_missing,
 )
 from tests.sitl_flight import (
-    ARM_TIMEOUT,
     FlightLog,
-    ask_fence_status,
-    retry,
     until,
-    unwatch,
-    upload_mission,
-    watch,
     within,
 )
 from tests.test_live_source_sitl import (
-    INSERT_AT_M,
     REFRESH_S,
-    SPEED,
     SPEEDUP,
     START,
     WALL_TIMEOUT,
@@ -63,13 +45,13 @@ from tests.test_live_source_sitl import (
     ZONE_HALF_M,
     _distance_to_zone,
     _events,
-    _mission,
+    fly_the_leg,
+    monitor_options,
 )
 
 pytestmark = pytest.mark.sitl
 
 PRISON_MARGIN_M = 50.0  # the default rules' prison margin
-CLEARANCE = 20.0
 FIRST_ID = 9_000_000_000  # beyond the extract's node and way ids
 
 
@@ -113,8 +95,6 @@ def _prison_change(path, ring):
 
 async def test_a_prison_added_on_the_map_reaches_the_flying_vehicle(fleet, sitl_factory, tmp_path):
     from alphafence.cli import main
-    from alphafence.vehicle.params import PROFILES as PARAMS
-    from alphafence.vehicle.params import apply_params
 
     pg, api, store, local = fleet
     frame = LocalFrame(*START)
@@ -125,67 +105,27 @@ async def test_a_prison_added_on_the_map_reaches_the_flying_vehicle(fleet, sitl_
     site = _prison_change(tmp_path / "prison.osc", ring)
     version_before = pg.sql("SELECT max(version) FROM zones")[0][0]
     rows_before = pg.sql("SELECT id, version FROM zones ORDER BY id")
-    rolling = RollingOptions(profile=PROFILES["copter"], speed_mps=SPEED, upload_budget_s=15.0)
-    options = speedup_options(SPEEDUP, onboard="rolling", rolling=rolling, enforce=True,
-                              imminent_action="reroute", reroute_clearance_m=CLEARANCE)  # fmt: skip
-    live = LiveOptions(SourceOptions(api.collection), load_rules(), BuildOptions(),
-                       refresh_s=REFRESH_S)  # fmt: skip
+    options, live = monitor_options(api.collection)
 
     sitl = await sitl_factory(home=f"{START[1]},{START[0]},80,270", speedup=SPEEDUP)
     log = FlightLog(frame)
-    monitor_log = EventLog()
-    log.events = monitor_log.events
     results = {}
 
-    async def flight():
-        async with open_vehicle(sitl.connection_url) as vehicle:
-            log.texts = vehicle.texts
-            watchers = watch(log, vehicle, "positions", "speeds", "modes", "fence", "progress")
-            monitor = Monitor(vehicle, fences, options, monitor_log, live=live)
-            stop = asyncio.Event()
-            task = asyncio.create_task(monitor.run(stop))
-            try:
-                await vehicle.telemetry.set_rate_position(10.0)
-                await until("the first rolling fence",
-                            lambda: _events(log, "onboard_upload") or _events(log, "onboard_kept"),
-                            60, log)  # fmt: skip
-                await until("the first answer", lambda: _events(log, "source_answer"), 60, log)
-                await until("the route planner", lambda: _events(log, "reroute_ready"), 60, log)
-                await apply_params(vehicle, PARAMS["copter-rtl"])
-                await vehicle.param.set_param_float("WPNAV_SPEED", SPEED * 100.0)
-                await ask_fence_status(vehicle, 2.0)
-                await upload_mission(vehicle, _mission(frame, sitl.home))
-                await retry("arming", vehicle.action.arm, ARM_TIMEOUT)
-                await vehicle.mission_raw.start_mission()
-                await until("AUTO", lambda: log.mode() == "AUTO", 10, log)
-                await until(
-                    "take-off", lambda: log.positions and log.positions[-1][3] > 10, 60, log
-                )
-                await until("30 s of flight along the leg",
-                            lambda: log.positions[-1][1] < -INSERT_AT_M, 60, log)  # fmt: skip
-                results["t_update"] = time.monotonic()
-                argv = ["update", str(tmp_path / "prison.osc"), "--store", str(store), "-q"]
-                results["status"] = await asyncio.to_thread(main, argv)
-                results["t_written"] = time.monotonic()
-                await until("the prison's fences",
-                            lambda: [e for e in _events(log, "source_zone")
-                                     if str(e["zone"]).startswith(site)],
-                            4 * REFRESH_S + 30, log)  # fmt: skip
-                await until("the re-route",
-                            lambda: _events(log, "reroute") or _events(log, "reroute_failed"),
-                            120, log, poll=0.01)  # fmt: skip
-                await until("reroute_done",
-                            lambda: _events(log, "reroute_done") or _events(log, "reroute_failed"),
-                            120, log)  # fmt: skip
-                await until("past the prison",
-                            lambda: log.positions[-1][1] < -ZONE_AT_M - 3 * ZONE_HALF_M, 120, log)  # fmt: skip
-                assert not task.done(), "the monitor stopped by itself"
-            finally:
-                stop.set()
-                await asyncio.wait_for(asyncio.gather(task, return_exceptions=True), 20)
-                await unwatch(watchers)
+    async def update():
+        results["t_update"] = time.monotonic()
+        argv = ["update", str(tmp_path / "prison.osc"), "--store", str(store), "-q"]
+        results["status"] = await asyncio.to_thread(main, argv)
+        results["t_written"] = time.monotonic()
 
-    await within(flight(), WALL_TIMEOUT, log)
+    async def then():
+        await until("the prison's fences",
+                    lambda: [e for e in _events(log, "source_zone")
+                             if str(e["zone"]).startswith(site)],
+                    4 * REFRESH_S + 30, log)  # fmt: skip
+        return True
+
+    await within(fly_the_leg(sitl, frame, fences, options, live, log, update, then),
+                 WALL_TIMEOUT, log)  # fmt: skip
     events = list(log.events)
     brief = ", ".join(f"{e['event']}@{e['time']:.1f}" for e in events)
     assert results["status"] == 0
