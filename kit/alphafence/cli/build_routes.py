@@ -115,7 +115,7 @@ def _write(output, zones, rules, options, meta) -> int:
 def run_postgis(args, build) -> int:
     """Build as ``build(args)`` does into a temporary fence file, then write the tables."""
     from alphafence.errors import need
-    from alphafence.sources.postgis import is_postgis_url, split_target, write_features
+    from alphafence.sources.postgis import is_postgis_url, split_target, write_feature_lines
 
     target, zones = args.output, args.zones_table
     for url in (target, zones):
@@ -136,16 +136,15 @@ def run_postgis(args, build) -> int:
         if is_postgis_url(target):
             path, meta, count = Path(tmp) / "fences.geojsonl", {}, [0]
 
-            def features():  # streamed from the file, never all held
+            def lines():  # streamed from the file as written, parsed by PostgreSQL
                 with open(path, encoding="utf-8") as fh:
                     for line in fh:
-                        feature = json.loads(line)
-                        meta.update(feature.pop("alphafence", None) or {})
-                        feature.pop("generator", None)
+                        if not count[0]:  # the build's meta rides on the first record
+                            meta.update(json.loads(line).get("alphafence") or {})
                         count[0] += 1
-                        yield feature
+                        yield line
 
-            version = write_features(target, features(), meta)
+            version = write_feature_lines(target, lines(), meta)
             if not args.quiet:
                 out_console.print(f"wrote {count[0]} fences to {target} (version {version})")
     if zones:

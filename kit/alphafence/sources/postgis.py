@@ -60,8 +60,7 @@ def split_target(url: str) -> tuple:
 
 def write_features(url: str, features, meta: dict | None = None) -> int:
     """Replace the rows of the table ``url`` names with these Features (fences, or zones), in one
-    transaction, streamed to PostGIS with ``COPY`` (any number of them, never all held); the
-    new ``version``.
+    transaction; the new ``version``. See :func:`write_feature_lines`.
 
     Parameters
     ----------
@@ -76,6 +75,13 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
     -------
     int
     """
+    return write_feature_lines(url, (json.dumps(f) for f in features), meta)
+
+
+def write_feature_lines(url: str, lines, meta: dict | None = None) -> int:
+    """:func:`write_features` of Features given as JSON text, one per line (a GeoJSON lines
+    file's, foreign members and all), streamed to PostgreSQL with ``COPY`` (any number, never
+    all held) and parsed there; the new ``version``. ``meta`` is read once the lines are."""
     need(("psycopg", f"writing {url}"))
     import psycopg
 
@@ -97,7 +103,7 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
             row = conn.execute(f"SELECT coalesce(max(version), 0) FROM {qualified}").fetchone()
             version = int(row[0]) + 1
             conn.execute(f"DELETE FROM {qualified}")
-            _copy(conn, qualified, features, version)
+            _copy(conn, qualified, lines, version)
             if meta:
                 text = json.dumps(meta).replace("'", "''")
                 conn.execute(f"COMMENT ON TABLE {qualified} IS '{text}'")
@@ -107,36 +113,35 @@ def write_features(url: str, features, meta: dict | None = None) -> int:
     return version
 
 
-def _copy(conn, qualified, features, version, batch=5000):
-    """``COPY`` the Features' rows into the table, a batch at a time (geometry as hex EWKB,
-    parsed from the GeoJSON as PostGIS's ST_GeomFromGeoJSON parses it: the same doubles)."""
-    import shapely
-
+def _copy(conn, qualified, lines, version, batch=2000):
+    """Each Feature's JSON text ``COPY``'d into a staging table, then its row made by
+    PostgreSQL: the properties as ``jsonb``, the columns from them, the geometry by
+    ``ST_GeomFromGeoJSON``, the id ``SITE#KIND#N`` (the N-th of its site and kind, so the rows of
+    one site are named alike whichever build or update wrote them)."""
+    conn.execute("CREATE TEMP TABLE alphafence_staging (n bigserial, feature jsonb NOT NULL) "
+                 "ON COMMIT DROP")  # fmt: skip
+    with conn.cursor() as cur, cur.copy("COPY alphafence_staging (feature) FROM STDIN") as copy:
+        chunk = []
+        for line in lines:  # COPY's text format: a backslash is its escape (JSON has no tabs)
+            chunk.append(line.strip().replace("\\", "\\\\"))
+            if len(chunk) >= batch:
+                copy.write("\n".join(chunk) + "\n")
+                chunk = []
+        if chunk:
+            copy.write("\n".join(chunk) + "\n")
     names = ", ".join(f'"{c}"' for c, _ in COLUMNS)
-    sql = f"COPY {qualified} (id, {names}, properties, version, geom) FROM STDIN"
-    rows = _rows(features, version)
-    with conn.cursor() as cur, cur.copy(sql) as copy:
-        while True:
-            chunk = [r for _, r in zip(range(batch), rows)]
-            if not chunk:
-                break
-            geoms = shapely.set_srid(shapely.from_geojson([r[-1] for r in chunk]), 4326)
-            ewkb = shapely.to_wkb(geoms, hex=True, include_srid=True)
-            for r, g in zip(chunk, ewkb):
-                copy.write_row((*r[:-1], g))
-
-
-def _rows(features, version):
-    """Each Feature's row; its id ``SITE#KIND#N`` (the N-th of its site and kind), so the rows
-    of one site are named alike whichever build or update wrote them."""
-    seen = {}
-    for feature in features:
-        p = feature["properties"]
-        key = (p.get("site_id") or "fence", p.get("kind"))
-        n = seen[key] = seen.get(key, -1) + 1
-        values = [p.get(c) for c, _ in COLUMNS]
-        geometry = json.dumps(feature["geometry"])
-        yield (f"{key[0]}#{key[1]}#{n}", *values, json.dumps(p), version, geometry)
+    values = ", ".join(f"(p->>'{c}')::{t}" for c, t in COLUMNS)
+    site = "coalesce(nullif(p->>'site_id', ''), 'fence')"
+    kind = "coalesce(p->>'kind', 'None')"
+    conn.execute(
+        f"INSERT INTO {qualified} (id, {names}, properties, version, geom) "
+        f"SELECT {site} || '#' || {kind} || '#' || "
+        f"(row_number() OVER (PARTITION BY {site}, {kind} ORDER BY n) - 1), {values}, p, %s, "
+        "ST_SetSRID(ST_GeomFromGeoJSON(feature->'geometry'), 4326) "
+        "FROM (SELECT n, feature, feature->'properties' AS p FROM alphafence_staging) AS s",
+        (version,),
+    )
+    conn.execute("DROP TABLE alphafence_staging")
 
 
 def replace_rows(url: str, drop, features, meta_update: dict | None = None) -> tuple:
@@ -176,7 +181,7 @@ def replace_rows(url: str, drop, features, meta_update: dict | None = None) -> t
             removed = conn.execute(
                 f"DELETE FROM {qualified} WHERE site_id = ANY(%s)", (sorted(drop),)
             ).rowcount
-            _copy(conn, qualified, features, version)
+            _copy(conn, qualified, (json.dumps(f) for f in features), version)
             if meta_update:
                 old = conn.execute("SELECT obj_description(%s::regclass)", (qualified,)).fetchone()
                 meta = {**json.loads(old[0] or "{}"), **meta_update}
