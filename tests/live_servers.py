@@ -21,6 +21,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.request
 from pathlib import Path
@@ -73,13 +74,18 @@ class PostGIS:
         self.url = f"postgresql://alphafence@127.0.0.1:{self.port}/zones"
         self._as = []
         self.folder.mkdir(parents=True, exist_ok=True)
+        self._own = None
         if os.geteuid() == 0:  # PostgreSQL refuses to run as root
             self._as = ["runuser", "-u", "postgres", "--"]
+            # the cluster lives outside pytest's folders: a pytest session started by a test
+            # (tests/test_ci_skips.py) makes /tmp/pytest-of-root private again, which would
+            # shut the postgres user out of a cluster inside it
+            self._own = Path(tempfile.mkdtemp(prefix="alphafence-pg-"))
+            os.chmod(self._own, 0o711)
+            self.folder = self._own / "pg"
+            self.folder.mkdir()
             shutil.chown(self.folder, "postgres")
-            for parent in self.folder.parents:  # pytest's tmp folders are 0700: let it in
-                if parent == Path(parent.anchor) or parent.stat().st_mode & 0o001:
-                    break
-                os.chmod(parent, parent.stat().st_mode | 0o001)
+            self.data = self.folder / "data"
 
     def _run(self, *cmd, **kw):
         return subprocess.run([*self._as, *cmd], check=True, capture_output=True, text=True, **kw)
@@ -108,6 +114,8 @@ class PostGIS:
         with contextlib.suppress(subprocess.CalledProcessError):
             self._run(str(self.bindir / "pg_ctl"), "-D", str(self.data), "-m", "immediate",
                       "-w", "stop")  # fmt: skip
+        if self._own is not None:
+            shutil.rmtree(self._own, ignore_errors=True)
 
 
 def pygeoapi_bin() -> str | None:
