@@ -92,27 +92,14 @@ def main(argv=None) -> int:
         metavar="N",
         help="wall minutes of the soak (default 30)",
     )
-    p.add_argument(
-        "--scale-sizes",
-        type=_sizes,
-        default=scale_bench.SIZES,
-        metavar="N,N",
-        help="areas built by the scale group (default 133000,1000000)",
-    )
-    p.add_argument(
-        "--update-sizes",
-        type=_sizes,
-        default=update_bench.SIZES,
-        metavar="N,N",
-        help="areas of the update group's extracts (default 133000; 1000000 for its target)",
-    )
-    p.add_argument(
-        "--planet-sizes",
-        type=_sizes,
-        default=planet_bench.SIZES,
-        metavar="N,N",
-        help="areas of the planet group's builds (default 1000000,2000000)",
-    )
+    for group, default, what in (
+        ("scale", scale_bench.SIZES, "areas built by the scale group (default 133000,1000000)"),
+        ("update", update_bench.SIZES, "areas of the update group's extracts (default 133000; "
+         "1000000 for its target)"),
+        ("planet", planet_bench.SIZES, "areas of the planet group's builds (default "
+         "1000000,2000000)"),
+    ):  # fmt: skip
+        p.add_argument(f"--{group}-sizes", type=_sizes, default=default, metavar="N,N", help=what)
     args = p.parse_args(argv)
     _use_shared_sitl()
     console = Console(width=150)

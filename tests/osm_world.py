@@ -129,25 +129,18 @@ class World:
 
     def write_changes(self, path):
         """What changed since :meth:`mark` as a change file (deletions not visible)."""
+        kinds = (("n", self.nodes, mutable.Node, "add_node", lambda v: {"location": v[:2]}),
+                 ("w", self.ways, mutable.Way, "add_way", lambda v: {"nodes": v[0]}),
+                 ("r", self.rels, mutable.Relation, "add_relation",
+                  lambda v: {"members": v[0]}))  # fmt: skip
         with osmium.SimpleWriter(str(path)) as w:
-            for n in sorted(self.changed["n"]):
-                if n in self.nodes:
-                    lon, lat, tags = self.nodes[n]
-                    w.add_node(mutable.Node(id=n, location=(lon, lat), tags=tags, version=2))
-                else:
-                    w.add_node(mutable.Node(id=n, version=2, visible=False))
-            for i in sorted(self.changed["w"]):
-                if i in self.ways:
-                    refs, tags = self.ways[i]
-                    w.add_way(mutable.Way(id=i, nodes=refs, tags=tags, version=2))
-                else:
-                    w.add_way(mutable.Way(id=i, nodes=[], version=2, visible=False))
-            for r in sorted(self.changed["r"]):
-                if r in self.rels:
-                    members, tags = self.rels[r]
-                    w.add_relation(mutable.Relation(id=r, members=members, tags=tags, version=2))
-                else:
-                    w.add_relation(mutable.Relation(id=r, members=[], version=2, visible=False))
+            for key, table, make, add, shape in kinds:
+                for i in sorted(self.changed[key]):
+                    if i in table:  # its last version, else deleted (not visible)
+                        obj = make(id=i, tags=table[i][-1], version=2, **shape(table[i]))
+                    else:
+                        obj = make(id=i, version=2, visible=False)
+                    getattr(w, add)(obj)
 
     def copy(self):
         return copy.deepcopy(self)
