@@ -67,3 +67,32 @@ def test_ctrl_c_stops_a_parallel_build_with_one_line(database, tmp_path, moment)
     assert build.returncode == 130, stderr
     assert [line for line in stderr.splitlines() if line.strip()] == ["alphafence: interrupted"]
     assert not out.exists() and not list(Path(tmp_path).iterdir())
+
+
+def test_a_ctrl_c_while_the_forkserver_starts_is_raised_not_lost(monkeypatch):
+    """The window in which the main process ignores Ctrl-C (so that the forkserver starts
+    ignoring it): a Ctrl-C that comes then is held and raised once the handler is back, and
+    the forkserver it had started is stopped. Before, such a Ctrl-C was lost and the build ran
+    on to the end (seen in CI: exit 0 for a Ctrl-C sent as the forkserver appeared)."""
+    import threading
+    from multiprocessing import forkserver
+
+    from alphafence.fencing import tile_jobs
+
+    assert threading.current_thread() is threading.main_thread()
+    started = []
+    real = forkserver.ensure_running
+
+    def ensure_running_then_ctrl_c():
+        real()
+        started.append(forkserver._forkserver._forkserver_pid)
+        os.kill(os.getpid(), signal.SIGINT)  # as a terminal's Ctrl-C, inside the window
+
+    monkeypatch.setattr(forkserver, "ensure_running", ensure_running_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        tile_jobs.start_pool(2)
+    assert started, "the forkserver was not started"
+    pid, _ = os.waitpid(started[0], 0)  # stopped: reaped here (it is this process's child)
+    assert pid == started[0]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())

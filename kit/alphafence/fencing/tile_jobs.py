@@ -178,7 +178,7 @@ def start_pool(workers: int):
     import signal
     import threading
     from concurrent.futures import ProcessPoolExecutor
-    from multiprocessing import forkserver
+    from multiprocessing import forkserver, resource_tracker
 
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(PRELOAD)
@@ -186,24 +186,36 @@ def start_pool(workers: int):
     # the workers, which ignore it (else each printed a traceback), finish the one they hold
     # (a job is about a second) and leave. The forkserver is started ignoring it, which it
     # keeps through Python's start and its imports, and its workers inherit.
+    # A Ctrl-C that comes while the server starts is held (blocked), not lost to SIG_IGN, and
+    # raised here once the handler is back; the server, and any worker, is then stopped. The
+    # resource tracker is started first: starting it unblocks Ctrl-C, which would let a held
+    # one through to SIG_IGN.
     main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    pool = None
     try:
-        forkserver.ensure_running()
-    finally:
+        resource_tracker.ensure_running()
         if main:
-            signal.signal(signal.SIGINT, previous)
-    pool = ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=ctx,
-        initializer=signal.signal,
-        initargs=(signal.SIGINT, signal.SIG_IGN),
-    )
-    try:
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            forkserver.ensure_running()
+        finally:
+            if main:
+                signal.signal(signal.SIGINT, previous)
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        pool = ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=ctx,
+            initializer=signal.signal,
+            initargs=(signal.SIGINT, signal.SIG_IGN),
+        )
         for _ in range(workers):
             pool.submit(int)  # a task that starts a worker (it waits for the server's preload)
     except BaseException:
-        stop_pool(pool, server=True)
+        if pool is None:
+            _stop_server()
+        else:
+            stop_pool(pool, server=True)
         raise
     return pool
 
@@ -222,23 +234,8 @@ def stop_pool(pool, server: bool = False, now: bool = False) -> None:
         Interrupted (Ctrl-C): the workers are killed in their jobs, which write nothing of
         their own, rather than waited for (a job is about a second).
     """
-    import os
-    import signal
-    from multiprocessing import forkserver
-
-    pid = getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
-    if server and pid:
-        try:  # stopped first, so that it forks no more; then its workers, then itself
-            os.kill(pid, signal.SIGSTOP)
-            with open(f"/proc/{pid}/task/{pid}/children") as fh:
-                for child in fh.read().split():
-                    os.kill(int(child), signal.SIGKILL)
-        except OSError:
-            pass  # gone already, or no /proc (not Linux)
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except OSError:
-            pass
+    if server:
+        _stop_server()
     if now or server:
         for process in list((getattr(pool, "_processes", None) or {}).values()):
             try:
@@ -246,6 +243,29 @@ def stop_pool(pool, server: bool = False, now: bool = False) -> None:
             except (OSError, ValueError):  # gone already, or closed
                 pass
     pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stop_server() -> None:
+    """Stop the forkserver, if one runs: first stopped, so that it forks no more; then its
+    workers, then itself."""
+    import os
+    import signal
+    from multiprocessing import forkserver
+
+    pid = getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
+    if not pid:
+        return
+    try:
+        os.kill(pid, signal.SIGSTOP)
+        with open(f"/proc/{pid}/task/{pid}/children") as fh:
+            for child in fh.read().split():
+                os.kill(int(child), signal.SIGKILL)
+    except OSError:
+        pass  # gone already, or no /proc (not Linux)
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except OSError:
+        pass
 
 
 def stop_on_exit(pool):
