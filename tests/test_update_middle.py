@@ -87,7 +87,11 @@ def test_the_middle_keeps_places_ways_and_keyed_relations(db):
     ]
     ways = {w: (json.loads(t) if t else None) for w, _, t in table(db, "SELECT * FROM ways")}
     assert ways == {100: PRISON, 101: None, 102: None, 103: None, 104: None}
+    assert table(db, "SELECT id FROM ways WHERE tags IS NULL") == [(101,), (102,), (103,), (104,)]
     assert [r for r, *_ in table(db, "SELECT * FROM rels")] == [200]  # 201: no rule's key
+    assert table(db, "SELECT id, nodes FROM ways WHERE id = 102") == [
+        (102, bytes.fromhex("0700000000000000080000000000000009000000000000000700000000000000"))
+    ]  # node ids as 8-byte little-endian integers, whatever the machine's own
     members, tags = db.execute("SELECT members, tags FROM rels WHERE id = 200").fetchone()
     assert json.loads(tags) == HOSPITAL
     assert json.loads(members) == [["w", 101, "outer"], ["w", 102, "outer"], ["n", 11, ""]]
@@ -130,14 +134,19 @@ def test_change_files_keep_the_last_version_of_each_object(tmp_path):
 
 
 def test_change_files_read_badly_are_one_line(tmp_path):
-    with pytest.raises(InputError, match="not an OpenStreetMap change file"):
-        read_changes([tmp_path / "x.osm"])
-    with pytest.raises(InputError, match="no such file"):
-        read_changes([tmp_path / "gone.osc"])
+    cases = [
+        (tmp_path / "x.osm", "not an OpenStreetMap change file (.osc, .osc.gz)"),
+        (tmp_path / "gone.osc", "no such file"),
+    ]
     bad = tmp_path / "bad.osc"
     bad.write_text("<osmChange><node id='1' lat='x'", encoding="utf-8")
-    with pytest.raises(InputError, match="not a readable change file"):
+    for path, message in cases:
+        with pytest.raises(InputError) as caught:
+            read_changes([path])
+        assert str(caught.value) == f"{path}: {message}"
+    with pytest.raises(InputError) as caught:
         read_changes([bad])
+    assert str(caught.value).startswith(f"{bad}: not a readable change file (")
     good = tmp_path / "good.osc"
     write_osm(good, [(1, (14.0, 35.0), {}, False), (2, (14.0, 35.0), {}, False)])
     calls = []
@@ -254,3 +263,37 @@ def test_an_empty_change_touches_nothing(db, tmp_path):
                                                             "way_rels")}  # fmt: skip
     assert apply_changes(db, Changes(), KEYS) == {"node": set(), "way": set(), "relation": set()}
     assert before == {t: table(db, f"SELECT * FROM {t}") for t in before}
+
+
+def test_a_keyed_way_goes_into_the_extract_with_its_tags_and_nodes(db, tmp_path):
+    change = changes_of(tmp_path, nodes=[(2, (14.2, 35.2), {}, False)],
+                        relations=[(200, [("w", 101, "outer"), ("n", 103, "")], HOSPITAL,
+                                    False)])  # fmt: skip
+    touched = apply_changes(db, change, KEYS)
+    assert touched == {"node": {2}, "way": {100}, "relation": {200}}
+    out = tmp_path / "mini.osm"
+    write_extract(db, touched, change, out)
+    nodes, ways, rels = read_back(out)
+    # the node member 103 is no way: way 103 stays out
+    assert ways == {100: ([1, 2, 3, 4, 1], PRISON), 101: ([5, 6, 7], {})}
+    assert rels == {200: ([("w", 101, "outer"), ("n", 103, "")], HOSPITAL)}
+    assert sorted(nodes) == [1, 2, 3, 4, 5, 6, 7] and nodes[2] == (14.2, 35.2, {})
+
+
+def test_changes_of_many_objects_are_looked_up_in_full(tmp_path):
+    """More ids than one SQL lookup takes (500): every chunk is looked up, none twice."""
+    n = 1234
+    nodes = [(i, (14.0 + i / 1e5, 35.0), {}, False) for i in range(1, n + 1)]
+    ways = [(10_000 + i, [i], {"amenity": "bench"}, False) for i in range(1, n + 1)]  # one each
+    path = tmp_path / "many.osm"
+    write_osm(path, nodes, ways)
+    con = sqlite3.connect(":memory:")
+    load_middle(con, path, KEYS)
+    change = changes_of(tmp_path, nodes=[(i, (15.0, 36.0), {}, False) for i in range(1, n + 1)])
+    touched = apply_changes(con, change, KEYS)
+    assert touched["way"] == {10_000 + i for i in range(1, n + 1)}
+    out = tmp_path / "mini.osm"
+    write_extract(con, touched, change, out)
+    got, ways_out, _ = read_back(out)
+    assert sorted(got) == list(range(1, n + 1)) and len(ways_out) == n
+    assert {v[:2] for v in got.values()} == {(15.0, 36.0)}
