@@ -92,7 +92,13 @@ def test_a_ctrl_c_while_the_forkserver_starts_is_raised_not_lost(monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         tile_jobs.start_pool(2)
     assert started, "the forkserver was not started"
-    pid, _ = os.waitpid(started[0], 0)  # stopped: reaped here (it is this process's child)
-    assert pid == started[0]
+    with pytest.raises(ProcessLookupError):  # killed and reaped
+        os.kill(started[0], 0)
+    assert forkserver._forkserver._forkserver_pid is None  # the next pool starts a new one
+    pool = tile_jobs.start_pool(1)
+    try:
+        assert pool.submit(int, "7").result() == 7
+    finally:
+        tile_jobs.stop_pool(pool, server=True)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())

@@ -247,7 +247,7 @@ def stop_pool(pool, server: bool = False, now: bool = False) -> None:
 
 def _stop_server() -> None:
     """Stop the forkserver, if one runs: first stopped, so that it forks no more; then its
-    workers, then itself."""
+    workers, then itself, reaped, so that the next pool in this process starts a new one."""
     import os
     import signal
     from multiprocessing import forkserver
@@ -265,6 +265,10 @@ def _stop_server() -> None:
     try:
         os.kill(pid, signal.SIGKILL)
     except OSError:
+        pass
+    try:  # multiprocessing's own stop: reaps it and forgets it (else a later start fails)
+        forkserver._forkserver._stop()
+    except (AttributeError, OSError):
         pass
 
 
