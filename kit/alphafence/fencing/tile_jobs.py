@@ -187,7 +187,9 @@ def start_pool(workers: int):
     # (a job is about a second) and leave. The forkserver is started ignoring it, which it
     # keeps through Python's start and its imports, and its workers inherit.
     # A Ctrl-C that comes while the server starts is held (blocked), not lost to SIG_IGN, and
-    # raised here once the handler is back; the server, and any worker, is then stopped. The
+    # raised here once the handler is back; the server, and any worker, is then stopped. (A
+    # Ctrl-C that another thread takes in the window, as a progress bar's refresh thread can
+    # on a terminal, is still lost: the window is the server's spawn, some milliseconds.) The
     # resource tracker is started first: starting it unblocks Ctrl-C, which would let a held
     # one through to SIG_IGN.
     main = threading.current_thread() is threading.main_thread()
