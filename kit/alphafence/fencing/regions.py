@@ -14,6 +14,7 @@ M_PER_DEG_LON = 111_320.0
 # hundred features at most, and importing scipy.sparse.csgraph costs more (0.15 s) than
 # Malta's whole grouping
 SMALL_GRAPH = 4096
+CHUNK = 65_536  # extents per R-tree when regions are found
 
 
 def _components(n, a, b):
@@ -36,13 +37,18 @@ def _components(n, a, b):
     return connected_components(graph, directed=False)[1]
 
 
-def region_labels(bounds, widths, join_m):
-    """Conservative clusters of features of one class, from their extents alone.
+def region_labels(bounds, widths, join_m, classes=None, chunk=CHUNK):
+    """Conservative clusters of features, from their extents alone.
 
     Each extent (degrees) is grown by the join distance, twice the feature's width and a metre;
-    features whose grown extents meet, directly or through others, share a region. A site never
-    spans two regions, so regions can be fenced apart (in tiles, in worker processes) and give
-    exactly the sites :func:`group_sites` gives.
+    features of one class whose grown extents meet, directly or through others, share a region.
+    A site never spans two regions, so regions can be fenced apart (in tiles, in worker
+    processes) and give exactly the sites :func:`group_sites` gives.
+
+    The extents are swept south to north ``chunk`` at a time (an R-tree over each chunk, asked
+    by the chunk and by the extents that start before the chunk's northernmost edge ends), and
+    the pairs found are joined as they come, so memory holds a few arrays of one number per
+    feature and one chunk's boxes, whatever the number of features.
 
     Parameters
     ----------
@@ -51,11 +57,15 @@ def region_labels(bounds, widths, join_m):
     widths : ndarray, shape (n,)
         Metres each feature is widened by (points and lines), else 0.
     join_m : float
+    classes : ndarray of int, shape (n,), optional
+        Features of different classes never share a region (default: one class).
+    chunk : int
+        Extents per R-tree.
 
     Returns
     -------
     ndarray of int
-        A region label per feature.
+        A region label per feature, numbered in the order of each region's first feature.
 
     Examples
     --------
@@ -64,15 +74,67 @@ def region_labels(bounds, widths, join_m):
     ...               [14.51, 35.9, 14.5105, 35.9004]])
     >>> region_labels(b, np.zeros(3), 25.0).tolist()
     [0, 0, 1]
+    >>> region_labels(b, np.zeros(3), 25.0, classes=np.array([1, 0, 1])).tolist()
+    [0, 1, 2]
     """
     bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
-    if len(bounds) == 1:
-        return np.zeros(1, int)
-    grown = grown_bounds(bounds, widths, join_m)
-    boxes = shapely.box(grown[:, 0], grown[:, 1], grown[:, 2], grown[:, 3])
-    tree = shapely.STRtree(boxes)
-    a, b = tree.query(boxes, predicate="intersects")
-    return _components(len(bounds), a, b)
+    n = len(bounds)
+    if n <= 1:
+        return np.zeros(n, np.int64)
+    widths = np.broadcast_to(np.asarray(widths, dtype=float), (n,))
+    classes = np.zeros(n, np.int64) if classes is None else np.asarray(classes)
+    south = bounds[:, 1] - _grow_m(widths, join_m) / M_PER_DEG_LAT  # as grown_bounds grows it
+    order = np.argsort(south, kind="stable")
+    south = south[order]
+    roots = np.arange(n)  # a union-find: each feature's parent, a root its own; roots are least
+    for start in range(0, n, chunk):
+        here = order[start : start + chunk]
+        grown = grown_bounds(bounds[here], widths[here], join_m)
+        boxes = shapely.box(*grown.T)
+        tree = shapely.STRtree(boxes)
+        a, b = tree.query(boxes, predicate="intersects")
+        _join(roots, here[a], here[b], classes)
+        end = _reach(south, grown[:, 3].max())
+        for later in range(start + chunk, end, chunk):  # extents starting inside the chunk
+            there = order[later : min(later + chunk, end)]
+            g = grown_bounds(bounds[there], widths[there], join_m)
+            a, b = tree.query(shapely.box(*g.T), predicate="intersects")
+            _join(roots, there[a], here[b], classes)
+    return np.unique(_find(roots, np.arange(n)), return_inverse=True)[1].reshape(n)
+
+
+def _reach(south, north):
+    """How many of the extents, sorted by their south edges, start at or south of ``north``."""
+    return int(np.searchsorted(south, north, side="right"))
+
+
+def _find(roots, nodes):
+    """Each node's root, the paths on the way made to point at it."""
+    r = roots[nodes]
+    while True:
+        up = roots[r]
+        if np.array_equal(up, r):
+            roots[nodes] = r
+            return r
+        r = up
+
+
+def _join(roots, a, b, classes):
+    """Join the sets of the pairs ``a``-``b`` of one class; each set's root stays its least
+    member."""
+    same = (a != b) & (classes[a] == classes[b])
+    if not same.any():
+        return
+    ra, rb = _find(roots, a[same]), _find(roots, b[same])
+    apart = ra != rb
+    if not apart.any():
+        return
+    nodes, inverse = np.unique(np.r_[ra[apart], rb[apart]], return_inverse=True)
+    m = int(apart.sum())
+    labels = _components(len(nodes), inverse[:m], inverse[m:])
+    least = np.full(int(labels.max()) + 1, len(roots))
+    np.minimum.at(least, labels, nodes)
+    roots[nodes] = least[labels]
 
 
 def grown_bounds(bounds, widths, join_m):
@@ -101,9 +163,14 @@ def grown_bounds(bounds, widths, join_m):
     """
     bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
     lat = np.clip(np.maximum(np.abs(bounds[:, 1]), np.abs(bounds[:, 3])), 0, 89.9)
-    grow_m = join_m + 2 * np.asarray(widths, dtype=float) + 1.0
+    grow_m = _grow_m(widths, join_m)
     dlat = grow_m / M_PER_DEG_LAT
     dlon = grow_m / (M_PER_DEG_LON * np.cos(np.radians(lat)))
     return np.column_stack(
         [bounds[:, 0] - dlon, bounds[:, 1] - dlat, bounds[:, 2] + dlon, bounds[:, 3] + dlat]
     )
+
+
+def _grow_m(widths, join_m):
+    """Metres each extent grows by: the join distance, twice the width and a metre."""
+    return join_m + 2 * np.asarray(widths, dtype=float) + 1.0

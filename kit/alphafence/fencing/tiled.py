@@ -295,15 +295,10 @@ def build_tiled(
 
             def inputs():
                 for job in plan:
-                    spans, start = [], 0
-                    for region in job.regions:
-                        spans.append((start, start + len(region)))
-                        start += len(region)
-                    records = spool.records(np.concatenate(job.regions))
                     yield JobInput(
                         job.number,
-                        records,
-                        spans,
+                        spool.records(job.indices),
+                        job.spans,
                         rules,
                         spool.rules,
                         spool.origins,

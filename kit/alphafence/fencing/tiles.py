@@ -32,18 +32,75 @@ class TileJob:
         Its place in the build's order (outputs are written in this order).
     tiles : list of tuple
         ``(row, column)`` of the tiles it covers.
-    regions : list of ndarray
-        Feature indices per region, ascending (the database's order).
+    indices : ndarray of int
+        Its features, region after region.
+    ends : ndarray of int
+        Where each region ends in ``indices``.
     """
 
     number: int
     tiles: list
-    regions: list
+    indices: np.ndarray
+    ends: np.ndarray
 
     @property
     def size(self) -> int:
         """The number of features."""
-        return int(sum(len(r) for r in self.regions))
+        return len(self.indices)
+
+    @property
+    def regions(self) -> list:
+        """Feature indices per region, ascending (the database's order)."""
+        return np.split(self.indices, self.ends[:-1])
+
+    @property
+    def spans(self) -> list:
+        """``(start, end)`` of each region in :attr:`indices`."""
+        ends = self.ends.tolist()
+        return list(zip([0, *ends[:-1]], ends))
+
+
+@dataclass
+class JobPlan:
+    """The tile jobs of a build, held as a few arrays (a number or two per feature and per
+    region) and made into :class:`TileJob` one at a time.
+
+    Attributes
+    ----------
+    indices : ndarray of int
+        Every feature, job after job, region after region.
+    ends : ndarray of int
+        Where each region ends in ``indices``.
+    rows, cols : ndarray of int
+        Each region's tile.
+    firsts : ndarray of int
+        Each job's first region, and the number of regions last.
+    """
+
+    indices: np.ndarray
+    ends: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    firsts: np.ndarray
+
+    def __len__(self):
+        return len(self.firsts) - 1
+
+    def __getitem__(self, number) -> TileJob:
+        if not -len(self) <= number < len(self):
+            raise IndexError(number)
+        number %= len(self)
+        r0, r1 = int(self.firsts[number]), int(self.firsts[number + 1])
+        start = int(self.ends[r0 - 1]) if r0 else 0
+        tiles = []
+        for tile in zip(self.rows[r0:r1].tolist(), self.cols[r0:r1].tolist()):
+            if not tiles or tiles[-1] != tile:
+                tiles.append(tile)
+        return TileJob(number, tiles, self.indices[start : self.ends[r1 - 1]],
+                       self.ends[r0:r1] - start)  # fmt: skip
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
 
 
 def plan_regions(bounds, widths, classes, join_m):
@@ -59,15 +116,9 @@ def plan_regions(bounds, widths, classes, join_m):
     Returns
     -------
     ndarray of int
+        Numbered in the order of each region's first feature.
     """
-    labels = np.empty(len(classes), dtype=np.int64)
-    next_label = 0
-    for c in np.unique(classes):
-        idx = np.flatnonzero(classes == c)
-        lab = region_labels(bounds[idx], widths[idx], join_m)
-        labels[idx] = lab + next_label
-        next_label += int(lab.max()) + 1
-    return labels
+    return region_labels(bounds, widths, join_m, classes=np.asarray(classes))
 
 
 def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_FEATURES):
@@ -89,7 +140,8 @@ def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_
 
     Returns
     -------
-    list of TileJob
+    JobPlan
+        A sequence of :class:`TileJob`.
 
     Examples
     --------
@@ -100,32 +152,36 @@ def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_
     >>> [(j.tiles, [r.tolist() for r in j.regions]) for j in jobs]
     [([(500, 776)], [[0]]), ([(500, 777)], [[1, 2]])]
     """
-    n = len(classes)
+    bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
+    n = len(bounds)
+    empty = np.empty(0, np.int64)
     if n == 0:
-        return []
-    labels = plan_regions(np.asarray(bounds), np.asarray(widths), np.asarray(classes), join_m)
-    order = np.lexsort((np.arange(n), labels))
-    sorted_labels = labels[order]
-    starts = np.flatnonzero(np.r_[True, sorted_labels[1:] != sorted_labels[:-1]])
-    b = np.asarray(bounds)[order]
-    lo = np.minimum.reduceat(b[:, :2], starts, axis=0)
-    hi = np.maximum.reduceat(b[:, 2:], starts, axis=0)
-    centre = (lo + hi) / 2.0
+        return JobPlan(empty, empty, empty, empty, np.zeros(1, np.int64))
+    labels = plan_regions(bounds, widths, classes, join_m)
+    order = np.argsort(labels, kind="stable")  # region after region, each in the database's order
+    starts = np.flatnonzero(np.r_[True, labels[order[1:]] != labels[order[:-1]]])
+    del labels
+    centre = np.empty((len(starts), 2))
+    for axis in (0, 1):  # a column at a time: one number per feature in memory
+        column = bounds[order, axis]
+        lo = np.minimum.reduceat(column, starts)
+        column = bounds[order, axis + 2]
+        centre[:, axis] = (lo + np.maximum.reduceat(column, starts)) / 2.0
+        del column
     col = np.floor((centre[:, 0] + 180.0) / tile_deg).astype(np.int64)
     row = np.floor((centre[:, 1] + 90.0) / tile_deg).astype(np.int64)
-    ends = np.r_[starts[1:], n]
+    sizes = np.diff(np.r_[starts, n])
     tile_order = np.lexsort((starts, col, row))  # row by row, then the database's order
-    jobs, current, tiles = [], [], []
-    size = 0
-    for r in tile_order:
-        tile = (int(row[r]), int(col[r]))
+    sizes = sizes[tile_order]
+    firsts, size = [0], 0
+    for r, s in enumerate(sizes.tolist()):  # greedy: a job closes once it holds the target
         if size >= target:
-            jobs.append(TileJob(len(jobs), tiles, current))
-            current, tiles, size = [], [], 0
-        current.append(order[starts[r] : ends[r]])
-        if not tiles or tiles[-1] != tile:
-            tiles.append(tile)
-        size += int(ends[r] - starts[r])
-    if current:
-        jobs.append(TileJob(len(jobs), tiles, current))
-    return jobs
+            firsts.append(r)
+            size = 0
+        size += s
+    firsts.append(len(sizes))
+    ends = np.cumsum(sizes)
+    # each region's features, in tile order: its start in ``order`` plus 0, 1, ...
+    shift = np.repeat(starts[tile_order] - (ends - sizes), sizes)
+    indices = order[shift + np.arange(n)]
+    return JobPlan(indices, ends, row[tile_order], col[tile_order], np.asarray(firsts))
