@@ -50,10 +50,10 @@ def run(extract, Row, console, sizes=SIZES):
                 out.unlink(missing_ok=True)
                 runs[(engine, n)] = m
                 how = "--jobs 2" if engine == "jobs" else "--dask, 2 local workers"
-                console.print(f"planet: {n:,} areas, {how}: {_result(m)}")
+                console.print(f"planet: {n:,} areas, {how}: {_result(m)}; {_split(m)}")
                 ok = not (m["why"] or m["rc"])
                 rows.append(Row(f"planet: build {n:,} areas, {how}",
-                                f"{_result(m)}, {m['fences']:,} fences ({n / m['wall']:,.0f} "
+                                f"{_result(m)}; {_split(m)}, {m['fences']:,} fences ({n / m['wall']:,.0f} "
                                 "areas/s)", "-", "-", "-", ok, m["wall"], "s"))  # fmt: skip
         if len(sizes) == 2:
             small, large = sizes
@@ -69,3 +69,20 @@ def run(extract, Row, console, sizes=SIZES):
                                 f"{a['peak'] / GB:.2f} GB", f"{mem:.2f}x",
                                 mem <= MEMORY_RATIO))  # fmt: skip
     return rows
+
+
+def _split(m):
+    """The peak by process: the build's own, and the largest others' (workers, scheduler).
+
+    Examples
+    --------
+    >>> _split({"main_peak": 3e8, "peaks": [4e8, 3e8, 2e8, 1e7]})
+    'build process 0.30 GB, others up to 0.40, 0.20, 0.01 GB'
+    """
+    others = list(m["peaks"])
+    if m["main_peak"] in others:
+        others.remove(m["main_peak"])
+    text = ", ".join(f"{p / GB:.2f}" for p in others[:4])
+    return f"build process {m['main_peak'] / GB:.2f} GB" + (
+        f", others up to {text} GB" if others else ""
+    )

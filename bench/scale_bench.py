@@ -134,10 +134,10 @@ def _pss(pid):
     return None
 
 
-def tree_sample(roots):
+def tree_sample(roots, peaks=None):
     """The summed RSS and PSS in bytes of ``roots`` and all their descendants (a process
     without a readable PSS counts its RSS), and each one's CPU seconds so far (user + system)
-    by (pid, start time).
+    by (pid, start time). ``peaks``, a dict, keeps each one's largest RSS by (pid, start time).
 
     Examples
     --------
@@ -148,6 +148,10 @@ def tree_sample(roots):
     table = _stat_table()
     seen = _tree(roots, table)
     rss = sum(table[p][1] for p in seen)
+    if peaks is not None:
+        for p in seen:
+            key = (p, table[p][3])
+            peaks[key] = max(peaks.get(key, 0), table[p][1])
     pss = sum(x if (x := _pss(p)) is not None else table[p][1] for p in seen)
     return rss, pss, {(p, table[p][3]): table[p][2] for p in seen}
 
@@ -167,12 +171,13 @@ class PeakSampler(threading.Thread):
         )
         self.peak, self.peak_pss, self.stopped_why = 0, 0, None
         self.cpu = {}  # (pid, start time): user + system seconds last seen
+        self.peaks = {}  # (pid, start time): largest RSS seen
         self._done = threading.Event()
 
     def run(self):
         last = 0
         while not self._done.is_set():
-            rss, pss, cpu = tree_sample(self.roots)
+            rss, pss, cpu = tree_sample(self.roots, self.peaks)
             self.cpu.update(cpu)
             # a PSS sum read across a fork can count the parent whole and its child's share:
             # a peak must hold for two samples
@@ -233,6 +238,10 @@ def measure(argv, limit_s, limit_bytes, extra_roots=()):
         "cpu": sum(sampler.cpu.values()),
         "peak": sampler.peak,
         "pss": sampler.peak_pss,
+        "peaks": sorted(sampler.peaks.values(), reverse=True),
+        "main_peak": max(
+            (v for (pid, _), v in sampler.peaks.items() if pid == proc.pid), default=0
+        ),
         "rc": proc.returncode,
         "why": sampler.stopped_why,
         "err": err.decode(errors="replace").strip().splitlines()[-1:] or [""],

@@ -83,10 +83,11 @@ def region_labels(bounds, widths, join_m, classes=None, chunk=CHUNK):
         return np.zeros(n, np.int64)
     widths = np.broadcast_to(np.asarray(widths, dtype=float), (n,))
     classes = np.zeros(n, np.int64) if classes is None else np.asarray(classes)
+    index = np.int32 if n < 2**31 else np.int64  # one number per feature, as small as it goes
     south = bounds[:, 1] - _grow_m(widths, join_m) / M_PER_DEG_LAT  # as grown_bounds grows it
-    order = np.argsort(south, kind="stable")
+    order = np.argsort(south, kind="stable").astype(index)
     south = south[order]
-    roots = np.arange(n)  # a union-find: each feature's parent, a root its own; roots are least
+    roots = np.arange(n, dtype=index)  # a union-find: parent per feature, roots least of theirs
     for start in range(0, n, chunk):
         here = order[start : start + chunk]
         grown = grown_bounds(bounds[here], widths[here], join_m)
@@ -100,7 +101,14 @@ def region_labels(bounds, widths, join_m, classes=None, chunk=CHUNK):
             g = grown_bounds(bounds[there], widths[there], join_m)
             a, b = tree.query(shapely.box(*g.T), predicate="intersects")
             _join(roots, there[a], here[b], classes)
-    return np.unique(_find(roots, np.arange(n)), return_inverse=True)[1].reshape(n)
+    del order, south
+    while True:  # every feature points at its root
+        up = roots[roots]
+        if np.array_equal(up, roots):
+            break
+        roots = up
+    first = roots == np.arange(n, dtype=index)  # a region's root is its first feature
+    return (np.cumsum(first, dtype=index) - 1)[roots]
 
 
 def _reach(south, north):

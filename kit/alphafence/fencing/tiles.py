@@ -158,7 +158,8 @@ def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_
     if n == 0:
         return JobPlan(empty, empty, empty, empty, np.zeros(1, np.int64))
     labels = plan_regions(bounds, widths, classes, join_m)
-    order = np.argsort(labels, kind="stable")  # region after region, each in the database's order
+    index = labels.dtype  # one number per feature, as small as region_labels made it
+    order = np.argsort(labels, kind="stable").astype(index)  # region after region, in db order
     starts = np.flatnonzero(np.r_[True, labels[order[1:]] != labels[order[:-1]]])
     del labels
     centre = np.empty((len(starts), 2))
@@ -182,6 +183,7 @@ def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_
     firsts.append(len(sizes))
     ends = np.cumsum(sizes)
     # each region's features, in tile order: its start in ``order`` plus 0, 1, ...
-    shift = np.repeat(starts[tile_order] - (ends - sizes), sizes)
-    indices = order[shift + np.arange(n)]
+    shift = np.repeat((starts[tile_order] - (ends - sizes)).astype(index), sizes)
+    shift += np.arange(n, dtype=index)
+    indices = order[shift]
     return JobPlan(indices, ends, row[tile_order], col[tile_order], np.asarray(firsts))
