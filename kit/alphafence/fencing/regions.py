@@ -14,7 +14,7 @@ M_PER_DEG_LON = 111_320.0
 # hundred features at most, and importing scipy.sparse.csgraph costs more (0.15 s) than
 # Malta's whole grouping
 SMALL_GRAPH = 4096
-CHUNK = 65_536  # extents per R-tree when regions are found
+CHUNK = 16_384  # extents per R-tree when regions are found (a few MB of GEOS boxes)
 
 
 def _components(n, a, b):
@@ -77,14 +77,16 @@ def region_labels(bounds, widths, join_m, classes=None, chunk=CHUNK):
     >>> region_labels(b, np.zeros(3), 25.0, classes=np.array([1, 0, 1])).tolist()
     [0, 1, 2]
     """
-    bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
+    bounds = floats(bounds).reshape(-1, 4)
     n = len(bounds)
     if n <= 1:
         return np.zeros(n, np.int64)
-    widths = np.broadcast_to(np.asarray(widths, dtype=float), (n,))
+    widths = np.broadcast_to(floats(widths), (n,))
     classes = np.zeros(n, np.int64) if classes is None else np.asarray(classes)
     index = np.int32 if n < 2**31 else np.int64  # one number per feature, as small as it goes
-    south = bounds[:, 1] - _grow_m(widths, join_m) / M_PER_DEG_LAT  # as grown_bounds grows it
+    # each grown extent's south edge, as grown_bounds grows it, rounded down to 32 bits: an
+    # extent that starts at or south of a chunk's northernmost edge still does
+    south = outward(bounds[:, 1] - _grow_m(widths, join_m) / M_PER_DEG_LAT, up=False)
     order = np.argsort(south, kind="stable").astype(index)
     south = south[order]
     roots = np.arange(n, dtype=index)  # a union-find: parent per feature, roots least of theirs
@@ -143,6 +145,33 @@ def _join(roots, a, b, classes):
     least = np.full(int(labels.max()) + 1, len(roots))
     np.minimum.at(least, labels, nodes)
     roots[nodes] = least[labels]
+
+
+def floats(values):
+    """``values`` as an array of 32- or 64-bit floats (not copied when it is one)."""
+    values = np.asarray(values)
+    return values if values.dtype in (np.float32, np.float64) else values.astype(float)
+
+
+def outward(values, up):
+    """64-bit floats as 32-bit ones rounded away from what they bound: up (``up``) or down.
+
+    Extents and widths kept this way take half the memory and still hold what they held:
+    regions found from them are the exact ones or joins of them, never splits.
+
+    Examples
+    --------
+    >>> x = np.array([14.5000001, -0.1, 20.0])
+    >>> bool(np.all(outward(x, up=True) >= x)), bool(np.all(outward(x, up=False) <= x))
+    (True, True)
+    >>> outward(x, up=True).dtype, float(outward(x, up=True)[2])
+    (dtype('float32'), 20.0)
+    """
+    values = np.asarray(values, dtype=float)
+    out = values.astype(np.float32)
+    past = out < values if up else out > values
+    out[past] = np.nextafter(out[past], np.float32(np.inf if up else -np.inf))
+    return out
 
 
 def grown_bounds(bounds, widths, join_m):

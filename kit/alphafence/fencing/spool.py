@@ -21,6 +21,7 @@ import tempfile
 import numpy as np
 import shapely
 
+from alphafence.fencing.regions import outward
 from alphafence.zones.features import Feature
 
 HEADER = struct.Struct("<II")  # origin, rule
@@ -36,10 +37,10 @@ class Spool:
 
     Attributes
     ----------
-    bounds : ndarray, shape (n, 4)
-        Each feature's extent (lon, lat).
-    widths : ndarray, shape (n,)
-        Metres each is widened by before grouping.
+    bounds : ndarray of float32, shape (n, 4)
+        Each feature's extent (lon, lat), rounded outwards: it holds the feature.
+    widths : ndarray of float32, shape (n,)
+        Metres each is widened by before grouping, rounded up.
     classes : ndarray of int, shape (n,)
         An index into :attr:`class_keys` per feature.
     class_keys : list
@@ -179,24 +180,32 @@ class Spool:
         self._fh.write(data)
         self._offsets.append(self._end + np.cumsum(lengths) - lengths)
         self._end += len(data)
-        self._bounds.append(np.asarray(bounds, dtype=float).reshape(-1, 4))
-        self._widths.append(np.asarray(widths, dtype=float))
+        bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
+        self._bounds.append(np.column_stack([outward(bounds[:, :2], up=False),
+                                             outward(bounds[:, 2:], up=True)]))  # fmt: skip
+        self._widths.append(outward(widths, up=True))
         self._classes.append(np.asarray(classes, dtype=np.int32))
         self._frozen = None
 
     def _arrays(self):
         if self._frozen is None:
             self._fh.flush()
-            n = len(self)
-            offsets = np.concatenate(self._offsets + [np.array([self._end], dtype=np.int64)])
-            self._frozen = (
-                offsets,
-                np.concatenate(self._bounds) if n else np.empty((0, 4)),
-                np.concatenate(self._widths) if n else np.empty(0),
-                np.concatenate(self._classes) if n else np.empty(0, np.int32),
-            )
-            self._offsets, self._bounds = [offsets[:-1]], [self._frozen[1]]
-            self._widths, self._classes = [self._frozen[2]], [self._frozen[3]]
+            # one column at a time, its batches let go as it is joined: memory holds the
+            # columns and one column's batches, never all of them twice
+            self._offsets.append(np.array([self._end], dtype=np.int64))
+            columns = []
+            for parts, empty in (
+                (self._offsets, None),
+                (self._bounds, np.empty((0, 4), np.float32)),
+                (self._widths, np.empty(0, np.float32)),
+                (self._classes, np.empty(0, np.int32)),
+            ):
+                joined = np.concatenate(parts) if parts or empty is None else empty
+                parts.clear()
+                parts.append(joined)
+                columns.append(joined)
+            self._offsets[0] = columns[0][:-1]
+            self._frozen = tuple(columns)
         return self._frozen
 
     @property

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from alphafence.fencing.regions import region_labels
+from alphafence.fencing.regions import floats, region_labels
 
 TILE_DEG = 0.25  # about 28 km north-south
 TARGET_FEATURES = 2_000  # per job
@@ -152,7 +152,7 @@ def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_
     >>> [(j.tiles, [r.tolist() for r in j.regions]) for j in jobs]
     [([(500, 776)], [[0]]), ([(500, 777)], [[1, 2]])]
     """
-    bounds = np.asarray(bounds, dtype=float).reshape(-1, 4)
+    bounds = floats(bounds).reshape(-1, 4)
     n = len(bounds)
     empty = np.empty(0, np.int64)
     if n == 0:
@@ -160,30 +160,55 @@ def plan_jobs(bounds, widths, classes, join_m, tile_deg=TILE_DEG, target=TARGET_
     labels = plan_regions(bounds, widths, classes, join_m)
     index = labels.dtype  # one number per feature, as small as region_labels made it
     order = np.argsort(labels, kind="stable").astype(index)  # region after region, in db order
-    starts = np.flatnonzero(np.r_[True, labels[order[1:]] != labels[order[:-1]]])
+    labels = labels[order]
+    new = np.empty(n, bool)
+    new[0] = True
+    np.not_equal(labels[1:], labels[:-1], out=new[1:])
     del labels
-    centre = np.empty((len(starts), 2))
-    for axis in (0, 1):  # a column at a time: one number per feature in memory
+    starts = np.flatnonzero(new).astype(index)
+    del new
+    # each region's tile, from the centre of its extent (a column at a time: one number per
+    # feature in memory at once)
+    tile = []
+    for axis, offset in ((1, 90.0), (0, 180.0)):
         column = bounds[order, axis]
-        lo = np.minimum.reduceat(column, starts)
+        centre = np.minimum.reduceat(column, starts).astype(float)
         column = bounds[order, axis + 2]
-        centre[:, axis] = (lo + np.maximum.reduceat(column, starts)) / 2.0
+        centre += np.maximum.reduceat(column, starts)
         del column
-    col = np.floor((centre[:, 0] + 180.0) / tile_deg).astype(np.int64)
-    row = np.floor((centre[:, 1] + 90.0) / tile_deg).astype(np.int64)
-    sizes = np.diff(np.r_[starts, n])
-    tile_order = np.lexsort((starts, col, row))  # row by row, then the database's order
+        centre = (centre / 2.0 + offset) / tile_deg
+        tile.append(np.floor(centre, out=centre).astype(np.int32))
+        del centre
+    row, col = tile
+    del tile
+    sizes = np.diff(starts, append=index.type(n))
+    tile_order = np.lexsort((starts, col, row)).astype(index)  # row by row, then the db's order
+    row, col = row[tile_order], col[tile_order]
     sizes = sizes[tile_order]
-    firsts, size = [0], 0
-    for r, s in enumerate(sizes.tolist()):  # greedy: a job closes once it holds the target
-        if size >= target:
-            firsts.append(r)
-            size = 0
-        size += s
-    firsts.append(len(sizes))
-    ends = np.cumsum(sizes)
+    ends = np.cumsum(sizes, dtype=index)
+    firsts = _pack(ends, target)
     # each region's features, in tile order: its start in ``order`` plus 0, 1, ...
-    shift = np.repeat((starts[tile_order] - (ends - sizes)).astype(index), sizes)
+    shift = np.repeat(starts[tile_order] - (ends - sizes), sizes)
+    del starts, tile_order, sizes
     shift += np.arange(n, dtype=index)
     indices = order[shift]
-    return JobPlan(indices, ends, row[tile_order], col[tile_order], np.asarray(firsts))
+    return JobPlan(indices, ends, row, col, firsts)
+
+
+def _pack(ends, target):
+    """Each job's first region, and the number of regions last: regions taken in order, a job
+    closing once it holds ``target`` features (greedy), from the regions' cumulative ends.
+
+    Examples
+    --------
+    >>> _pack(np.cumsum([3, 1, 1, 5, 2]), 4).tolist()
+    [0, 2, 4, 5]
+    """
+    target = max(1, int(target))
+    firsts, r = [0], 0
+    while r < len(ends):
+        base = int(ends[r - 1]) if r else 0
+        # the first region whose end reaches base + target closes the job
+        r = min(int(np.searchsorted(ends, base + target, side="left")), len(ends) - 1) + 1
+        firsts.append(r)
+    return np.asarray(firsts, dtype=np.int64)
