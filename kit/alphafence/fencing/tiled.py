@@ -290,6 +290,7 @@ def build_tiled(
                 spool.bounds, spool.widths, spool.classes, options.join_m, tile_deg, target
             )
             result.jobs = len(plan)
+            give_back_memory()  # planning's passing arrays, before the jobs' long run
             t1 = time.perf_counter()
             encoders = tuple(type(w).encode for w in writers)
 
@@ -328,6 +329,23 @@ def build_tiled(
                     progress("fencing", done, result.features)
         result.seconds = {"read": t1 - t0, "fence": time.perf_counter() - t1}
         return result
+
+
+def give_back_memory() -> None:
+    """Hand the heap's free pages back to the system (glibc's ``malloc_trim``; nothing where
+    there is none). Planning a large build frees some tens of bytes per feature in arrays the
+    allocator would otherwise keep for the rest of the build.
+
+    Examples
+    --------
+    >>> give_back_memory()
+    """
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
 
 
 def _input_bytes(paths):
