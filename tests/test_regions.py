@@ -5,9 +5,12 @@ the components found without scipy are scipy's."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from alphafence.fencing.regions import region_labels
 
 
 @settings(max_examples=200, deadline=None)
@@ -104,3 +107,70 @@ def test_a_sweep_that_misses_a_pair_is_caught(monkeypatch):
     assert regions.region_labels(bounds, zeros, 25.0, classes=one, chunk=16).tolist() == truth
     monkeypatch.setattr(regions, "_reach", lambda south, north: 0)  # later extents never asked
     assert regions.region_labels(bounds, zeros, 25.0, classes=one, chunk=16).tolist() != truth
+
+
+def test_large_graph_components_are_scipys():
+    """Graphs larger than the ones found without scipy are scipy's components, numbered by
+    their smallest node."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    from alphafence.fencing.regions import SMALL_GRAPH, _components
+
+    rng = np.random.default_rng(11)
+    n = SMALL_GRAPH + 500
+    a, b = rng.integers(0, n, 3000), rng.integers(0, n, 3000)
+    want = connected_components(coo_array((np.ones(3000), (a, b)), shape=(n, n)))[1]
+    got = _components(n, a, b)
+    assert got.tolist() == want.tolist()
+    assert got[0] == 0 and len(np.unique(got)) > 1000  # many components, the first node's first
+
+
+def test_reach_counts_the_extents_starting_at_or_south_of_an_edge():
+    """An extent starting exactly at a chunk's northernmost edge touches it: it is asked."""
+    from alphafence.fencing.regions import _reach
+
+    south = np.array([0.0, 1.0, 1.0, 2.0], dtype=np.float32)
+    assert [_reach(south, x) for x in (-1.0, 0.0, 1.0, 1.5, 2.0)] == [0, 1, 3, 3, 4]
+
+
+def test_an_overlap_finer_than_a_32_bit_step_still_joins():
+    """Two extents whose grown edges overlap by a nanodegree, each in a chunk of its own: the
+    sweep's south edges are rounded down, so the later one is still asked."""
+    from alphafence.fencing.regions import M_PER_DEG_LAT, grown_bounds
+
+    south = np.array([14.0, 35.0, 14.001, 35.001])
+    north_edge = grown_bounds(south[None], np.zeros(1), 25.0)[0, 3]
+    lat = north_edge - 1e-9 + (25.0 + 1.0) / M_PER_DEG_LAT
+    bounds = np.array([south, [14.0, lat, 14.001, lat + 0.001]])
+    assert grown_bounds(bounds[1:], np.zeros(1), 25.0)[0, 1] < north_edge
+    assert region_labels(bounds, np.zeros(2), 25.0, chunk=1).tolist() == [0, 0]
+
+
+def test_labels_are_32_bit_and_inputs_are_not_copied():
+    """Memory: labels in 32 bits for fewer than 2**31 features; 32-bit extents read in place."""
+    from alphafence.fencing.regions import floats
+
+    rng = np.random.default_rng(1)
+    xy = rng.uniform([14.0, 35.0], [14.01, 35.01], size=(100, 2))
+    labels = region_labels(np.c_[xy, xy + 0.0001], np.zeros(100), 25.0)
+    assert labels.dtype == np.int32
+    x32 = np.zeros(3, np.float32)
+    assert floats(x32) is x32 and floats(x32.astype(float)).dtype == np.float64
+    assert floats(np.arange(3)).dtype == np.float64 and floats([1, 2]).dtype == np.float64
+
+
+@pytest.mark.parametrize("lat", [0.0, 0.5, 45.0, -60.0, 89.95, -89.99])
+def test_extents_grow_by_the_join_at_their_farthest_latitude(lat):
+    """Grown by the join, twice the width and a metre: north-south at 110,574 m a degree,
+    east-west at 111,320 m a degree times the cosine of the extent's farthest latitude (taken
+    no farther than 89.9 degrees)."""
+    from alphafence.fencing.regions import grown_bounds
+
+    box = np.array([[14.0, lat, 14.001, lat + 0.0001 * np.sign(lat)]])
+    g = grown_bounds(box, np.array([3.0]), 25.0)[0]
+    grow = 25.0 + 2 * 3.0 + 1.0
+    far = min(max(abs(box[0, 1]), abs(box[0, 3])), 89.9)
+    dlon = grow / (111_320.0 * np.cos(np.radians(far)))
+    want = [14.0 - dlon, box[0, 1] - grow / 110_574.0, 14.001 + dlon, box[0, 3] + grow / 110_574.0]
+    assert np.allclose(g, want, rtol=0, atol=1e-12)

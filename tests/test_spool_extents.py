@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from alphafence.fencing import regions
-from alphafence.fencing.regions import region_labels
+from alphafence.fencing.regions import outward, region_labels
 from alphafence.fencing.spool import Spool
 from alphafence.zones.features import Feature
 from alphafence.zones.rules import load_rules
@@ -113,3 +113,12 @@ def test_a_south_edge_rounded_up_is_caught(monkeypatch):
     real = regions.outward
     monkeypatch.setattr(regions, "outward", lambda v, up: real(np.asarray(v) + 5e-4, up=True))
     assert region_labels(bounds, zeros, 25.0, classes=one, chunk=8).tolist() != truth
+
+
+def test_values_a_32_bit_float_holds_are_kept_as_they_are():
+    """Rounded outwards only when rounding is needed: 20 m stays 20 m, 0.5 degrees stays."""
+    exact = np.array([20.0, 0.5, -14.25, 0.0, 1e-3])
+    for up in (True, False):
+        kept = outward(exact, up=up).astype(float)
+        assert kept[:4].tolist() == exact[:4].tolist()
+        assert (kept[4] > exact[4]) if up else (kept[4] < exact[4])  # 0.001 is not one
