@@ -155,6 +155,9 @@ def test_labels_are_32_bit_and_inputs_are_not_copied():
     xy = rng.uniform([14.0, 35.0], [14.01, 35.01], size=(100, 2))
     labels = region_labels(np.c_[xy, xy + 0.0001], np.zeros(100), 25.0)
     assert labels.dtype == np.int32
+    for n in (0, 1):  # no sweep at all
+        few = region_labels(np.c_[xy, xy + 0.0001][:n], np.zeros(n), 25.0)
+        assert few.dtype == np.int32 and few.tolist() == [0] * n
     x32 = np.zeros(3, np.float32)
     assert floats(x32) is x32 and floats(x32.astype(float)).dtype == np.float64
     assert floats(np.arange(3)).dtype == np.float64 and floats([1, 2]).dtype == np.float64

@@ -80,7 +80,7 @@ def region_labels(bounds, widths, join_m, classes=None, chunk=CHUNK):
     bounds = floats(bounds).reshape(-1, 4)
     n = len(bounds)
     if n <= 1:
-        return np.zeros(n, np.int64)
+        return np.zeros(n, np.int32)
     widths = np.broadcast_to(floats(widths), (n,))
     classes = np.zeros(n, np.int64) if classes is None else np.asarray(classes)
     index = np.int32 if n < 2**31 else np.int64  # one number per feature, as small as it goes
