@@ -168,3 +168,42 @@ def test_many_rings_are_cleaned_and_oriented_as_one_at_a_time(many):
     some = [p for p in pts if len(p)]
     if some:
         assert ring_signs(some).tolist() == [int(np.sign(signed_area(p))) for p in some]
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    vertices=st.sampled_from([4, 40, 999, 1000, 3000]),
+    margin=st.floats(0.0, 60.0),
+)
+def test_clear_of_is_the_plain_distance(seed, vertices, margin):
+    """Whether a fence's boundary keeps a margin from a geometry, as the plain distance says,
+    for boundaries measured plainly and those indexed first (1,000 vertices or more)."""
+    from alphafence.geo.rings import clear_of
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, vertices, endpoint=False)
+    radius = 100.0 + rng.uniform(0, 5, vertices)
+    fence = shapely.Polygon(np.c_[radius * np.cos(t), radius * np.sin(t)])
+    centres = rng.uniform(-90, 90, size=(6, 2))
+    houses = shapely.buffer(shapely.points(centres), rng.uniform(1, 30, 6))
+    boundaries = np.array([fence.boundary] * 6, dtype=object)
+    want = shapely.distance(boundaries, houses) >= margin
+    assert clear_of(boundaries, houses, margin).tolist() == want.tolist()
+    assert clear_of(fence.boundary, houses[0], margin) == bool(want[0])
+
+
+def test_a_clear_of_measuring_from_centres_is_caught(monkeypatch):
+    """The broken case: distances taken between the geometries' centres call a house that
+    touches the fence's line clear, and the comparison above sees it."""
+    import types
+
+    from alphafence.geo import rings
+
+    fence = shapely.Point(0, 0).buffer(100.0, 16)
+    house = shapely.Point(95, 0).buffer(10.0)
+    assert not rings.clear_of(fence.boundary, house, 5.0)
+    centres = lambda a, b: shapely.distance(shapely.centroid(a), shapely.centroid(b))  # noqa: E731
+    broken = types.SimpleNamespace(**{**vars(shapely), "distance": centres})
+    monkeypatch.setattr(rings, "shapely", broken)
+    assert rings.clear_of(fence.boundary, house, 5.0)

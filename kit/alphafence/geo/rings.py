@@ -298,13 +298,17 @@ def ring_polygons(rings) -> np.ndarray:
     return shapely.polygons(shapely.linearrings(np.concatenate(rings), indices=at))
 
 
+PREPARED_FROM = 1_000  # boundary vertices from which clear_of indexes a boundary first
+
+
 def clear_of(boundaries, geoms, distance_m):
     """Whether each boundary keeps at least ``distance_m`` from its geometry (vectorised):
     ``shapely.distance(boundary, geom) >= distance_m``.
 
-    The boundaries are prepared (indexed), and the distance is measured only where one comes
-    within reach: near a pole a fence's lon/lat reading has some 1e5 vertices, where a plain
-    distance takes seconds and this milliseconds.
+    Boundaries of :data:`PREPARED_FROM` vertices or more are prepared (indexed), and the
+    distance is measured only where one comes within reach: near a pole a fence's lon/lat
+    reading has some 1e5 vertices, where a plain distance takes seconds and this milliseconds.
+    The others, most fences, are measured plainly (indexing each would cost more).
 
     Examples
     --------
@@ -316,9 +320,15 @@ def clear_of(boundaries, geoms, distance_m):
     boundaries = np.atleast_1d(np.asarray(boundaries, dtype=object))
     geoms = np.broadcast_to(np.asarray(geoms, dtype=object), boundaries.shape)
     distance_m = np.broadcast_to(np.asarray(distance_m, dtype=float), boundaries.shape)
-    shapely.prepare(boundaries)
-    near = np.flatnonzero(shapely.dwithin(boundaries, geoms, distance_m))
     clear = np.ones(boundaries.shape, dtype=bool)
-    if near.size:  # within reach, or exactly at it: measured
-        clear[near] = shapely.distance(boundaries[near], geoms[near]) >= distance_m[near]
+    large = shapely.get_num_coordinates(boundaries) >= PREPARED_FROM
+    small = np.flatnonzero(~large)
+    if small.size:  # (an empty boundary keeps clear of anything, as it does below)
+        clear[small] = ~(shapely.distance(boundaries[small], geoms[small]) < distance_m[small])
+    large = np.flatnonzero(large)
+    if large.size:
+        shapely.prepare(boundaries[large])
+        near = large[shapely.dwithin(boundaries[large], geoms[large], distance_m[large])]
+        if near.size:  # within reach, or exactly at it: measured
+            clear[near] = shapely.distance(boundaries[near], geoms[near]) >= distance_m[near]
     return bool(clear[0]) if one else clear
